@@ -1,0 +1,25 @@
+"""Angle conventions: bearings and courses clockwise from north, radians inside the code."""
+
+import numpy as np
+
+TWO_PI = 2.0 * np.pi
+
+
+def wrap_to_pi(angle_rad):
+    """Wrap angles (radians) to [-pi, pi)."""
+    return (np.asarray(angle_rad) + np.pi) % TWO_PI - np.pi
+
+
+def wrap_to_180(angle_deg):
+    """Wrap angles (degrees) to [-180, 180)."""
+    return (np.asarray(angle_deg) + 180.0) % 360.0 - 180.0
+
+
+def bearing_from_north(dx_m, dy_m):
+    """Bearing (radians, clockwise from north) of the vector (dx east, dy north)."""
+    return np.arctan2(dx_m, dy_m)
+
+
+def course_from_velocity(vx_m_s, vy_m_s):
+    """Course (radians in [0, 2pi), clockwise from north) of a velocity (vx east, vy north)."""
+    return np.arctan2(vx_m_s, vy_m_s) % TWO_PI

@@ -1,0 +1,56 @@
+"""Shared pieces of the bearings-only estimators: input checks and per-track context."""
+
+import numpy as np
+
+from tma.errors import InputError
+from tma.io.bearings_log import BearingsLog
+from tma.models.bearings2d import bearing_cost, gauss_newton_matrix
+
+
+class BearingsEstimator:
+    """Base of estimators over ``bearings2d`` logs; subclasses implement ``solve``."""
+
+    family = "bearings2d"
+    name = ""
+
+    def __init__(self, config):
+        self.config = config
+
+    def estimate(self, log: BearingsLog) -> dict:
+        """Estimate theta for every track of ``log``; returns output columns by name."""
+        t, ox, oy = log.t_s, log.own_x_m, log.own_y_m
+        measured = np.deg2rad(log.bearing_deg)
+        valid = np.isfinite(measured)
+        n_bearings = valid.sum(axis=1)
+        few = n_bearings < self.config.min_bearings
+        if np.any(few):
+            ids = ", ".join(str(i) for i in log.track_id[few][:10])
+            raise InputError(
+                f"{self.name}: tracks {ids} have fewer than {self.config.min_bearings} bearings "
+                f"(min {n_bearings.min()}); 4 parameters (x0, y0, vx, vy) need more"
+            )
+        measured = np.where(valid, measured, 0.0)
+        last = valid.shape[1] - 1 - np.argmax(valid[:, ::-1], axis=1)
+        first = np.argmax(valid, axis=1)
+        if valid.all():
+            valid = None  # every bearing present: skip masking in the hot loops
+        out = self.solve(t, ox, oy, measured, valid, first)
+        theta = out.pop("theta")
+        cost = bearing_cost(theta, t, ox, oy, measured, valid)
+        jtj = gauss_newton_matrix(np.nan_to_num(theta), t, ox, oy, valid)
+        columns = {
+            "x0_m": theta[:, 0], "y0_m": theta[:, 1], "vx_m_s": theta[:, 2], "vy_m_s": theta[:, 3],
+            **out,
+            "cost_rad2": cost,
+            "n_bearings": n_bearings.astype(np.int64),
+            "t_last_s": t[last], "own_x_last_m": ox[last], "own_y_last_m": oy[last],
+        }
+        for i in range(4):
+            for j in range(i, 4):
+                columns[f"jtj_{i}{j}"] = jtj[:, i, j]
+        return columns
+
+    def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
+        """``valid``: mask or None (all present); ``first``: index of each track's first
+        bearing. Returns ``theta`` (n, 4) and estimator-specific columns."""
+        raise NotImplementedError

@@ -1,0 +1,136 @@
+"""``lm``: maximum-likelihood TMA by Marquardt's Levenberg-Marquardt, batched over tracks.
+
+Minimises F(theta) = sum_k wrap(X_k - f_k(theta))^2 (rad^2) per track with its own lambda:
+A = H + lambda diag(H), H = J^T J; a trial step whose F rises, or whose A is not positive
+definite, multiplies lambda by ``lambda_up``; an accepted step multiplies it by
+``lambda_down``; a track stops when an accepted step lowers F by less than ``f_tol_rad2``.
+Every pass evaluates F once for each still-active track (accepted and rejected alike), and the
+Jacobian only for tracks whose last trial was accepted, so the per-track sequence is exactly
+the scalar algorithm's while the work stays vectorised.
+"""
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from tma.config import require
+from tma.estimators.base import BearingsEstimator
+from tma.linalg import jacobi_scaled_eigh, solve_shifted
+from tma.models.bearings2d import bearing_cost, normal_equations
+
+# Stop reasons recorded per track.
+STOP_F_TOL, STOP_MAX_ITER, STOP_LAMBDA_MAX = 0, 1, 2
+
+
+@dataclass
+class Config:
+    name: str = "lm"
+    # Prior guess: target at this bearing/distance from own-ship at t = 0 with this
+    # course/speed. initial_bearing_deg = null uses each track's first measured bearing.
+    initial_bearing_deg: Optional[float] = 0.0
+    initial_distance_m: float = 25000.0
+    initial_course_deg: float = 90.0
+    initial_speed_m_s: float = 10.0
+    lambda0: float = 10.0
+    lambda_up: float = 10.0
+    lambda_down: float = 0.1
+    f_tol_rad2: float = 1e-10
+    max_iter: int = 200  # accepted steps
+    lambda_max: float = 1e16  # a track whose lambda exceeds this stops (stalled)
+    pd_rtol: float = 1e-12  # A is positive definite if its smallest scaled eigenvalue > this
+    min_bearings: int = 5
+
+    def __post_init__(self):
+        w = "estimator 'lm'"
+        require(self.lambda0 > 0, w, "lambda0 must be positive")
+        require(self.lambda_up > 1, w, "lambda_up must exceed 1")
+        require(0 < self.lambda_down < 1, w, "lambda_down must lie in (0, 1)")
+        require(self.f_tol_rad2 > 0, w, "f_tol_rad2 must be positive")
+        require(self.max_iter > 0, w, "max_iter must be positive")
+        require(self.min_bearings >= 4, w, "min_bearings must be at least 4")
+
+
+def initial_theta(cfg: Config, t, own_x, own_y, measured_rad, first):
+    """Prior guess (n_tracks, 4) placed relative to own-ship at t = 0."""
+    n = measured_rad.shape[0]
+    if cfg.initial_bearing_deg is None:
+        bearing = measured_rad[np.arange(n), first]
+    else:
+        bearing = np.full(n, np.deg2rad(cfg.initial_bearing_deg))
+    course, speed = np.deg2rad(cfg.initial_course_deg), cfg.initial_speed_m_s
+    ox0 = np.interp(0.0, t, own_x)
+    oy0 = np.interp(0.0, t, own_y)
+    d = cfg.initial_distance_m
+    return np.column_stack([
+        ox0 + d * np.sin(bearing), oy0 + d * np.cos(bearing),
+        np.full(n, speed * np.sin(course)), np.full(n, speed * np.cos(course)),
+    ])
+
+
+def _rows(valid, idx):
+    return None if valid is None else valid[idx]
+
+
+class LevenbergMarquardt(BearingsEstimator):
+    name = "lm"
+    Config = Config
+
+    def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
+        cfg = self.config
+        n = measured_rad.shape[0]
+        theta = initial_theta(cfg, t, own_x, own_y, measured_rad, first)
+        cost = bearing_cost(theta, t, own_x, own_y, measured_rad, valid)
+        n_f_evals = np.ones(n, dtype=np.int64)
+        n_iter = np.zeros(n, dtype=np.int64)
+        lam = np.full(n, cfg.lambda0)
+        stop = np.full(n, -1, dtype=np.int64)
+        need_jacobian = np.ones(n, dtype=bool)
+        w, V, d = np.zeros((n, 4)), np.zeros((n, 4, 4)), np.ones((n, 4))
+        g = np.zeros((n, 4))
+        active = np.arange(n)
+
+        while active.size:
+            fresh = active[need_jacobian[active]]
+            if fresh.size:
+                args = (t, own_x, own_y)
+                _, H, g[fresh] = normal_equations(theta[fresh], *args, measured_rad[fresh],
+                                                  _rows(valid, fresh))
+                w[fresh], V[fresh], d[fresh] = jacobi_scaled_eigh(H)
+                need_jacobian[fresh] = False
+
+            # Step 4: raise lambda until A = H + lambda diag(H) is positive definite (the scaled
+            # A has eigenvalues w + lambda, so no refactorisation is needed).
+            wa = w[active]
+            not_pd = wa[:, 0] + lam[active] <= cfg.pd_rtol * np.maximum(wa[:, -1], 1.0)
+            while np.any(not_pd):
+                idx = active[not_pd]
+                lam[idx] *= cfg.lambda_up
+                not_pd &= wa[:, 0] + lam[active] <= cfg.pd_rtol * np.maximum(wa[:, -1], 1.0)
+
+            step = solve_shifted(wa, V[active], d[active], g[active], lam[active])
+            trial = theta[active] + step
+            trial_cost = bearing_cost(trial, t, own_x, own_y, measured_rad[active], _rows(valid, active))
+            n_f_evals[active] += 1
+            decrease = cost[active] - trial_cost
+            accepted = decrease >= 0  # NaN (a non-finite trial) counts as rejected
+
+            acc, rej = active[accepted], active[~accepted]
+            theta[acc], cost[acc] = trial[accepted], trial_cost[accepted]
+            lam[acc] *= cfg.lambda_down
+            n_iter[acc] += 1
+            need_jacobian[acc] = True
+            lam[rej] *= cfg.lambda_up
+
+            stop[acc[decrease[accepted] < cfg.f_tol_rad2]] = STOP_F_TOL
+            stop[active[(stop[active] < 0) & (n_iter[active] >= cfg.max_iter)]] = STOP_MAX_ITER
+            stop[active[(stop[active] < 0) & (lam[active] > cfg.lambda_max)]] = STOP_LAMBDA_MAX
+            active = active[stop[active] < 0]
+
+        return {
+            "theta": theta,
+            "n_f_evals": n_f_evals,
+            "n_iter": n_iter,
+            "converged": stop == STOP_F_TOL,
+            "stop_reason": stop,
+        }

@@ -1,0 +1,1 @@
+"""File formats shared by the pipeline stages: datasets, logs, manifests, run outputs."""

@@ -1,0 +1,1 @@
+"""Motion and measurement models shared by scenarios, estimators and metrics."""

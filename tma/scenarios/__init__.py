@@ -1,0 +1,35 @@
+"""Scenario families: each module declares a ``Config`` dataclass and simulates one shard.
+
+A scenario module provides ``FAMILY``, ``Config``, ``label(cfg)`` (short human tag used in
+dataset names), ``n_shards(cfg)`` and ``simulate_shard(cfg, index) -> (log, truth_table)``.
+"""
+
+import importlib
+
+from tma.config import to_plain, validate
+from tma.errors import ConfigError
+from tma.io.atomic import sha256_json
+
+SCENARIO_MODULES = {"bearings2d": "tma.scenarios.bearings2d"}
+
+
+def scenario_module(family: str):
+    """The scenario module of ``family``; a clear error for unknown names."""
+    if family not in SCENARIO_MODULES:
+        known = ", ".join(sorted(SCENARIO_MODULES))
+        raise ConfigError(f"unknown scenario family '{family}' (known: {known})")
+    return importlib.import_module(SCENARIO_MODULES[family])
+
+
+def load_scenario(node):
+    """Validate a scenario config node; return ``(module, config dataclass instance)``."""
+    family = node.get("family") if node is not None else None
+    if family is None:
+        raise ConfigError("scenario: missing 'family'")
+    module = scenario_module(family)
+    return module, validate(module.Config, node, f"scenario '{family}'")
+
+
+def dataset_name(module, cfg) -> str:
+    """Directory name of the dataset a scenario config produces: family, label, config hash."""
+    return f"{module.FAMILY}-{module.label(cfg)}-{sha256_json(to_plain(cfg))[:10]}"
