@@ -1,0 +1,1 @@
+"""Thin Hydra entry points, one verb each: ``python -m pipeline.<verb>``."""

@@ -10,7 +10,6 @@ the scalar algorithm's while the work stays vectorised.
 """
 
 from dataclasses import dataclass
-from typing import Optional
 
 import numpy as np
 
@@ -28,7 +27,7 @@ class Config:
     name: str = "lm"
     # Prior guess: target at this bearing/distance from own-ship at t = 0 with this
     # course/speed. initial_bearing_deg = null uses each track's first measured bearing.
-    initial_bearing_deg: Optional[float] = 0.0
+    initial_bearing_deg: float | None = 0.0
     initial_distance_m: float = 25000.0
     initial_course_deg: float = 90.0
     initial_speed_m_s: float = 10.0

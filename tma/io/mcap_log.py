@@ -6,6 +6,8 @@ decode them. Writes are atomic; reads check that the file is a complete MCAP (it
 summary section) and that the expected topics and schemas are present.
 """
 
+import contextlib
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -53,9 +55,9 @@ class LogWriter:
         self.n_messages = 0
 
     def __enter__(self):
-        self._atomic = atomic_path(self.path)
-        tmp = self._atomic.__enter__()
-        self._file = open(tmp, "wb")
+        self._stack = contextlib.ExitStack()
+        tmp = self._stack.enter_context(atomic_path(self.path))
+        self._file = self._stack.enter_context(open(tmp, "wb"))  # closed before the rename
         self._writer = Writer(self._file, compression=CompressionType.ZSTD)
         self._writer.start(profile=PROFILE, library=f"tma {__version__}")
         self._ids, schema_ids = {}, {}
@@ -81,12 +83,14 @@ class LogWriter:
         self.n_messages += 1
 
     def __exit__(self, exc_type, exc, tb):
-        try:
-            if exc_type is None:
+        if exc_type is None:
+            try:
                 self._writer.finish()
-        finally:
-            self._file.close()
-            return self._atomic.__exit__(exc_type, exc, tb)
+            except BaseException:
+                if not self._stack.__exit__(*sys.exc_info()):
+                    raise
+                return False
+        return self._stack.__exit__(exc_type, exc, tb)
 
 
 class JsonDecoderFactory(DecoderFactory):

@@ -8,14 +8,13 @@ of workers nor on sigma: datasets at different sigma share targets and standardi
 """
 
 from dataclasses import dataclass, field
-from typing import Optional
 
 import numpy as np
 import pyarrow as pa
 
 from tma.angles import bearing_from_north, wrap_to_pi
 from tma.config import require
-from tma.io.bearings_log import BearingsLog
+from tma.io.bearings_log import BearingsLog, read_bearings_log, write_bearings_log
 from tma.models.observer import ObserverPath
 
 FAMILY = "bearings2d"
@@ -26,11 +25,11 @@ class LegConfig:
     """A straight leg ``{course_deg, duration_s}`` or a turn ``{turn_to_deg, rate_deg_s,
     direction: left|right}``."""
 
-    course_deg: Optional[float] = None
-    duration_s: Optional[float] = None
-    turn_to_deg: Optional[float] = None
-    rate_deg_s: Optional[float] = None
-    direction: Optional[str] = None
+    course_deg: float | None = None
+    duration_s: float | None = None
+    turn_to_deg: float | None = None
+    rate_deg_s: float | None = None
+    direction: str | None = None
 
 
 def _default_legs():
@@ -141,3 +140,13 @@ def simulate_shard(cfg: Config, shard_index: int):
         "course_deg": np.rad2deg(course), "speed_m_s": speed,
     })
     return log, truth
+
+
+def write_log(path, log: BearingsLog, metadata=None) -> int:
+    """Write a shard's bearing log as MCAP; returns the message count."""
+    return write_bearings_log(path, log, metadata)
+
+
+def read_log(path) -> BearingsLog:
+    """Read a shard's bearing log (validated)."""
+    return read_bearings_log(path)

@@ -1,0 +1,44 @@
+# tma: make table | make test | make lint | make bench | make help | make clean
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+# Every family's default experiment; `make table EXPERIMENT=<name>` builds one.
+EXPERIMENTS := bearings2d_table
+EXPERIMENT ?= $(EXPERIMENTS)
+ARGS ?=
+
+.PHONY: help table test lint bench clean venv
+
+help:  ## list the targets
+	@grep -E '^[a-z]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-7s %s\n", $$1, $$2}'
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e ".[dev]"
+	touch $(STAMP)
+
+venv: $(STAMP)  ## create .venv from pyproject.toml
+
+table: $(STAMP)  ## simulate -> estimate -> aggregate every default experiment into tables/
+	@set -e; for exp in $(EXPERIMENT); do \
+	  echo "== $$exp"; \
+	  $(PY) -m pipeline.simulate experiment=$$exp $(ARGS); \
+	  $(PY) -m pipeline.estimate experiment=$$exp $(ARGS); \
+	  $(PY) -m pipeline.aggregate experiment=$$exp $(ARGS); \
+	done
+
+test: $(STAMP)  ## run the test suite (pytest)
+	$(PY) -m pytest -q $(ARGS)
+
+lint: $(STAMP)  ## ruff
+	$(VENV)/bin/ruff check tma pipeline tests bench
+
+bench: $(STAMP)  ## benchmarks: batch LM vs scipy, stage wall times of the default table
+	$(PY) bench/bench.py $(ARGS)
+
+clean:  ## remove generated data, tables, Hydra outputs and caches (keeps .venv)
+	rm -rf data tables outputs multirun .pytest_cache .ruff_cache .hypothesis
+	find . -name __pycache__ -type d -prune -exec rm -rf {} +

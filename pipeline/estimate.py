@@ -1,0 +1,23 @@
+"""Run estimators over stored datasets: ``python -m pipeline.estimate [overrides]``."""
+
+import hydra
+
+from pipeline._common import CONF_DIR, estimator_nodes, log, n_jobs, open_datasets, run_stage
+from tma.runs import estimate_runs
+
+
+def estimate_stage(cfg):
+    jobs = [(ds, est) for ds in open_datasets(cfg) for est in estimator_nodes(cfg)]
+    roots = estimate_runs(cfg.paths.data_dir, jobs, n_jobs=n_jobs(cfg), progress=cfg.progress,
+                          force=cfg.force)
+    for root in roots:
+        log.info("run %s", root)
+
+
+@hydra.main(config_path=CONF_DIR, config_name="config", version_base="1.3")
+def main(cfg):
+    run_stage(estimate_stage, cfg)
+
+
+if __name__ == "__main__":
+    main()

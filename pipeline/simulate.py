@@ -1,0 +1,26 @@
+"""Simulate datasets from scenario configs: ``python -m pipeline.simulate [overrides]``."""
+
+import hydra
+
+from pipeline._common import CONF_DIR, log, n_jobs, run_stage, scenario_nodes
+from tma.errors import ConfigError
+from tma.simulate import simulate_datasets
+
+
+def simulate_stage(cfg):
+    if cfg.dataset:
+        raise ConfigError("simulate creates datasets from the scenario config; "
+                          "'dataset=' names an existing one (use it with estimate/aggregate)")
+    roots = simulate_datasets(scenario_nodes(cfg), cfg.paths.data_dir, n_jobs=n_jobs(cfg),
+                              force=cfg.force, progress=cfg.progress)
+    for root in roots:
+        log.info("dataset %s", root)
+
+
+@hydra.main(config_path=CONF_DIR, config_name="config", version_base="1.3")
+def main(cfg):
+    run_stage(simulate_stage, cfg)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,50 @@
+"""The aggregate stage: finished runs -> per-track metrics (Parquet) -> tables and plots.
+
+Each family's report module provides ``aggregate_runs(entries, tables_dir, table_name)``
+where ``entries`` are ``RunEntry`` items; it writes per-track metrics into each run
+directory and returns the table files it wrote.
+"""
+
+import importlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from tma.errors import ConfigError
+from tma.io.dataset import Dataset
+from tma.runs import check_compatible, open_run, run_path
+
+REPORT_MODULES = {"bearings2d": "tma.reports.bearings2d"}
+
+
+@dataclass
+class RunEntry:
+    dataset: Dataset
+    estimator: str
+    run_root: Path
+    manifest: dict
+    estimates: pd.DataFrame
+
+
+def aggregate(data_dir, tables_dir, jobs, table=None) -> list[Path]:
+    """Aggregate the runs of ``jobs`` (``(Dataset, estimator config)`` pairs)."""
+    by_family: dict[str, list[RunEntry]] = {}
+    for dataset, est_cfg in jobs:
+        check_compatible(dataset, est_cfg)
+        root = run_path(data_dir, dataset, est_cfg)
+        manifest, estimates = open_run(root)
+        by_family.setdefault(dataset.family, []).append(
+            RunEntry(dataset, est_cfg["name"], root, manifest, estimates.to_pandas()))
+    written = []
+    for family, entries in by_family.items():
+        if family not in REPORT_MODULES:
+            raise ConfigError(f"no report for family '{family}'")
+        module = importlib.import_module(REPORT_MODULES[family])
+        name = table
+        if name is None:
+            first = entries[0]
+            name = (f"{first.dataset.name}-{first.estimator}" if len(entries) == 1
+                    else f"{family}-custom")
+        written += module.aggregate_runs(entries, Path(tables_dir), name)
+    return written

@@ -1,0 +1,1 @@
+"""Per-track metrics and summary statistics."""

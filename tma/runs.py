@@ -1,0 +1,155 @@
+"""The estimate stage: (dataset, estimator config) -> a run directory.
+
+Layout::
+
+    data/runs/<dataset>/<estimator>-<key10>/
+        shards/shard-00000.parquet (+ .done.json)   # one per dataset shard
+        estimates.parquet                            # all tracks, shard order
+        manifest.json                                # config, dataset hash, file hashes
+        timing.json                                  # wall time per shard (not hashed)
+
+``key`` hashes the estimator config, the dataset's content hash and the package version, so a
+run directory's content is a pure function of its inputs: byte-identical for any ``n_jobs``.
+"""
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from time import perf_counter
+
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.parquet as pq
+
+from tma import __version__
+from tma.errors import ConfigError, InputError, IntegrityError
+from tma.estimators import build_estimator, estimator_class
+from tma.io.atomic import sha256_file, sha256_json, write_json_atomic, write_parquet_atomic
+from tma.io.dataset import Dataset
+from tma.io.shards import is_finished, mark_finished
+from tma.parallel import run_tasks
+from tma.scenarios import scenario_module
+
+RUN_FORMAT = "tma-run"
+MANIFEST = "manifest.json"
+ESTIMATES = "estimates.parquet"
+
+
+def runs_dir(data_dir) -> Path:
+    return Path(data_dir) / "runs"
+
+
+def run_key(dataset: Dataset, estimator_config: dict) -> str:
+    return sha256_json({"estimator": estimator_config, "dataset": dataset.content_hash,
+                        "version": __version__})
+
+
+def run_path(data_dir, dataset: Dataset, estimator_config: dict) -> Path:
+    key = run_key(dataset, estimator_config)
+    return runs_dir(data_dir) / dataset.name / f"{estimator_config['name']}-{key[:10]}"
+
+
+def check_compatible(dataset: Dataset, estimator_config: dict):
+    cls = estimator_class(estimator_config["name"])
+    if cls.family != dataset.family:
+        raise ConfigError(
+            f"estimator '{cls.name}' reads '{cls.family}' datasets, but {dataset.name} is a "
+            f"'{dataset.family}' dataset"
+        )
+
+
+@dataclass(frozen=True)
+class ShardTask:
+    dataset_root: str
+    shard: str
+    estimator_config: dict
+    out_path: str
+    key: str
+
+
+def estimate_shard(task: ShardTask) -> dict:
+    """Run one estimator over one dataset shard (worker function)."""
+    out = Path(task.out_path)
+    if is_finished(out, task.key):
+        return json.loads(out.with_name(out.name + ".done.json").read_text())
+    dataset = Dataset.open(task.dataset_root)
+    log = scenario_module(dataset.family).read_log(dataset.verified_path(task.shard))
+    estimator = build_estimator(task.estimator_config)
+    start = perf_counter()
+    columns = estimator.estimate(log)
+    seconds = perf_counter() - start
+    write_parquet_atomic(out, pa.table({"track_id": log.track_id, **columns}))
+    epochs = int(log.t_s.size)
+    return mark_finished(out, task.key, rows=int(log.n_tracks), epochs=epochs, seconds=seconds)
+
+
+def plan_run(data_dir, dataset: Dataset, estimator_config: dict):
+    """Shard tasks of one run (validates the estimator config and family first)."""
+    check_compatible(dataset, estimator_config)
+    build_estimator(estimator_config)  # fail on bad parameters before any worker starts
+    root = run_path(data_dir, dataset, estimator_config)
+    key = run_key(dataset, estimator_config)
+    tasks = []
+    for shard in dataset.shard_paths:
+        out = root / "shards" / (Path(shard).stem + ".parquet")
+        shard_key = sha256_json({"run": key, "shard": shard,
+                                 "sha256": dataset.manifest["shards"][shard]["sha256"]})
+        tasks.append(ShardTask(str(dataset.root), shard, estimator_config, str(out), shard_key))
+    return root, tasks
+
+
+def finish_run(root: Path, dataset: Dataset, estimator_config: dict, tasks, records) -> Path:
+    """Concatenate shard outputs into ``estimates.parquet`` and write the run manifest."""
+    table = pa.concat_tables(pq.read_table(t.out_path) for t in tasks)
+    write_parquet_atomic(root / ESTIMATES, table)
+    shards = {Path(t.out_path).name: {"sha256": r["sha256"], "rows": r["rows"]}
+              for t, r in zip(tasks, records, strict=True)}
+    manifest = {
+        "format": RUN_FORMAT,
+        "format_version": 1,
+        "estimator": estimator_config["name"],
+        "config": estimator_config,
+        "dataset": {"name": dataset.name, "family": dataset.family,
+                    "content_hash": dataset.content_hash},
+        "package": {"name": "tma", "version": __version__},
+        "shards": shards,
+        "files": {ESTIMATES: {"sha256": sha256_file(root / ESTIMATES), "rows": table.num_rows}},
+        "n_tracks": table.num_rows,
+        "n_converged": int(pc.sum(table["converged"]).as_py() or 0),
+    }
+    write_json_atomic(root / MANIFEST, manifest)
+    timing = {"shards": {Path(t.out_path).name: {"seconds": r["seconds"], "rows": r["rows"],
+                                                 "epochs": r["epochs"]}
+                         for t, r in zip(tasks, records, strict=True)}}
+    write_json_atomic(root / "timing.json", timing)
+    return root
+
+
+def estimate_runs(data_dir, jobs, *, n_jobs=2, progress=True, force=False):
+    """Run every (dataset, estimator config) job, all shards in one worker pool."""
+    planned, tasks = [], []
+    for dataset, est_cfg in jobs:
+        root, run_tasks_ = plan_run(data_dir, dataset, est_cfg)
+        if force:
+            for t in run_tasks_:
+                Path(t.out_path).with_name(Path(t.out_path).name + ".done.json").unlink(
+                    missing_ok=True)
+        planned.append((root, dataset, est_cfg, run_tasks_))
+        tasks += run_tasks_
+    records = iter(run_tasks(estimate_shard, tasks, n_jobs=n_jobs, desc="estimate",
+                             progress=progress))
+    return [finish_run(root, ds, cfg, ts, [next(records) for _ in ts])
+            for root, ds, cfg, ts in planned]
+
+
+def open_run(root) -> tuple[dict, "pa.Table"]:
+    """A finished run's manifest and estimates (hash-checked)."""
+    root = Path(root)
+    if not (root / MANIFEST).exists():
+        raise InputError(f"no finished run at {root}: run `python -m pipeline.estimate` first")
+    manifest = json.loads((root / MANIFEST).read_text())
+    record = manifest["files"][ESTIMATES]
+    if sha256_file(root / ESTIMATES) != record["sha256"]:
+        raise IntegrityError(f"{root / ESTIMATES}: does not match its run manifest; "
+                             "re-run estimate with force=true")
+    return manifest, pq.read_table(root / ESTIMATES)
