@@ -84,7 +84,8 @@ def open_datasets(cfg: DictConfig) -> list[Dataset]:
     datasets = []
     for root in dataset_roots(cfg):
         if not (root / "manifest.json").exists() and not cfg.dataset:
-            overrides = " ".join(HydraConfig.get().overrides.task) if HydraConfig.initialized() else ""
+            overrides = (" ".join(HydraConfig.get().overrides.task)
+                         if HydraConfig.initialized() else "")
             raise ConfigError(
                 f"no dataset {root.name} in {root.parent}: create it first with\n"
                 f"  python -m pipeline.simulate {overrides}".rstrip()

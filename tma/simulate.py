@@ -90,4 +90,6 @@ def simulate_datasets(scenario_nodes, data_dir, *, n_jobs=2, force=False, progre
                        shards=shards, files=files,
                        extra={"seed": plain.get("seed"), "time_origin_s": 0.0})
         shutil.rmtree(root / PARTS, ignore_errors=True)
+        for t in shard_tasks:  # resume bookkeeping is no longer needed once the manifest exists
+            t.log_path.with_name(t.log_path.name + ".done.json").unlink(missing_ok=True)
     return [p[0] for p in plans]

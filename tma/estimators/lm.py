@@ -109,7 +109,8 @@ class LevenbergMarquardt(BearingsEstimator):
 
             step = solve_shifted(wa, V[active], d[active], g[active], lam[active])
             trial = theta[active] + step
-            trial_cost = bearing_cost(trial, t, own_x, own_y, measured_rad[active], _rows(valid, active))
+            trial_cost = bearing_cost(trial, t, own_x, own_y, measured_rad[active],
+                                      _rows(valid, active))
             n_f_evals[active] += 1
             decrease = cost[active] - trial_cost
             accepted = decrease >= 0  # NaN (a non-finite trial) counts as rejected

@@ -114,7 +114,8 @@ def read_log(path, expected: dict[str, str]):
             summary = reader.get_summary()
             if summary is None:
                 raise InputError(f"{path}: MCAP file has no summary section (truncated?)")
-            found = {ch.topic: summary.schemas.get(ch.schema_id) for ch in summary.channels.values()}
+            found = {ch.topic: summary.schemas.get(ch.schema_id)
+                     for ch in summary.channels.values()}
             missing = [t for t in expected if t not in found]
             if missing:
                 raise InputError(

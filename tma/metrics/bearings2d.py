@@ -23,7 +23,8 @@ REGIONS = {
 def kinematics_at(x0, y0, vx, vy, t, own_x, own_y):
     """Bearing (rad), distance (m), course (rad), speed (m/s) at time t from own-ship."""
     dx, dy = x0 + vx * t - own_x, y0 + vy * t - own_y
-    return bearing_from_north(dx, dy), np.hypot(dx, dy), course_from_velocity(vx, vy), np.hypot(vx, vy)
+    return (bearing_from_north(dx, dy), np.hypot(dx, dy), course_from_velocity(vx, vy),
+            np.hypot(vx, vy))
 
 
 def track_metrics(estimates: pd.DataFrame, truth: pd.DataFrame) -> pd.DataFrame:

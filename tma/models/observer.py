@@ -80,10 +80,12 @@ def _positions_on(seg, speed_m_s, tau_s):
     """Positions at times ``tau_s`` after the segment start (closed form)."""
     c0 = seg.course0_rad
     if seg.rate_rad_s == 0.0:
-        return seg.x0_m + speed_m_s * tau_s * np.sin(c0), seg.y0_m + speed_m_s * tau_s * np.cos(c0)
+        step = speed_m_s * tau_s
+        return seg.x0_m + step * np.sin(c0), seg.y0_m + step * np.cos(c0)
     radius = speed_m_s / seg.rate_rad_s  # signed
     c = c0 + seg.rate_rad_s * tau_s
-    return seg.x0_m + radius * (np.cos(c0) - np.cos(c)), seg.y0_m + radius * (np.sin(c) - np.sin(c0))
+    return (seg.x0_m + radius * (np.cos(c0) - np.cos(c)),
+            seg.y0_m + radius * (np.sin(c) - np.sin(c0)))
 
 
 class ObserverPath:

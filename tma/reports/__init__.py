@@ -7,9 +7,10 @@ import pandas as pd
 from tma.io.atomic import atomic_path, write_text_atomic
 
 
-def write_csv(df: pd.DataFrame, path: Path):
+def write_csv(df: pd.DataFrame, path: Path, float_format=None):
+    """CSV without index; floats in shortest round-trip form unless ``float_format``."""
     with atomic_path(path) as tmp:
-        df.to_csv(tmp, index=False, float_format="%.6g", lineterminator="\n")
+        df.to_csv(tmp, index=False, float_format=float_format, lineterminator="\n")
 
 
 def markdown_table(df: pd.DataFrame) -> str:

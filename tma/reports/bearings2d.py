@@ -10,8 +10,16 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
+import pyarrow as pa  # noqa: E402
 
-from tma.metrics.bearings2d import REGIONS, TABLE_COLUMNS, kinematics_at  # noqa: E402
+from tma.io.atomic import write_parquet_atomic  # noqa: E402
+from tma.metrics.bearings2d import (  # noqa: E402
+    REGIONS,
+    TABLE_COLUMNS,
+    kinematics_at,
+    summary_row,
+    track_metrics,
+)
 from tma.reports import markdown_table, save_figure, write_csv, write_markdown  # noqa: E402
 
 INTRO = """Bearings-only TMA of a constant-velocity target from a manoeuvring observer
@@ -43,7 +51,7 @@ def write_table(rows: list[dict], tables_dir, name="bearings2d") -> list[Path]:
     table = pd.DataFrame(rows, columns=TABLE_COLUMNS).sort_values(
         ["estimator", "sigma_deg"], kind="stable").reset_index(drop=True)
     paths = [tables_dir / f"{name}.{ext}" for ext in ("csv", "md", "png")]
-    write_csv(table, paths[0])
+    write_csv(table, paths[0], float_format="%.6g")
 
     shown = pd.DataFrame({
         "estimator": table["estimator"],
@@ -135,13 +143,16 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str)
     tables_dir = Path(tables_dir)
     paths = [tables_dir / f"{name}.csv", tables_dir / f"{name}.md"]
     write_csv(report, paths[0])
+    def pm(value, sd, fmt):
+        return [f"{v:{fmt}} ± {e:{fmt}}" for v, e in report[[value, sd]].to_numpy()]
+
     shown = pd.DataFrame({
         "track": report["track_id"], "n": report["n_bearings"],
         "t now (s)": report["t_now_s"].map("{:.1f}".format),
-        "range now (m)": [f"{r:.0f} ± {s:.0f}" for r, s in report[["range_now_m", "range_sd_m"]].to_numpy()],
-        "bearing now (deg)": [f"{b:.2f} ± {s:.2f}" for b, s in report[["bearing_now_deg", "bearing_sd_deg"]].to_numpy()],
-        "course (deg)": [f"{c:.1f} ± {s:.1f}" for c, s in report[["course_deg", "course_sd_deg"]].to_numpy()],
-        "speed (m/s)": [f"{v:.2f} ± {s:.2f}" for v, s in report[["speed_m_s", "speed_sd_m_s"]].to_numpy()],
+        "range now (m)": pm("range_now_m", "range_sd_m", ".0f"),
+        "bearing now (deg)": pm("bearing_now_deg", "bearing_sd_deg", ".2f"),
+        "course (deg)": pm("course_deg", "course_sd_deg", ".1f"),
+        "speed (m/s)": pm("speed_m_s", "speed_sd_m_s", ".2f"),
         "sqrt(Ka) (deg)": report["sqrt_ka_deg"].map("{:.3g}".format),
         "converged": report["converged"],
     })
@@ -155,11 +166,6 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str)
 def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
     """Metrics per track into each run dir; the comparison table for simulated datasets and
     a per-track report for each dataset without truth."""
-    import pyarrow as pa
-
-    from tma.io.atomic import write_parquet_atomic
-    from tma.metrics.bearings2d import summary_row, track_metrics
-
     rows, written = [], []
     for entry in entries:
         truth = entry.dataset.read_truth()

@@ -79,7 +79,8 @@ class Config:
         require(self.family == FAMILY, where, f"family must be '{FAMILY}'")
         require(self.n_tracks > 0, where, "n_tracks must be positive")
         require(self.shard_size > 0, where, "shard_size must be positive")
-        require(0 <= self.sigma_deg < 90, where, f"sigma_deg must be in [0, 90), got {self.sigma_deg}")
+        require(0 <= self.sigma_deg < 90, where,
+                f"sigma_deg must be in [0, 90), got {self.sigma_deg}")
         require(self.sample_period_s > 0, where, "sample_period_s must be positive")
         p = self.population
         require(0 < p.distance_min_m <= p.distance_max_m, where, "bad population distance range")

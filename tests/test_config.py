@@ -1,0 +1,101 @@
+"""Hydra composition of every config group, and clear errors for bad configs."""
+
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+from hydra.errors import ConfigCompositionException
+from omegaconf import OmegaConf
+
+from pipeline._common import CONF_DIR, estimator_nodes, scenario_nodes
+from tests.conftest import compose_cfg, run_cli
+from tma.errors import ConfigError
+from tma.estimators import ESTIMATORS, build_estimator
+from tma.scenarios import load_scenario
+
+CONF = Path(CONF_DIR)
+
+
+def _options(group):
+    return sorted(p.stem for p in (CONF / group).glob("*.yaml"))
+
+
+@pytest.mark.parametrize("name", _options("scenario"))
+def test_every_scenario_composes_and_validates(name):
+    cfg = compose_cfg([f"scenario={name}"])
+    module, scenario = load_scenario(OmegaConf.to_container(cfg.scenario))
+    assert module.FAMILY == scenario.family
+
+
+@pytest.mark.parametrize("name", _options("estimator"))
+def test_every_estimator_composes_and_builds(name):
+    cfg = compose_cfg([f"estimator={name}"])
+    assert cfg.estimator.name in ESTIMATORS
+    build_estimator(OmegaConf.to_container(cfg.estimator))
+
+
+@pytest.mark.parametrize("name", _options("parallel"))
+def test_every_parallel_option_composes(name):
+    assert compose_cfg([f"parallel={name}"]).parallel.n_jobs >= 1
+
+
+@pytest.mark.parametrize("name", _options("experiment"))
+def test_every_experiment_composes_to_a_grid(name):
+    cfg = compose_cfg([f"experiment={name}"])
+    assert cfg.table
+    nodes = scenario_nodes(cfg)
+    assert len(nodes) >= 1
+    for node in nodes:
+        load_scenario(node)
+    for node in estimator_nodes(cfg):
+        build_estimator(node)
+
+
+def test_table_experiment_is_the_spec_grid():
+    cfg = compose_cfg(["experiment=bearings2d_table"])
+    assert [n["sigma_deg"] for n in scenario_nodes(cfg)] == [0.0, 0.1, 0.2, 0.3, 0.5, 1.0]
+    assert {n["n_tracks"] for n in scenario_nodes(cfg)} == {10000}
+    assert [n["name"] for n in estimator_nodes(cfg)] == ["lm", "nbearings"]
+
+
+def test_joblib_launcher_preset_composes():
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+        cfg = compose("config", overrides=["hydra/launcher=parallel"], return_hydra_config=True)
+    assert "joblib" in cfg.hydra.launcher._target_.lower()
+    assert cfg.hydra.launcher.n_jobs == 2
+
+
+def test_ingest_config_composes():
+    cfg = compose_cfg(["input=x.csv"], config_name="ingest")
+    assert cfg.input == "x.csv" and cfg.format == "auto"
+
+
+def test_unknown_keys_wrong_types_and_names_fail_clearly():
+    with pytest.raises(ConfigCompositionException, match="estimator/foo"):
+        compose_cfg(["estimator=foo"])
+    with pytest.raises(ConfigCompositionException, match="Could not override 'sigma'"):
+        compose_cfg(["sigma=0.3"])
+    cfg = compose_cfg(["+scenario.sigmaa_deg=0.3"])
+    with pytest.raises(ConfigError, match="sigmaa_deg"):
+        load_scenario(OmegaConf.to_container(cfg.scenario))
+    cfg = compose_cfg(["scenario.sigma_deg=half"])
+    with pytest.raises(ConfigError, match="could not be converted to Float"):
+        load_scenario(OmegaConf.to_container(cfg.scenario))
+    cfg = compose_cfg(["scenario.sigma_deg=-1"])
+    with pytest.raises(ConfigError, match=r"sigma_deg must be in \[0, 90\)"):
+        load_scenario(OmegaConf.to_container(cfg.scenario))
+
+
+def test_cli_errors_are_one_clear_line(tmp_path):
+    proc = run_cli("estimate", "estimator=kalman", f"paths.data_dir={tmp_path}", check=False)
+    assert proc.returncode != 0
+    assert "Could not find 'estimator/kalman'" in proc.stderr
+    assert "lm" in proc.stderr and "nbearings" in proc.stderr
+    proc = run_cli("simulate", "scenario.n_tracks=many", f"paths.data_dir={tmp_path}",
+                   check=False)
+    assert proc.returncode == 2
+    assert "error: scenario 'bearings2d'" in proc.stderr and "Traceback" not in proc.stderr
+    proc = run_cli("estimate", f"paths.data_dir={tmp_path}", "scenario.n_tracks=5",
+                   check=False)
+    assert proc.returncode == 2
+    assert "python -m pipeline.simulate" in proc.stderr

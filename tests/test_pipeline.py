@@ -1,0 +1,142 @@
+"""simulate -> estimate -> aggregate: end to end, determinism, resume, integrity, sweeps."""
+
+import json
+import os
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from pipeline.aggregate import aggregate_stage
+from pipeline.estimate import estimate_stage
+from pipeline.simulate import simulate_stage
+from tests.conftest import SMALL, compose_cfg, run_cli
+from tma.errors import IntegrityError
+
+EXPECTED_COLUMNS = (
+    "estimator,sigma_deg,n_tracks,ref1,ref1_lo,ref1_hi,ref2,ref2_lo,ref2_hi,ref3,ref3_lo,"
+    "ref3_hi,ref4,ref4_lo,ref4_hi,sqrt_ka_mean,sqrt_ka_median,nf_median,iter_median,n_converged"
+)
+GRID = ["experiment=bearings2d_table", "scenario.n_tracks=60", "scenario.shard_size=25",
+        "grid.scenario.sigma_deg=[0.0,0.5]", "progress=false"]
+
+
+def _all_stages(overrides):
+    cfg = compose_cfg(overrides)
+    simulate_stage(cfg)
+    estimate_stage(cfg)
+    aggregate_stage(cfg)
+    return cfg
+
+
+def _files(root: Path):
+    return {p.relative_to(root): p.read_bytes() for p in sorted(root.rglob("*"))
+            if p.is_file() and "hydra" not in p.parts
+            # wall-clock bookkeeping (timing.json, shard sidecars) is not output
+            and p.name != "timing.json" and not p.name.endswith(".done.json")}
+
+
+def test_end_to_end_table(paths, tmp_path):
+    _all_stages([*GRID, *paths])
+    tables = tmp_path / "tables"
+    csv = (tables / "bearings2d.csv").read_text().splitlines()
+    assert csv[0] == EXPECTED_COLUMNS
+    df = pd.read_csv(tables / "bearings2d.csv")
+    assert list(zip(df.estimator, df.sigma_deg, strict=True)) == [
+        ("lm", 0.0), ("lm", 0.5), ("nbearings", 0.0), ("nbearings", 0.5)]
+    assert (df.n_tracks == 60).all()
+    exact = df[df.sigma_deg == 0]
+    assert (exact.ref1 == 1.0).all()  # noiseless: both estimators recover every target
+    lm = df[(df.estimator == "lm") & (df.sigma_deg == 0.5)].iloc[0]
+    assert 0.4 < lm.sqrt_ka_median < 0.6
+    assert lm.ref1_lo <= lm.ref1 <= lm.ref1_hi
+    assert (tables / "bearings2d.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "| lm | 0.5 | 60 |" in (tables / "bearings2d.md").read_text()
+    runs = list((tmp_path / "data" / "runs").glob("*/lm-*"))
+    metrics = pd.read_parquet(runs[0] / "metrics.parquet")
+    assert len(metrics) == 60 and {"ref1", "bearing_err_deg"} <= set(metrics.columns)
+    manifest = json.loads(next((tmp_path / "data" / "datasets").glob("*/manifest.json"))
+                          .read_text())
+    assert manifest["seed"] == 20260101 and manifest["package"]["name"] == "tma"
+    assert all(len(r["sha256"]) == 64 for r in manifest["shards"].values())
+    assert manifest["files"]["truth.parquet"]["rows"] == 60
+
+
+def test_outputs_do_not_depend_on_n_jobs(tmp_path):
+    trees = []
+    for n_jobs in (1, 2):
+        root = tmp_path / f"jobs{n_jobs}"
+        _all_stages([*GRID, f"paths.data_dir={root}", f"paths.tables_dir={root}/tables",
+                     f"parallel.n_jobs={n_jobs}"])
+        trees.append(_files(root))
+    assert trees[0].keys() == trees[1].keys()
+    differing = [str(k) for k in trees[0] if trees[0][k] != trees[1][k]]
+    assert differing == []
+    assert any(str(k).endswith("estimates.parquet") for k in trees[0])
+
+
+def test_rerun_reuses_shards_resumes_and_force_recomputes(paths, tmp_path):
+    overrides = [*SMALL, *paths, "parallel=serial"]
+    cfg = compose_cfg(overrides)
+    simulate_stage(cfg)
+    estimate_stage(cfg)
+    run = next((tmp_path / "data" / "runs").glob("*/lm-*"))
+    shards = sorted((run / "shards").glob("*.parquet"))
+    assert len(shards) == 3
+    stamps = {p: os.stat(p).st_mtime_ns for p in shards}
+    before = (run / "estimates.parquet").read_bytes()
+
+    # a killed run: one shard output lost, the combined file missing
+    shards[1].unlink()
+    (run / "estimates.parquet").unlink()
+    estimate_stage(cfg)
+    assert os.stat(shards[0]).st_mtime_ns == stamps[shards[0]]  # reused
+    assert os.stat(shards[2]).st_mtime_ns == stamps[shards[2]]
+    assert (run / "estimates.parquet").read_bytes() == before
+
+    # a damaged shard output fails its hash check and is recomputed
+    shards[2].write_bytes(b"garbage")
+    estimate_stage(cfg)
+    assert (run / "estimates.parquet").read_bytes() == before
+
+    estimate_stage(compose_cfg([*overrides, "force=true"]))
+    assert os.stat(shards[0]).st_mtime_ns != stamps[shards[0]]
+    assert (run / "estimates.parquet").read_bytes() == before
+
+
+def test_simulate_resumes_after_a_kill(paths, tmp_path):
+    cfg = compose_cfg([*SMALL, *paths, "parallel=serial"])
+    simulate_stage(cfg)
+    ds = next((tmp_path / "data" / "datasets").iterdir())
+    reference = _files(ds)
+    (ds / "manifest.json").unlink()  # killed before the manifest was written
+    simulate_stage(cfg)
+    assert _files(ds) == reference
+
+
+def test_tampered_dataset_is_refused(paths, tmp_path):
+    cfg = compose_cfg([*SMALL, *paths, "parallel=serial"])
+    simulate_stage(cfg)
+    shard = next((tmp_path / "data" / "datasets").glob("*/log/shard-00001.mcap"))
+    data = bytearray(shard.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    shard.write_bytes(bytes(data))
+    with pytest.raises(IntegrityError, match="does not match the manifest"):
+        estimate_stage(cfg)
+
+
+def test_cli_sweep_and_joblib_launcher(tmp_path):
+    common = [f"paths.data_dir={tmp_path}", "scenario.n_tracks=30", "scenario.shard_size=15",
+              "progress=false"]
+    run_cli("simulate", "-m", "scenario.sigma_deg=0.1,0.5", *common)
+    proc = run_cli("estimate", "-m", "estimator=lm,nbearings", "scenario.sigma_deg=0.1,0.5",
+                   *common)
+    assert proc.stderr.count("run ") + proc.stdout.count("run ") >= 4
+    runs = sorted(p.parent.name + "/" + p.name.split("-")[0]
+                  for p in tmp_path.glob("runs/*/*/estimates.parquet"))
+    assert len(runs) == 4
+    stamp = {p: p.stat().st_mtime_ns for p in tmp_path.glob("runs/*/*/shards/*.parquet")}
+    proc = run_cli("estimate", "-m", "hydra/launcher=parallel", "estimator=lm,nbearings",
+                   "scenario.sigma_deg=0.1,0.5", *common)
+    assert "Joblib" in proc.stdout + proc.stderr or "joblib" in proc.stdout + proc.stderr
+    assert {p: p.stat().st_mtime_ns for p in stamp} == stamp  # finished shards reused
