@@ -4,7 +4,19 @@ import numpy as np
 
 from tma.errors import InputError
 from tma.io.bearings_log import BearingsLog
-from tma.models.bearings2d import bearing_cost, gauss_newton_matrix
+from tma.models.bearings2d import BearingTerms
+
+BLOCK_TRACKS = 64
+
+
+def evaluate_in_blocks(terms: BearingTerms, theta, block=BLOCK_TRACKS):
+    """F(theta) (rad^2) and J^T J per track, evaluated in cache-sized blocks of tracks."""
+    n = theta.shape[0]
+    cost, jtj = np.empty(n), np.empty((n, 4, 4))
+    for start in range(0, n, block):
+        rows = np.arange(start, min(start + block, n))
+        cost[rows], jtj[rows], _ = terms(theta[rows], rows)
+    return cost, jtj
 
 
 class BearingsEstimator:
@@ -36,8 +48,10 @@ class BearingsEstimator:
             valid = None  # every bearing present: skip masking in the hot loops
         out = self.solve(t, ox, oy, measured, valid, first)
         theta = out.pop("theta")
-        cost = bearing_cost(theta, t, ox, oy, measured, valid)
-        jtj = gauss_newton_matrix(np.nan_to_num(theta), t, ox, oy, valid)
+        if "cost_rad2" in out:  # iterative estimators know F and J^T J at their solution
+            cost, jtj = out.pop("cost_rad2"), out.pop("jtj")
+        else:
+            cost, jtj = evaluate_in_blocks(BearingTerms(t, ox, oy, measured, valid), theta)
         columns = {
             "x0_m": theta[:, 0], "y0_m": theta[:, 1], "vx_m_s": theta[:, 2], "vy_m_s": theta[:, 3],
             **out,
@@ -52,5 +66,6 @@ class BearingsEstimator:
 
     def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
         """``valid``: mask or None (all present); ``first``: index of each track's first
-        bearing. Returns ``theta`` (n, 4) and estimator-specific columns."""
+        bearing. Returns ``theta`` (n, 4), optionally ``cost_rad2`` and ``jtj`` at theta, and
+        estimator-specific columns."""
         raise NotImplementedError

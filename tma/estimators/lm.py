@@ -4,9 +4,9 @@ Minimises F(theta) = sum_k wrap(X_k - f_k(theta))^2 (rad^2) per track with its o
 A = H + lambda diag(H), H = J^T J; a trial step whose F rises, or whose A is not positive
 definite, multiplies lambda by ``lambda_up``; an accepted step multiplies it by
 ``lambda_down``; a track stops when an accepted step lowers F by less than ``f_tol_rad2``.
-Every pass evaluates F once for each still-active track (accepted and rejected alike), and the
-Jacobian only for tracks whose last trial was accepted, so the per-track sequence is exactly
-the scalar algorithm's while the work stays vectorised.
+Every pass makes one fused evaluation of F, J^T J and J^T r at each still-active track's trial
+point (accepted and rejected alike; n_f_evals counts it once), so the per-track sequence is
+exactly the scalar algorithm's while the work stays vectorised, in cache-sized blocks.
 """
 
 from dataclasses import dataclass
@@ -16,7 +16,7 @@ import numpy as np
 from tma.config import require
 from tma.estimators.base import BearingsEstimator
 from tma.linalg import jacobi_scaled_eigh, solve_shifted
-from tma.models.bearings2d import bearing_cost, normal_equations
+from tma.models.bearings2d import BearingTerms
 
 # Stop reasons recorded per track.
 STOP_F_TOL, STOP_MAX_ITER, STOP_LAMBDA_MAX = 0, 1, 2
@@ -39,6 +39,7 @@ class Config:
     lambda_max: float = 1e16  # a track whose lambda exceeds this stops (stalled)
     pd_rtol: float = 1e-12  # A is positive definite if its smallest scaled eigenvalue > this
     min_bearings: int = 5
+    block_tracks: int = 64  # tracks per vectorised block (cache-sized; does not change results)
 
     def __post_init__(self):
         w = "estimator 'lm'"
@@ -48,6 +49,7 @@ class Config:
         require(self.f_tol_rad2 > 0, w, "f_tol_rad2 must be positive")
         require(self.max_iter > 0, w, "max_iter must be positive")
         require(self.min_bearings >= 4, w, "min_bearings must be at least 4")
+        require(self.block_tracks >= 1, w, "block_tracks must be positive")
 
 
 def initial_theta(cfg: Config, t, own_x, own_y, measured_rad, first):
@@ -67,10 +69,6 @@ def initial_theta(cfg: Config, t, own_x, own_y, measured_rad, first):
     ])
 
 
-def _rows(valid, idx):
-    return None if valid is None else valid[idx]
-
-
 class LevenbergMarquardt(BearingsEstimator):
     name = "lm"
     Config = Config
@@ -78,48 +76,56 @@ class LevenbergMarquardt(BearingsEstimator):
     def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
         cfg = self.config
         n = measured_rad.shape[0]
-        theta = initial_theta(cfg, t, own_x, own_y, measured_rad, first)
-        cost = bearing_cost(theta, t, own_x, own_y, measured_rad, valid)
+        terms = BearingTerms(t, own_x, own_y, measured_rad, valid)
+        out = {
+            "theta": initial_theta(cfg, t, own_x, own_y, measured_rad, first),
+            "n_f_evals": np.zeros(n, dtype=np.int64),
+            "n_iter": np.zeros(n, dtype=np.int64),
+            "stop_reason": np.full(n, -1, dtype=np.int64),
+            "cost_rad2": np.zeros(n),
+            "jtj": np.zeros((n, 4, 4)),
+        }
+        # Cache-sized blocks of tracks: each track's iterations are independent of the others.
+        for start in range(0, n, cfg.block_tracks):
+            self._solve_block(terms, np.arange(start, min(start + cfg.block_tracks, n)), out)
+        out["converged"] = out["stop_reason"] == STOP_F_TOL
+        return out
+
+    def _solve_block(self, terms, rows, out):
+        """Marquardt iterations for the tracks ``rows``; results written into ``out``."""
+        cfg = self.config
+        theta = out["theta"][rows]
+        cost, H, g = terms(theta, rows)
+        n = rows.size
         n_f_evals = np.ones(n, dtype=np.int64)
         n_iter = np.zeros(n, dtype=np.int64)
         lam = np.full(n, cfg.lambda0)
         stop = np.full(n, -1, dtype=np.int64)
-        need_jacobian = np.ones(n, dtype=bool)
-        w, V, d = np.zeros((n, 4)), np.zeros((n, 4, 4)), np.ones((n, 4))
-        g = np.zeros((n, 4))
+        w, V, d = jacobi_scaled_eigh(H)
         active = np.arange(n)
 
         while active.size:
-            fresh = active[need_jacobian[active]]
-            if fresh.size:
-                args = (t, own_x, own_y)
-                _, H, g[fresh] = normal_equations(theta[fresh], *args, measured_rad[fresh],
-                                                  _rows(valid, fresh))
-                w[fresh], V[fresh], d[fresh] = jacobi_scaled_eigh(H)
-                need_jacobian[fresh] = False
-
             # Step 4: raise lambda until A = H + lambda diag(H) is positive definite (the scaled
             # A has eigenvalues w + lambda, so no refactorisation is needed).
             wa = w[active]
-            not_pd = wa[:, 0] + lam[active] <= cfg.pd_rtol * np.maximum(wa[:, -1], 1.0)
+            floor = cfg.pd_rtol * np.maximum(wa[:, -1], 1.0)
+            not_pd = wa[:, 0] + lam[active] <= floor
             while np.any(not_pd):
-                idx = active[not_pd]
-                lam[idx] *= cfg.lambda_up
-                not_pd &= wa[:, 0] + lam[active] <= cfg.pd_rtol * np.maximum(wa[:, -1], 1.0)
+                lam[active[not_pd]] *= cfg.lambda_up
+                not_pd &= wa[:, 0] + lam[active] <= floor
 
-            step = solve_shifted(wa, V[active], d[active], g[active], lam[active])
-            trial = theta[active] + step
-            trial_cost = bearing_cost(trial, t, own_x, own_y, measured_rad[active],
-                                      _rows(valid, active))
+            trial = theta[active] + solve_shifted(wa, V[active], d[active], g[active], lam[active])
+            trial_cost, trial_H, trial_g = terms(trial, rows[active])
             n_f_evals[active] += 1
             decrease = cost[active] - trial_cost
             accepted = decrease >= 0  # NaN (a non-finite trial) counts as rejected
 
             acc, rej = active[accepted], active[~accepted]
             theta[acc], cost[acc] = trial[accepted], trial_cost[accepted]
+            H[acc], g[acc] = trial_H[accepted], trial_g[accepted]
+            w[acc], V[acc], d[acc] = jacobi_scaled_eigh(H[acc])
             lam[acc] *= cfg.lambda_down
             n_iter[acc] += 1
-            need_jacobian[acc] = True
             lam[rej] *= cfg.lambda_up
 
             stop[acc[decrease[accepted] < cfg.f_tol_rad2]] = STOP_F_TOL
@@ -127,10 +133,9 @@ class LevenbergMarquardt(BearingsEstimator):
             stop[active[(stop[active] < 0) & (lam[active] > cfg.lambda_max)]] = STOP_LAMBDA_MAX
             active = active[stop[active] < 0]
 
-        return {
-            "theta": theta,
-            "n_f_evals": n_f_evals,
-            "n_iter": n_iter,
-            "converged": stop == STOP_F_TOL,
-            "stop_reason": stop,
-        }
+        out["theta"][rows] = theta
+        out["n_f_evals"][rows] = n_f_evals
+        out["n_iter"][rows] = n_iter
+        out["stop_reason"][rows] = stop
+        out["cost_rad2"][rows] = cost
+        out["jtj"][rows] = H

@@ -89,3 +89,58 @@ def gauss_newton_matrix(theta, t_s, own_x_m, own_y_m, valid):
     divided by the bearing variance)."""
     zeros = np.zeros((theta.shape[0], np.size(t_s)))
     return normal_equations(theta, t_s, own_x_m, own_y_m, zeros, valid)[1]
+
+
+class BearingTerms:
+    """Fused evaluation of F, H = J^T J and g = J^T r at many trial points (the LM hot path).
+
+    Precomputes sin and cos of the measured bearings once, so the wrapped residual is
+    ``atan2(sin X dy - cos X dx, cos X dy + sin X dx)`` (already in (-pi, pi], no separate
+    wrap), and a missing bearing (sin = cos = 0, weight 0) contributes exactly zero.
+    """
+
+    def __init__(self, t_s, own_x_m, own_y_m, measured_rad, valid):
+        self.t, self.ox, self.oy = t_s, own_x_m, own_y_m
+        self.sin_m, self.cos_m = np.sin(measured_rad), np.cos(measured_rad)
+        self.weight = None
+        if valid is not None:
+            self.weight = valid.astype(float)
+            self.sin_m *= self.weight
+            self.cos_m *= self.weight
+        self.powers = np.stack([np.ones_like(t_s), t_s, t_s * t_s], axis=1)
+
+    def __call__(self, theta, rows):
+        """``(F, H, g)`` for ``theta`` (k, 4) of tracks ``rows`` (index array, length k)."""
+        t, k = self.t, theta.shape[0]
+        sin_m, cos_m = self.sin_m[rows], self.cos_m[rows]
+        dx = np.multiply.outer(theta[:, 2], t)
+        dx += theta[:, 0, None]
+        dx -= self.ox
+        dy = np.multiply.outer(theta[:, 3], t)
+        dy += theta[:, 1, None]
+        dy -= self.oy
+        r = np.arctan2(sin_m * dy - cos_m * dx, cos_m * dy + sin_m * dx)
+        F = np.einsum("ij,ij->i", r, r)
+        inv_r2 = dx * dx
+        inv_r2 += dy * dy
+        np.reciprocal(inv_r2, out=inv_r2)
+        if self.weight is not None:
+            inv_r2 *= self.weight[rows]
+        a = np.multiply(dy, inv_r2, out=dy)  # d bearing / d x
+        b = np.multiply(dx, inv_r2, out=dx)  # minus d bearing / d y
+        products = np.empty((5, k, t.size))
+        np.multiply(a, a, out=products[0])
+        np.multiply(a, b, out=products[1])
+        np.multiply(b, b, out=products[2])
+        np.multiply(a, r, out=products[3])
+        np.multiply(b, r, out=products[4])
+        sums = (products.reshape(5 * k, t.size) @ self.powers).reshape(5, k, 3)
+        aa, ab, bb, ar, br = sums  # with b = -d/dy: ab, br change sign
+        H = np.empty((k, 4, 4))
+        H[:, 0, 0], H[:, 0, 1], H[:, 0, 2], H[:, 0, 3] = aa[:, 0], -ab[:, 0], aa[:, 1], -ab[:, 1]
+        H[:, 1, 1], H[:, 1, 2], H[:, 1, 3] = bb[:, 0], -ab[:, 1], bb[:, 1]
+        H[:, 2, 2], H[:, 2, 3], H[:, 3, 3] = aa[:, 2], -ab[:, 2], bb[:, 2]
+        iu = np.triu_indices(4, 1)
+        H[:, iu[1], iu[0]] = H[:, iu[0], iu[1]]
+        g = np.column_stack([ar[:, 0], -br[:, 0], ar[:, 1], -br[:, 1]])
+        return F, H, g
