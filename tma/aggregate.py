@@ -15,7 +15,10 @@ from tma.errors import ConfigError
 from tma.io.dataset import Dataset
 from tma.runs import check_compatible, open_run, run_path
 
-REPORT_MODULES = {"bearings2d": "tma.reports.bearings2d"}
+REPORT_MODULES = {
+    "bearings2d": "tma.reports.bearings2d",
+    "ranges2d": "tma.reports.ranges2d",
+}
 
 
 @dataclass

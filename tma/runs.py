@@ -58,6 +58,10 @@ def check_compatible(dataset: Dataset, estimator_config: dict):
         )
 
 
+def extra_path(shard_out: Path, name: str) -> Path:
+    return shard_out.with_name(f"{shard_out.stem}.{name}.parquet")
+
+
 @dataclass(frozen=True)
 class ShardTask:
     dataset_root: str
@@ -78,9 +82,14 @@ def estimate_shard(task: ShardTask) -> dict:
     start = perf_counter()
     columns = estimator.estimate(log)
     seconds = perf_counter() - start
+    # Optional small side tables (e.g. sample points for plots): written beside the shard.
+    extras = columns.pop("extras", {}) if isinstance(columns.get("extras"), dict) else {}
+    for name, table in extras.items():
+        write_parquet_atomic(extra_path(out, name), pa.table(table))
     write_parquet_atomic(out, pa.table({"track_id": log.track_id, **columns}))
     epochs = int(log.t_s.size)
-    return mark_finished(out, task.key, rows=int(log.n_tracks), epochs=epochs, seconds=seconds)
+    return mark_finished(out, task.key, rows=int(log.n_tracks), epochs=epochs, seconds=seconds,
+                         extras=sorted(extras))
 
 
 def plan_run(data_dir, dataset: Dataset, estimator_config: dict):
@@ -104,6 +113,13 @@ def finish_run(root: Path, dataset: Dataset, estimator_config: dict, tasks, reco
     write_parquet_atomic(root / ESTIMATES, table)
     shards = {Path(t.out_path).name: {"sha256": r["sha256"], "rows": r["rows"]}
               for t, r in zip(tasks, records, strict=True)}
+    files = {ESTIMATES: {"sha256": sha256_file(root / ESTIMATES), "rows": table.num_rows}}
+    for name in sorted({n for r in records for n in r.get("extras", [])}):
+        parts = [extra_path(Path(t.out_path), name) for t in tasks]
+        extra = pa.concat_tables(pq.read_table(p) for p in parts if p.exists())
+        write_parquet_atomic(root / f"{name}.parquet", extra)
+        files[f"{name}.parquet"] = {"sha256": sha256_file(root / f"{name}.parquet"),
+                                    "rows": extra.num_rows}
     manifest = {
         "format": RUN_FORMAT,
         "format_version": 1,
@@ -113,9 +129,10 @@ def finish_run(root: Path, dataset: Dataset, estimator_config: dict, tasks, reco
                     "content_hash": dataset.content_hash},
         "package": {"name": "tma", "version": __version__},
         "shards": shards,
-        "files": {ESTIMATES: {"sha256": sha256_file(root / ESTIMATES), "rows": table.num_rows}},
+        "files": files,
         "n_tracks": table.num_rows,
-        "n_converged": int(pc.sum(table["converged"]).as_py() or 0),
+        **({"n_converged": int(pc.sum(table["converged"]).as_py() or 0)}
+           if "converged" in table.column_names else {}),
     }
     write_json_atomic(root / MANIFEST, manifest)
     timing = {"shards": {Path(t.out_path).name: {"seconds": r["seconds"], "rows": r["rows"],

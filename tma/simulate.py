@@ -44,17 +44,21 @@ class ShardTask:
 
 def simulate_shard(task: ShardTask) -> dict:
     """Simulate and write one shard (worker function)."""
-    if is_finished(task.log_path, task.key) and is_finished(task.truth_path, task.key):
-        return finished_record(task.log_path)
+    if is_finished(task.log_path, task.key):
+        record = finished_record(task.log_path)
+        if not record["truth_rows"] or is_finished(task.truth_path, task.key):
+            return record
     module, cfg = load_scenario(task.config)
     log, truth = module.simulate_shard(cfg, task.index)
     metadata = {"tma.dataset": {"family": module.FAMILY, "shard": task.index,
                                 "config_sha256": sha256_json(task.config),
                                 "package_version": __version__}}
     n_messages = module.write_log(task.log_path, log, metadata)
-    write_parquet_atomic(task.truth_path, truth)
-    mark_finished(task.truth_path, task.key, rows=truth.num_rows)
-    return mark_finished(task.log_path, task.key, messages=n_messages, tracks=int(log.n_tracks))
+    if truth is not None:  # some scenarios (a recorded case replayed) have no truth
+        write_parquet_atomic(task.truth_path, truth)
+        mark_finished(task.truth_path, task.key, rows=truth.num_rows)
+    return mark_finished(task.log_path, task.key, messages=n_messages, tracks=int(log.n_tracks),
+                         truth_rows=0 if truth is None else truth.num_rows)
 
 
 def simulate_datasets(scenario_nodes, data_dir, *, n_jobs=2, force=False, progress=True):
@@ -83,9 +87,11 @@ def simulate_datasets(scenario_nodes, data_dir, *, n_jobs=2, force=False, progre
                                      "tracks": r["tracks"]}
             for t, r in zip(shard_tasks, records, strict=True)
         }
-        truth = pa.concat_tables(pq.read_table(t.truth_path) for t in shard_tasks)
-        write_parquet_atomic(root / "truth.parquet", truth)
-        files = {"truth.parquet": file_record(root / "truth.parquet", rows=truth.num_rows)}
+        files = {}
+        if any(r["truth_rows"] for r in records):
+            truth = pa.concat_tables(pq.read_table(t.truth_path) for t in shard_tasks)
+            write_parquet_atomic(root / "truth.parquet", truth)
+            files["truth.parquet"] = file_record(root / "truth.parquet", rows=truth.num_rows)
         write_manifest(root, family=module.FAMILY, source="simulate", config=plain,
                        shards=shards, files=files,
                        extra={"seed": plain.get("seed"), "time_origin_s": 0.0})

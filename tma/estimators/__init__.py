@@ -13,6 +13,9 @@ from tma.errors import ConfigError
 ESTIMATORS = {
     "lm": "tma.estimators.lm:LevenbergMarquardt",
     "nbearings": "tma.estimators.nbearings:NBearings",
+    "quadrature": "tma.estimators.quadrature:Quadrature",
+    "prior_is": "tma.estimators.prior_is:PriorIS",
+    "adaptive_is": "tma.estimators.adaptive_is:AdaptiveIS",
 }
 
 

@@ -11,6 +11,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import orjson
 from mcap.decoder import DecoderFactory
 from mcap.exceptions import McapError
@@ -24,6 +25,13 @@ from tma.io.atomic import atomic_path
 SCHEMA_DIR = Path(__file__).parent / "schemas"
 PROFILE = ""  # plain JSON channels: no ROS profile
 _JSON_OPTIONS = orjson.OPT_SERIALIZE_NUMPY
+
+
+def _strided_array(obj):
+    """orjson serialises contiguous arrays natively; strided views go through a copy."""
+    if isinstance(obj, np.ndarray):
+        return np.ascontiguousarray(obj)
+    raise TypeError(f"cannot serialise {type(obj).__name__} to JSON")
 
 
 def schema_bytes(name: str) -> bytes:
@@ -78,7 +86,8 @@ class LogWriter:
         t_ns = seconds_to_ns(t_s)
         self._writer.add_message(
             self._ids[topic], log_time=t_ns, publish_time=t_ns,
-            data=orjson.dumps(message, option=_JSON_OPTIONS), sequence=self.n_messages,
+            data=orjson.dumps(message, default=_strided_array, option=_JSON_OPTIONS),
+            sequence=self.n_messages,
         )
         self.n_messages += 1
 

@@ -10,7 +10,10 @@ from tma.config import to_plain, validate
 from tma.errors import ConfigError
 from tma.io.atomic import sha256_json
 
-SCENARIO_MODULES = {"bearings2d": "tma.scenarios.bearings2d"}
+SCENARIO_MODULES = {
+    "bearings2d": "tma.scenarios.bearings2d",
+    "ranges2d": "tma.scenarios.ranges2d",
+}
 
 
 def scenario_module(family: str):

@@ -1,0 +1,1 @@
+"""Reusable densities for importance sampling."""
