@@ -6,7 +6,11 @@
 (b) Wall time of each stage of the default table (``experiment=bearings2d_table``) on a fresh
     data directory, then of a re-run that reuses every finished shard.
 
-Options: ``--tracks N`` (default 2000), ``--sigma DEG`` (0.5), ``--skip-stages``.
+(c) ``ranges2d``: time per 1e4 bisections and per 1e5 samples of each sampler, and the
+    headline ratio of samples needed (prior / adaptive) for the same accuracy.
+
+Options: ``--tracks N`` (2000), ``--sigma DEG`` (0.5), ``--runs N`` (30), ``--skip-stages``,
+``--only FAMILY``.
 """
 
 import argparse
@@ -82,15 +86,59 @@ def bench_stages():
             print(f"    {label:7s} {'total':10s} {total:7.2f} s{target}")
 
 
+def bench_ranges(runs: int):
+    from tma.density.bisection import BisectionDensity
+    from tma.estimators.adaptive_is import scalar_log_kernel
+    from tma.models.ranges2d import RangeModel
+    from tma.scenarios.ranges2d import Config as RangesConfig
+    from tma.scenarios.ranges2d import simulate_shard as simulate_ranges
+
+    log, _ = simulate_ranges(RangesConfig(n_tracks=runs, shard_size=runs), 0)
+    model = RangeModel.from_ranges(log.landmarks_m, log.ranges_m[0], 30.0, [0, 0], [100, 100])
+    rng = np.random.default_rng(0)
+    box = ((-400.0, 400.0), (-400.0, 400.0))
+    print("(c) ranges2d, the article's concrete case, one thread")
+    with threadpool_limits(limits=1):
+        start = time.perf_counter()
+        density = BisectionDensity.build(scalar_log_kernel(model), box, 10_000, 5e-4, rng)
+        t_bisect = time.perf_counter() - start
+        start = time.perf_counter()
+        pts = model.prior_mean_m + model.prior_sd_m * rng.standard_normal((100_000, 2))
+        model.log_likelihood(pts[:, 0], pts[:, 1])
+        t_prior = time.perf_counter() - start
+        start = time.perf_counter()
+        pts, cell = density.sample(100_000, rng)
+        model.log_kernel(pts[:, 0], pts[:, 1]) - np.log(density.cell_density(cell))
+        t_adaptive = time.perf_counter() - start
+        print(f"    10,000 bisections                  {1e3 * t_bisect:8.1f} ms")
+        print(f"    1e5 samples + weights, prior_is    {1e3 * t_prior:8.1f} ms")
+        print(f"    1e5 samples + weights, adaptive_is {1e3 * t_adaptive:8.1f} ms")
+        used = {}
+        for name in ("prior_is", "adaptive_is"):
+            start = time.perf_counter()
+            out = build_estimator({"name": name}).estimate(log)
+            used[name] = (out["samples_used"].mean(), (time.perf_counter() - start) / runs)
+            print(f"    {name:11s} to 0.1 m at 95 %: {used[name][0]:11,.0f} samples, "
+                  f"{used[name][1]:.3f} s per run ({runs} runs)")
+    ratio = used["prior_is"][0] / used["adaptive_is"][0]
+    print(f"    HEADLINE samples needed, prior / adaptive: {ratio:.1f}x "
+          f"(time ratio {used['prior_is'][1] / used['adaptive_is'][1]:.2f}x)")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--tracks", type=int, default=2000)
     parser.add_argument("--sigma", type=float, default=0.5)
+    parser.add_argument("--runs", type=int, default=30, help="ranges2d repeated runs")
     parser.add_argument("--skip-stages", action="store_true")
+    parser.add_argument("--only", choices=["bearings2d", "ranges2d"], default=None)
     args = parser.parse_args()
-    bench_lm(args.tracks, args.sigma)
-    if not args.skip_stages:
-        bench_stages()
+    if args.only in (None, "bearings2d"):
+        bench_lm(args.tracks, args.sigma)
+        if not args.skip_stages:
+            bench_stages()
+    if args.only in (None, "ranges2d"):
+        bench_ranges(args.runs)
 
 
 if __name__ == "__main__":
