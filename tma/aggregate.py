@@ -18,6 +18,7 @@ from tma.runs import check_compatible, open_run, run_path
 REPORT_MODULES = {
     "bearings2d": "tma.reports.bearings2d",
     "ranges2d": "tma.reports.ranges2d",
+    "radar2d": "tma.reports.radar2d",
 }
 
 

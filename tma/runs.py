@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from time import perf_counter
 
+import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
@@ -58,6 +59,23 @@ def check_compatible(dataset: Dataset, estimator_config: dict):
         )
 
 
+def columns_to_table(track_id, columns: dict) -> pa.Table:
+    """Estimator output -> table. Columns are (n_tracks,) or, for per-step outputs such as
+    filter estimates at every scan, (n_tracks, n_steps): then the table is long, one row per
+    (track_id, step), and per-track columns repeat on each of their rows."""
+    steps = {c.shape[1] for c in columns.values() if np.ndim(c) == 2}
+    if not steps:
+        return pa.table({"track_id": track_id, **columns})
+    if len(steps) > 1:
+        raise ValueError(f"per-step columns disagree on the number of steps: {steps}")
+    n_steps = steps.pop()
+    long = {"track_id": np.repeat(track_id, n_steps),
+            "step": np.tile(np.arange(n_steps, dtype=np.int64), track_id.size)}
+    for name, col in columns.items():
+        long[name] = np.ravel(col) if np.ndim(col) == 2 else np.repeat(col, n_steps)
+    return pa.table(long)
+
+
 def extra_path(shard_out: Path, name: str) -> Path:
     return shard_out.with_name(f"{shard_out.stem}.{name}.parquet")
 
@@ -86,7 +104,7 @@ def estimate_shard(task: ShardTask) -> dict:
     extras = columns.pop("extras", {}) if isinstance(columns.get("extras"), dict) else {}
     for name, table in extras.items():
         write_parquet_atomic(extra_path(out, name), pa.table(table))
-    write_parquet_atomic(out, pa.table({"track_id": log.track_id, **columns}))
+    write_parquet_atomic(out, columns_to_table(log.track_id, columns))
     epochs = int(log.t_s.size)
     return mark_finished(out, task.key, rows=int(log.n_tracks), epochs=epochs, seconds=seconds,
                          extras=sorted(extras))

@@ -16,6 +16,9 @@ ESTIMATORS = {
     "quadrature": "tma.estimators.quadrature:Quadrature",
     "prior_is": "tma.estimators.prior_is:PriorIS",
     "adaptive_is": "tma.estimators.adaptive_is:AdaptiveIS",
+    "alphabeta": "tma.estimators.alphabeta:AlphaBeta",
+    "fuzzy_mm": "tma.estimators.fuzzy_mm:FuzzyMultiModel",
+    "imm": "tma.estimators.imm:IMM",
 }
 
 

@@ -13,6 +13,7 @@ from tma.io.atomic import sha256_json
 SCENARIO_MODULES = {
     "bearings2d": "tma.scenarios.bearings2d",
     "ranges2d": "tma.scenarios.ranges2d",
+    "radar2d": "tma.scenarios.radar2d",
 }
 
 

@@ -15,7 +15,7 @@ import pyarrow as pa
 from tma.angles import bearing_from_north, wrap_to_pi
 from tma.config import require
 from tma.io.bearings_log import BearingsLog, read_bearings_log, write_bearings_log
-from tma.models.observer import ObserverPath
+from tma.models.path import LegPath
 
 FAMILY = "bearings2d"
 
@@ -95,12 +95,12 @@ def n_shards(cfg: Config) -> int:
     return -(-cfg.n_tracks // cfg.shard_size)
 
 
-def observer_path(cfg: Config) -> ObserverPath:
+def observer_path(cfg: Config) -> LegPath:
     o = cfg.observer
-    return ObserverPath(o.start_x_m, o.start_y_m, o.speed_m_s, o.legs)
+    return LegPath(o.start_x_m, o.start_y_m, o.speed_m_s, o.legs)
 
 
-def epochs(cfg: Config, path: ObserverPath) -> np.ndarray:
+def epochs(cfg: Config, path: LegPath) -> np.ndarray:
     """Bearing times t = 0, dt, ..., up to the end of the observer path (s)."""
     n = int(np.floor(path.duration_s / cfg.sample_period_s + 1e-9)) + 1
     return np.arange(n) * cfg.sample_period_s

@@ -1,10 +1,10 @@
-"""Own-ship path: exact arcs, continuity and the spec's default manoeuvre."""
+"""Leg paths: exact arcs, continuity, the bearings2d manoeuvre and the radar2d legs."""
 
 import numpy as np
 import pytest
 
 from tma.errors import ConfigError
-from tma.models.observer import ObserverPath
+from tma.models.path import LegPath
 from tma.scenarios.bearings2d import Config, epochs, observer_path
 
 
@@ -57,7 +57,23 @@ def test_turn_through_north_goes_right():
 
 def test_bad_legs_are_rejected():
     with pytest.raises(ConfigError, match="direction"):
-        ObserverPath(0, 0, 5, [{"course_deg": 0, "duration_s": 10},
+        LegPath(0, 0, 5, [{"course_deg": 0, "duration_s": 10},
                                {"turn_to_deg": 90, "rate_deg_s": 1, "direction": "up"}])
-    with pytest.raises(ConfigError, match="either"):
-        ObserverPath(0, 0, 5, [{"duration_s": 10}])
+    with pytest.raises(ConfigError, match="first leg needs course_deg"):
+        LegPath(0, 0, 5, [{"duration_s": 10}])
+    with pytest.raises(ConfigError, match="not both"):
+        LegPath(0, 0, 5, [{"course_deg": 0, "duration_s": 1},
+                          {"turn_to_deg": 9, "turn_radius_m": 9, "direction": "left"}])
+
+
+def test_radius_turn_and_course_keeping_legs():
+    legs = [{"duration_s": 45.0}, {"turn_radius_m": 300.0, "duration_s": 45.0,
+                                   "direction": "left"}, {"duration_s": 30.0}]
+    path = LegPath(0, 0, 10.0, legs, initial_course_deg=90.0)  # heading +x
+    x, y = path.position(np.array([45.0, 90.0]))
+    assert (x[0], y[0]) == pytest.approx((450.0, 0.0))
+    turned = 10.0 * 45.0 / 300.0  # rad, to the left (counter-clockwise)
+    assert (x[1], y[1]) == pytest.approx((450 + 300 * np.sin(turned),
+                                          300 * (1 - np.cos(turned))))
+    assert np.rad2deg(path.course(np.array([100.0])))[0] == pytest.approx(
+        90 - np.rad2deg(turned))

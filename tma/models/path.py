@@ -1,8 +1,13 @@
-"""Own-ship (observer) path made of straight legs and constant-rate turns, integrated exactly.
+"""A platform's path made of straight legs and constant-rate turns at constant speed,
+integrated exactly (own-ship of ``bearings2d``, the vessel of ``radar2d``).
 
 Conventions: x east, y north (m), time in s, course clockwise from north. A turn at rate
 omega (rad/s) and speed V is a circular arc of radius V/omega; positions on it come from the
 closed-form integral, so position is continuous and the radius exact (no Euler drift).
+
+Leg forms: ``{course_deg, duration_s}`` (straight; without ``course_deg`` it keeps the
+current course), ``{turn_to_deg, rate_deg_s, direction}`` and
+``{turn_radius_m, duration_s, direction}`` (turns; ``direction`` is ``left`` or ``right``).
 """
 
 from dataclasses import dataclass
@@ -29,50 +34,53 @@ def _leg_value(leg, key):
 
 
 def build_segments(start_x_m, start_y_m, speed_m_s, legs, initial_course_deg=None):
-    """Turn a leg list into exact segments.
-
-    Each leg is either ``{course_deg, duration_s}`` (straight) or
-    ``{turn_to_deg, rate_deg_s, direction}`` with ``direction`` ``"left"`` or ``"right"``.
-    A turn starts from the previous leg's course (or ``initial_course_deg``).
-    """
+    """Turn a leg list (see the module docstring) into exact segments. A leg without its own
+    course starts from the previous leg's final course (or ``initial_course_deg``)."""
     if speed_m_s <= 0:
-        raise ConfigError(f"observer speed must be positive, got {speed_m_s} m/s")
+        raise ConfigError(f"path speed must be positive, got {speed_m_s} m/s")
     segments, t, x, y = [], 0.0, float(start_x_m), float(start_y_m)
     course = None if initial_course_deg is None else np.deg2rad(initial_course_deg)
     for i, leg in enumerate(legs):
-        straight = _leg_value(leg, "course_deg") is not None
-        turn = _leg_value(leg, "turn_to_deg") is not None
-        if straight == turn:
-            raise ConfigError(
-                f"observer leg {i}: give either course_deg + duration_s or "
-                f"turn_to_deg + rate_deg_s + direction, got {dict(leg)!r}"
-            )
-        if straight:
+        turn_to = _leg_value(leg, "turn_to_deg") is not None
+        radius = _leg_value(leg, "turn_radius_m")
+        if turn_to and radius is not None:
+            raise ConfigError(f"leg {i}: give turn_to_deg or turn_radius_m, not both")
+        if turn_to or radius is not None:
+            if course is None:
+                raise ConfigError(f"leg {i}: a turn needs a preceding course")
+            direction = _leg_value(leg, "direction")
+            if direction not in ("left", "right"):
+                raise ConfigError(f"leg {i}: direction must be 'left' or 'right'")
+            sign = 1.0 if direction == "right" else -1.0
+            if turn_to:
+                rate_deg = _leg_value(leg, "rate_deg_s")
+                if rate_deg is None or rate_deg <= 0:
+                    raise ConfigError(f"leg {i}: rate_deg_s must be positive")
+                target = np.deg2rad(_leg_value(leg, "turn_to_deg"))
+                angle = (sign * (target - course)) % (2 * np.pi)  # turn angle that way
+                rate = sign * np.deg2rad(rate_deg)
+                duration = angle / abs(rate)
+            else:
+                duration = _leg_value(leg, "duration_s")
+                if radius <= 0 or duration is None or duration <= 0:
+                    raise ConfigError(f"leg {i}: turn_radius_m and duration_s must be positive")
+                rate = sign * speed_m_s / radius
+        else:
             duration = _leg_value(leg, "duration_s")
             if duration is None or duration <= 0:
-                raise ConfigError(f"observer leg {i}: duration_s must be positive")
-            course, rate = np.deg2rad(_leg_value(leg, "course_deg")), 0.0
-        else:
-            if course is None:
-                raise ConfigError(f"observer leg {i}: a turn needs a preceding course")
-            rate_deg = _leg_value(leg, "rate_deg_s")
-            direction = _leg_value(leg, "direction")
-            if rate_deg is None or rate_deg <= 0:
-                raise ConfigError(f"observer leg {i}: rate_deg_s must be positive")
-            if direction not in ("left", "right"):
-                raise ConfigError(f"observer leg {i}: direction must be 'left' or 'right'")
-            target = np.deg2rad(_leg_value(leg, "turn_to_deg"))
-            sign = 1.0 if direction == "right" else -1.0
-            angle = (sign * (target - course)) % (2 * np.pi)  # turn angle in that direction
-            rate = sign * np.deg2rad(rate_deg)
-            duration = angle / abs(rate)
+                raise ConfigError(f"leg {i}: duration_s must be positive, got {dict(leg)!r}")
+            if _leg_value(leg, "course_deg") is not None:
+                course = np.deg2rad(_leg_value(leg, "course_deg"))
+            elif course is None:
+                raise ConfigError(f"leg {i}: the first leg needs course_deg")
+            rate = 0.0
         seg = Segment(t, x, y, course, float(duration), rate)
         segments.append(seg)
         x, y = _positions_on(seg, speed_m_s, np.array([duration]))
         x, y, t = float(x[0]), float(y[0]), t + duration
         course = course + rate * duration
     if not segments:
-        raise ConfigError("observer needs at least one leg")
+        raise ConfigError("a path needs at least one leg")
     return segments
 
 
@@ -88,12 +96,12 @@ def _positions_on(seg, speed_m_s, tau_s):
             seg.y0_m + radius * (np.sin(c) - np.sin(c0)))
 
 
-class ObserverPath:
-    """Exact own-ship path. ``position(t)`` for any times within [0, duration]."""
+class LegPath:
+    """Exact path at constant speed. ``position(t)`` for any times within [0, duration]."""
 
-    def __init__(self, start_x_m, start_y_m, speed_m_s, legs):
+    def __init__(self, start_x_m, start_y_m, speed_m_s, legs, initial_course_deg=None):
         self.speed_m_s = float(speed_m_s)
-        self.segments = build_segments(start_x_m, start_y_m, speed_m_s, legs)
+        self.segments = build_segments(start_x_m, start_y_m, speed_m_s, legs, initial_course_deg)
         self._t0 = np.array([s.t0_s for s in self.segments])
         last = self.segments[-1]
         self.duration_s = last.t0_s + last.duration_s
@@ -102,7 +110,7 @@ class ObserverPath:
         """Own-ship (x, y) in metres at times ``t_s`` (array), each in [0, duration]."""
         t_s = np.asarray(t_s, dtype=float)
         if np.any(t_s < 0) or np.any(t_s > self.duration_s * (1 + 1e-12)):
-            raise ConfigError(f"observer times must lie in [0, {self.duration_s:g}] s")
+            raise ConfigError(f"path times must lie in [0, {self.duration_s:g}] s")
         which = np.clip(np.searchsorted(self._t0, t_s, side="right") - 1, 0, len(self._t0) - 1)
         x, y = np.empty_like(t_s), np.empty_like(t_s)
         for i, seg in enumerate(self.segments):

@@ -1,0 +1,72 @@
+"""Radar plot logs: one MCAP message per scan on ``/radar/plots`` (schema ``tma.PlotBatch``).
+
+The metadata record ``tma.sensor`` describes the radar and its noise (JSON-encoded values):
+``noise`` (``cartesian`` or ``polar``), ``sigma_m``, ``radar_x_m``, ``radar_y_m``,
+``range_sd_m``, ``bearing_sd_deg``. In memory: ``plots_m`` (n_tracks, n_scans, 2), NaN where
+a scan has no plot (estimators skip it).
+"""
+
+import json
+from dataclasses import dataclass
+
+import numpy as np
+
+from tma.errors import InputError
+from tma.io.mcap_log import Channel, LogWriter, read_log
+
+PLOTS_TOPIC = "/radar/plots"
+SCHEMAS = {PLOTS_TOPIC: "tma.PlotBatch"}
+CHANNELS = [Channel(PLOTS_TOPIC, SCHEMAS[PLOTS_TOPIC],
+                    {"units": "t_s: s; x_m, y_m: m", "frame": "local plane, x east, y north"})]
+
+
+@dataclass
+class RadarLog:
+    t_s: np.ndarray  # (n_scans,)
+    track_id: np.ndarray  # (n,)
+    plots_m: np.ndarray  # (n, n_scans, 2)
+    sensor: dict
+
+    @property
+    def n_tracks(self) -> int:
+        return self.track_id.size
+
+    def validate(self, where: str):
+        dt = np.diff(self.t_s)
+        if np.any(dt <= 0):
+            k = int(np.argmax(dt <= 0))
+            raise InputError(f"{where}: scan times are not increasing at t = {self.t_s[k + 1]:g} s")
+        if self.t_s.size < 3:
+            raise InputError(f"{where}: {self.t_s.size} scans; tracking needs at least 3")
+        if "noise" not in self.sensor:
+            raise InputError(f"{where}: metadata tma.sensor lacks 'noise'")
+
+
+def write_radar_log(path, log: RadarLog, metadata=None) -> int:
+    meta = {**(metadata or {}), "tma.sensor": {k: json.dumps(v) for k, v in log.sensor.items()}}
+    with LogWriter(path, CHANNELS, meta) as w:
+        for k, t in enumerate(log.t_s.tolist()):
+            w.write(PLOTS_TOPIC, t, {"t_s": t, "track_id": log.track_id,
+                                     "x_m": log.plots_m[:, k, 0], "y_m": log.plots_m[:, k, 1]})
+        return w.n_messages
+
+
+def read_radar_log(path) -> RadarLog:
+    messages, metadata = read_log(path, SCHEMAS)
+    msgs = messages[PLOTS_TOPIC]
+    where = str(path)
+    if not msgs:
+        raise InputError(f"{where}: no messages on {PLOTS_TOPIC}")
+    if "tma.sensor" not in metadata:
+        raise InputError(f"{where}: missing metadata record 'tma.sensor'")
+    sensor = {k: json.loads(v) for k, v in metadata["tma.sensor"].items()}
+    t = np.array([m["t_s"] for m in msgs], float)
+    track_id = np.unique(np.concatenate([np.asarray(m["track_id"], np.int64) for m in msgs]))
+    plots = np.full((track_id.size, t.size, 2), np.nan)
+    for k, m in enumerate(msgs):
+        rows = np.searchsorted(track_id, np.asarray(m["track_id"], np.int64))
+        for axis, key in enumerate(("x_m", "y_m")):
+            plots[rows, k, axis] = np.array([np.nan if v is None else v for v in m[key]], float)
+    log = RadarLog(t, track_id, plots, sensor)
+    log.validate(where)
+    return log
