@@ -7,7 +7,8 @@ of the fit of the j scans before z_i; L_j = |r_j| / sigma_hat clipped to 3. sigm
 causal running RMS of the selected model's innovation norm with a prior of ``sigma_prior_m``
 worth one sample (or fixed by ``sigma_hat_m``). The selection m_i = round_half_up(max(raw_i,
 raw_(i-1))) clipped to [2, J] starts at scan 3; the output is the model-m_i estimate. A scan
-without a plot keeps the previous selection and sigma_hat.
+without a plot keeps the previous selection and sigma_hat; a model whose window holds no plot
+(missed scans) counts as Bad.
 """
 
 from dataclasses import dataclass
