@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 # Every family's default experiment; `make table EXPERIMENT=<name>` builds one.
-EXPERIMENTS := bearings2d_table ranges2d_table radar2d_table
+EXPERIMENTS := bearings2d_table ranges2d_table radar2d_table bearing_doppler3d_table
 EXPERIMENT ?= $(EXPERIMENTS)
 ARGS ?=
 

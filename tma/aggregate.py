@@ -13,12 +13,13 @@ import pandas as pd
 
 from tma.errors import ConfigError
 from tma.io.dataset import Dataset
-from tma.runs import check_compatible, open_run, run_path
+from tma.runs import open_run, prepared_config, run_path
 
 REPORT_MODULES = {
     "bearings2d": "tma.reports.bearings2d",
     "ranges2d": "tma.reports.ranges2d",
     "radar2d": "tma.reports.radar2d",
+    "bearing_doppler3d": "tma.reports.bearing_doppler3d",
 }
 
 
@@ -35,7 +36,7 @@ def aggregate(data_dir, tables_dir, jobs, table=None) -> list[Path]:
     """Aggregate the runs of ``jobs`` (``(Dataset, estimator config)`` pairs)."""
     by_family: dict[str, list[RunEntry]] = {}
     for dataset, est_cfg in jobs:
-        check_compatible(dataset, est_cfg)
+        est_cfg = prepared_config(data_dir, dataset, est_cfg)  # artefacts exist: reused
         root = run_path(data_dir, dataset, est_cfg)
         manifest, estimates = open_run(root)
         by_family.setdefault(dataset.family, []).append(

@@ -110,10 +110,20 @@ def estimate_shard(task: ShardTask) -> dict:
                          extras=sorted(extras))
 
 
-def plan_run(data_dir, dataset: Dataset, estimator_config: dict):
-    """Shard tasks of one run (validates the estimator config and family first)."""
+def prepared_config(data_dir, dataset: Dataset, estimator_config: dict, n_jobs=1,
+                    progress=False) -> dict:
+    """The estimator config after its optional ``prepare`` step (e.g. training an artefact
+    that the run then records by path and hash)."""
     check_compatible(dataset, estimator_config)
-    build_estimator(estimator_config)  # fail on bad parameters before any worker starts
+    build_estimator(estimator_config)  # fail on bad parameters before any work starts
+    cls = estimator_class(estimator_config["name"])
+    if hasattr(cls, "prepare"):
+        estimator_config = cls.prepare(estimator_config, dataset, data_dir, n_jobs, progress)
+    return estimator_config
+
+
+def plan_run(data_dir, dataset: Dataset, estimator_config: dict):
+    """Shard tasks of one run (``estimator_config`` as returned by ``prepared_config``)."""
     root = run_path(data_dir, dataset, estimator_config)
     key = run_key(dataset, estimator_config)
     tasks = []
@@ -164,6 +174,7 @@ def estimate_runs(data_dir, jobs, *, n_jobs=2, progress=True, force=False):
     """Run every (dataset, estimator config) job, all shards in one worker pool."""
     planned, tasks = [], []
     for dataset, est_cfg in jobs:
+        est_cfg = prepared_config(data_dir, dataset, est_cfg, n_jobs, progress)
         root, run_tasks_ = plan_run(data_dir, dataset, est_cfg)
         if force:
             for t in run_tasks_:

@@ -19,6 +19,10 @@ ESTIMATORS = {
     "alphabeta": "tma.estimators.alphabeta:AlphaBeta",
     "fuzzy_mm": "tma.estimators.fuzzy_mm:FuzzyMultiModel",
     "imm": "tma.estimators.imm:IMM",
+    "ekf": "tma.estimators.ekf:EKF",
+    "srekf": "tma.estimators.srekf:SquareRootEKF",
+    "cmnf": "tma.estimators.cmnf:CMNF",
+    "prior_mean": "tma.estimators.prior_mean:PriorMean",
 }
 
 

@@ -14,6 +14,7 @@ SCENARIO_MODULES = {
     "bearings2d": "tma.scenarios.bearings2d",
     "ranges2d": "tma.scenarios.ranges2d",
     "radar2d": "tma.scenarios.radar2d",
+    "bearing_doppler3d": "tma.scenarios.bearing_doppler3d",
 }
 
 

@@ -1,0 +1,100 @@
+"""Shared pieces of the ``bearing_doppler3d`` filters.
+
+Filters keep paths on the last axis (state (6, n), covariance (6, 6, n)) so that each state
+row is a contiguous vector over paths. Both Kalman filters propagate the covariance of the
+Euler-discretised linearised SDE over each step dt: with Phi = I + A dt (A the drift
+Jacobian at the mean), P <- Phi P Phi^T + b b^T dt, b = (0, 0, 0, 0, 0, mu): the Euler step of
+dP = (A P + P A^T + b b^T) dt plus its own O(dt^2) term A P A^T dt^2, which keeps P positive
+definite and is exactly what the square-root filter propagates. Observations are processed as
+scalars in sequence against one linearisation point per epoch (the batch EKF update, since R
+is diagonal); a missing reading (NaN) is skipped.
+
+Outputs per path and epoch: the estimate, its standard deviations, and the covariance's upper
+triangle every ``covariance_every`` epochs (NaN between, for NEES); ``filter_ok`` is False
+for a path whose covariance became non-finite (it is kept, the others go on).
+"""
+
+import numpy as np
+
+from tma.io.hydrophone_log import HydrophoneLog
+from tma.models.auv3d import A, PHI, STATE_NAMES, V, X, Y
+from tma.scenarios.bearing_doppler3d import auv_model
+
+IU = np.triu_indices(6)
+
+
+def initial_moments(initial: dict):
+    """Mean (6,) and covariance (6, 6) of the initial distribution, exactly."""
+    mean = np.array([*initial["position_mean_m"],
+                     0.5 * (initial["speed_min_m_s"] + initial["speed_max_m_s"]),
+                     initial["heading_mean_rad"],
+                     0.5 * (initial["accel_min_m_s2"] + initial["accel_max_m_s2"])])
+    var = np.array([*np.square(initial["position_sd_m"]),
+                    (initial["speed_max_m_s"] - initial["speed_min_m_s"]) ** 2 / 12,
+                    initial["heading_sd_rad"] ** 2,
+                    (initial["accel_max_m_s2"] - initial["accel_min_m_s2"]) ** 2 / 12])
+    return mean, np.diag(var)
+
+
+def drift_times_rows(M, x, lam):
+    """A @ M for the drift Jacobian A at states x (6, n); M (6, k, n) (or (6, n))."""
+    out = np.zeros_like(M)
+    c, s, v, a = np.cos(x[PHI]), np.sin(x[PHI]), x[V], x[A]
+    out[X] = c * M[V] - (v * s) * M[PHI]
+    out[Y] = s * M[V] + (v * c) * M[PHI]
+    out[PHI] = (-a / v**2) * M[V] + M[A] / v
+    out[A] = -lam * M[A]
+    return out
+
+
+def drift_step(x, dt, lam, nu):
+    """One Euler step of the mean, x (6, n)."""
+    out = x.copy()
+    out[X] += x[V] * np.cos(x[PHI]) * dt
+    out[Y] += x[V] * np.sin(x[PHI]) * dt
+    out[PHI] += x[A] / x[V] * dt
+    out[A] += (-lam * x[A] + nu) * dt
+    return out
+
+
+class AuvEstimator:
+    family = "bearing_doppler3d"
+    name = ""
+
+    def __init__(self, config):
+        self.config = config
+
+    def estimate(self, log: HydrophoneLog) -> dict:
+        record = log.model
+        model = auv_model(record)
+        if log.obs.shape[2] != model.n_obs:
+            raise ValueError(f"the log holds {log.obs.shape[2]} readings per epoch, the model "
+                             f"{model.n_obs}")
+        # a wrecked path overflows on its own (paths never mix); it is flagged, not raised
+        with np.errstate(all="ignore"):
+            est, cov, ok = self.run(model, record, log.t_s, log.obs)  # (n,K,6), (n,K,6,6), (n,)
+        return output_columns(est, cov, ok, log.t_s, self.config.covariance_every)
+
+    def run(self, model, record, t, obs):
+        raise NotImplementedError
+
+
+def output_columns(est, cov, ok, t, covariance_every):
+    n, K, _ = est.shape
+    out = {"t_s": np.broadcast_to(t, (n, K)).copy(), "filter_ok": ok}
+    for i, name in enumerate(STATE_NAMES):
+        out[name] = est[..., i]
+    sd = np.sqrt(np.einsum("nkii->nki", cov))
+    for i, name in enumerate(STATE_NAMES):
+        out[f"sd_{name}"] = sd[..., i]
+    keep = np.zeros(K, dtype=bool)
+    keep[::covariance_every] = True
+    keep[-1] = True
+    for i, j in zip(*IU, strict=True):
+        out[f"P_{i}{j}"] = np.where(keep, cov[..., i, j], np.nan)
+    return out
+
+
+def to_paths_first(x_hist, P_hist):
+    """(K, 6, n), (K, 6, 6, n) -> (n, K, 6), (n, K, 6, 6)."""
+    return np.moveaxis(x_hist, -1, 0), np.moveaxis(P_hist, -1, 0)

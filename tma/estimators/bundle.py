@@ -1,0 +1,47 @@
+"""The simulated training bundle shared by ``cmnf`` and ``prior_mean``: ``n_paths`` paths of
+the dataset's model (Doppler always simulated; bearings-only consumers drop it), truth at the
+observation epochs (float64) and observations (float32), built in parallel shards and cached
+as an artefact keyed by the model, size and seed."""
+
+import numpy as np
+
+from tma.io.artefacts import load_arrays, load_or_build
+from tma.parallel import run_tasks
+from tma.scenarios.bearing_doppler3d import simulate_paths
+
+SHARD = 2500
+
+
+def _bundle_shard(task):
+    record, seed, index, n = task
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(index,)))
+    truth, obs = simulate_paths({**record, "no_doppler": False}, n, rng)
+    return truth, obs.astype(np.float32)
+
+
+def bundle_spec(model_record: dict, n_paths: int, seed: int) -> dict:
+    return {"model": {**model_record, "no_doppler": False}, "n_paths": n_paths, "seed": seed}
+
+
+def training_bundle(data_dir, model_record, n_paths, seed, n_jobs=1, progress=False) -> dict:
+    """``{"path", "sha256"}`` of the bundle artefact (simulated on first use)."""
+    spec = bundle_spec(model_record, n_paths, seed)
+
+    def build():
+        tasks = [(spec["model"], seed, i, min(SHARD, n_paths - i * SHARD))
+                 for i in range(-(-n_paths // SHARD))]
+        parts = run_tasks(_bundle_shard, tasks, n_jobs=n_jobs, desc="training bundle",
+                          progress=progress)
+        return {"truth": np.concatenate([p[0] for p in parts]),
+                "obs": np.concatenate([p[1] for p in parts])}
+
+    path, sha = load_or_build(data_dir, "bundle", spec, build)
+    return {"path": str(path), "sha256": sha}
+
+
+def bundle_observations(arrays: dict, no_doppler: bool) -> np.ndarray:
+    obs = arrays["obs"].astype(float)
+    if no_doppler:
+        M, K, m = obs.shape
+        obs = obs.reshape(M, K, m // 3, 3)[..., :2].reshape(M, K, -1)
+    return obs

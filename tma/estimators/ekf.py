@@ -1,0 +1,93 @@
+"""``ekf``: continuous-discrete extended Kalman filter (EKF-1), batched over paths.
+
+Between observations: Euler steps of ``filter_step_s`` for the mean (dx = a(x) dt) and the
+covariance (see ``tma.estimators.auv_base``); at each observation the EKF update with the
+analytic observation Jacobian at the predicted mean, processed as sequential scalar updates.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tma.config import require
+from tma.estimators.auv_base import (
+    AuvEstimator,
+    drift_step,
+    initial_moments,
+    to_paths_first,
+)
+from tma.models.auv3d import A, PHI, V, X, Y
+
+
+@dataclass
+class Config:
+    name: str = "ekf"
+    covariance_every: int = 10  # store the full covariance every this many epochs (NEES)
+
+    def __post_init__(self):
+        require(self.covariance_every >= 1, f"estimator '{self.name}'",
+                "covariance_every must be >= 1")
+
+
+def predict_covariance(P, x, dt, lam, mu):
+    """P <- Phi P Phi^T + b b^T dt with Phi = I + A dt; P (6, 6, n), x (6, n).
+
+    Only rows and columns X, Y, phi, a of A are non-zero, so M = Phi P changes four rows of P
+    and M Phi^T four columns of M (``drift_times_rows`` is the general form).
+    """
+    c, s, v, a = np.cos(x[PHI]), np.sin(x[PHI]), x[V], x[A]
+    cdt, sdt, vsdt, vcdt = c * dt, s * dt, v * s * dt, v * c * dt
+    adt, idt, ldt = -a / (v * v) * dt, dt / v, -lam * dt
+    M = P.copy()
+    M[X] += cdt * P[V] - vsdt * P[PHI]
+    M[Y] += sdt * P[V] + vcdt * P[PHI]
+    M[PHI] += adt * P[V] + idt * P[A]
+    M[A] += ldt * P[A]
+    out = M.copy()
+    out[:, X] += cdt * M[:, V] - vsdt * M[:, PHI]
+    out[:, Y] += sdt * M[:, V] + vcdt * M[:, PHI]
+    out[:, PHI] += adt * M[:, V] + idt * M[:, A]
+    out[:, A] += ldt * M[:, A]
+    out[A, A] += mu * mu * dt
+    return out
+
+
+def sequential_update(x, P, obs_k, model):
+    """EKF update with one epoch's readings obs_k (n, m) (NaN = missing), in place."""
+    h, H = model.observe_with_jacobian(x.T)  # (n, m), (n, m, 6)
+    x_lin = x.copy()
+    r = model.obs_sd**2
+    for j in range(h.shape[1]):
+        hj = H[:, j].T  # (6, n)
+        Ph = np.einsum("ijn,jn->in", P, hj)
+        s = np.einsum("in,in->n", hj, Ph) + r[j]
+        valid = np.isfinite(obs_k[:, j])
+        innovation = np.where(valid, obs_k[:, j] - h[:, j]
+                              - np.einsum("in,in->n", hj, x - x_lin), 0.0)
+        K = np.where(valid, Ph / s, 0.0)
+        x += K * innovation
+        P -= K[:, None, :] * Ph[None, :, :]
+    return x, P
+
+
+class EKF(AuvEstimator):
+    name = "ekf"
+    Config = Config
+
+    def run(self, model, record, t, obs):
+        n, K, _ = obs.shape
+        dt, lam, mu = record["filter_step_s"], record["lam"], record["mu"]
+        mean0, cov0 = initial_moments(record["initial"])
+        x = np.repeat(mean0[:, None], n, axis=1)
+        P = np.repeat(cov0[:, :, None], n, axis=2)
+        xs, Ps = np.empty((K, 6, n)), np.empty((K, 6, 6, n))
+        for k in range(K):
+            if k:
+                for _ in range(int(round((t[k] - t[k - 1]) / dt))):
+                    P = predict_covariance(P, x, dt, lam, mu)
+                    x = drift_step(x, dt, lam, record["nu"])
+            x, P = sequential_update(x, P, obs[:, k], model)
+            xs[k], Ps[k] = x, P
+        est, cov = to_paths_first(xs, Ps)
+        ok = np.isfinite(cov).all(axis=(1, 2, 3)) & np.isfinite(est).all(axis=(1, 2))
+        return est, cov, ok

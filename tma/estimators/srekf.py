@@ -1,0 +1,108 @@
+"""``srekf``: the square-root form of ``ekf`` (same filter, Cholesky factor S with P = S S^T).
+
+In the state order (v, a, phi, X, Y, Z) the drift Jacobian is lower triangular, so
+Phi = I + A dt is too and Phi S stays lower triangular. Each Euler step triangularises
+[Phi S, b sqrt(dt)] orthogonally: Givens rotations fold the single noise column into Phi S
+(a structured QR, equal to ``numpy.linalg.qr`` of the same array up to signs). Each scalar
+reading updates by the array algorithm: Givens rotations triangularise
+[[sqrt(r), h S], [0, S]] into [[sqrt(alpha), 0], [K sqrt(alpha), S+]].
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tma.config import require
+from tma.estimators.auv_base import AuvEstimator, drift_step, initial_moments, to_paths_first
+from tma.models.auv3d import A, PHI, V
+
+ORDER = np.array([3, 5, 4, 0, 1, 2])  # (v, a, phi, X, Y, Z) in the model's state indices
+INVERSE = np.argsort(ORDER)
+SV, SA, SPHI, SX, SY = 0, 1, 2, 3, 4  # positions in the square-root order
+
+
+@dataclass
+class Config:
+    name: str = "srekf"
+    covariance_every: int = 10
+
+    def __post_init__(self):
+        require(self.covariance_every >= 1, "estimator 'srekf'", "covariance_every must be >= 1")
+
+
+def phi_times(S, x, dt, lam):
+    """(I + A dt) S in the square-root order; S (6, 6, n), x (6, n) in model order."""
+    c, s, v, a = np.cos(x[PHI]), np.sin(x[PHI]), x[V], x[A]
+    L = S.copy()
+    L[SA] += dt * (-lam * S[SA])
+    L[SPHI] += dt * ((-a / v**2) * S[SV] + S[SA] / v)
+    L[SX] += dt * (c * S[SV] - (v * s) * S[SPHI])
+    L[SY] += dt * (s * S[SV] + (v * c) * S[SPHI])
+    return L
+
+
+def fold_noise(L, q):
+    """Lower-triangular L' with L' L'^T = L L^T + q q^T, q (6, n) (Givens, in place)."""
+    q = q.copy()
+    for k in range(6):
+        if not np.any(q[k]):
+            continue
+        r = np.hypot(L[k, k], q[k])
+        c, s = r / L[k, k], q[k] / L[k, k]
+        L[k, k] = r
+        L[k + 1:, k] = (L[k + 1:, k] + s * q[k + 1:]) / c
+        q[k + 1:] = c * q[k + 1:] - s * L[k + 1:, k]
+        q[k] = 0.0
+    return L
+
+
+def scalar_update(S, h, r, innovation, valid):
+    """Array-algorithm update of S with one scalar reading; returns (S+, gain (6, n))."""
+    u = np.einsum("iln,in->ln", S, h)  # h S
+    u = np.where(valid, u, 0.0)
+    rho = np.full(u.shape[1], np.sqrt(r))
+    gain_col = np.zeros_like(h)
+    for col in range(5, -1, -1):  # right to left keeps S lower triangular
+        rho_new = np.hypot(rho, u[col])
+        c, s = rho / rho_new, u[col] / rho_new
+        old = S[:, col].copy()
+        S[:, col] = -s * gain_col + c * old
+        gain_col = c * gain_col + s * old
+        rho = rho_new
+    return S, np.where(valid, gain_col / rho, 0.0) * np.where(valid, innovation, 0.0)
+
+
+class SquareRootEKF(AuvEstimator):
+    name = "srekf"
+    Config = Config
+
+    def run(self, model, record, t, obs):
+        n, K, _ = obs.shape
+        dt, lam, mu = record["filter_step_s"], record["lam"], record["mu"]
+        mean0, cov0 = initial_moments(record["initial"])
+        x = np.repeat(mean0[:, None], n, axis=1)
+        S = np.repeat(np.linalg.cholesky(cov0[np.ix_(ORDER, ORDER)])[:, :, None], n, axis=2)
+        q = np.zeros((6, n))
+        q[SA] = mu * np.sqrt(dt)
+        r = model.obs_sd**2
+        xs, Ps = np.empty((K, 6, n)), np.empty((K, 6, 6, n))
+        for k in range(K):
+            if k:
+                for _ in range(int(round((t[k] - t[k - 1]) / dt))):
+                    S = fold_noise(phi_times(S, x, dt, lam), q)
+                    x = drift_step(x, dt, lam, record["nu"])
+            h, H = model.observe_with_jacobian(x.T)
+            x_lin = x.copy()
+            for j in range(h.shape[1]):
+                hj = H[:, j].T[ORDER]  # (6, n), square-root order
+                valid = np.isfinite(obs[:, k, j])
+                innovation = (obs[:, k, j] - h[:, j]
+                              - np.einsum("in,in->n", H[:, j].T, x - x_lin))
+                S, step = scalar_update(S, hj, r[j], innovation, valid)
+                x = x + step[INVERSE]
+            xs[k] = x
+            P = np.einsum("ikn,jkn->ijn", S, S)
+            Ps[k] = P[np.ix_(INVERSE, INVERSE)]
+        est, cov = to_paths_first(xs, Ps)
+        ok = np.isfinite(cov).all(axis=(1, 2, 3)) & np.isfinite(est).all(axis=(1, 2))
+        return est, cov, ok

@@ -1,0 +1,50 @@
+"""Trained or precomputed artefacts (e.g. CMNF gains, a simulated training bundle).
+
+``data/artefacts/<kind>-<key12>/`` holds ``arrays.npz`` and ``manifest.json`` (kind, the full
+spec it was built from, package version, the npz's sha256). The key hashes the spec and the
+package version, so a later run with the same spec reuses the artefact (after checking its
+hash) and a different spec builds its own.
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from tma import __version__
+from tma.errors import IntegrityError
+from tma.io.atomic import atomic_path, sha256_file, sha256_json, write_json_atomic
+
+ARRAYS = "arrays.npz"
+
+
+def artefact_dir(data_dir, kind: str, spec: dict) -> Path:
+    key = sha256_json({"kind": kind, "spec": spec, "version": __version__})
+    return Path(data_dir) / "artefacts" / f"{kind}-{key[:12]}"
+
+
+def load_or_build(data_dir, kind: str, spec: dict, build) -> tuple[Path, str]:
+    """Path and sha256 of the artefact for ``spec``; ``build()`` -> dict of arrays if absent."""
+    root = artefact_dir(data_dir, kind, spec)
+    manifest = root / "manifest.json"
+    if manifest.exists():
+        record = json.loads(manifest.read_text())
+        if sha256_file(root / ARRAYS) == record["sha256"]:
+            return root / ARRAYS, record["sha256"]
+    arrays = build()
+    with atomic_path(root / ARRAYS) as tmp, open(tmp, "wb") as f:
+        np.savez(f, **arrays)
+    sha = sha256_file(root / ARRAYS)
+    write_json_atomic(manifest, {"kind": kind, "spec": spec, "sha256": sha,
+                                 "package": {"name": "tma", "version": __version__},
+                                 "arrays": {k: list(np.shape(v)) for k, v in arrays.items()}})
+    return root / ARRAYS, sha
+
+
+def load_arrays(record: dict) -> dict:
+    """Arrays of an artefact given ``{"path", "sha256"}`` (hash-checked)."""
+    path = Path(record["path"])
+    if sha256_file(path) != record["sha256"]:
+        raise IntegrityError(f"{path}: artefact does not match its recorded sha256")
+    with np.load(path) as data:
+        return {k: data[k] for k in data.files}

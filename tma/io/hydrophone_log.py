@@ -1,0 +1,86 @@
+"""Hydrophone logs: one MCAP channel per sensor (``/hydrophones/<i>``, schema
+``tma.HydrophoneBatch``), one message per sensor and epoch carrying every track.
+
+The metadata record ``tma.model`` holds the JSON-encoded model the filters assume: sensor
+positions, noise standard deviations, tone frequency, sound speed, dynamics parameters, the
+initial distribution and time steps. In memory: ``obs`` (n_tracks, n_epochs, n_obs) in the
+model's order (xi, eta[, omega] per sensor), NaN where a reading is missing.
+"""
+
+import json
+from dataclasses import dataclass
+
+import numpy as np
+
+from tma.errors import InputError
+from tma.io.mcap_log import Channel, LogWriter, read_log
+
+SCHEMA = "tma.HydrophoneBatch"
+FIELDS = ("elevation_sin", "bearing_cos", "doppler_hz")
+
+
+def topic(sensor: int) -> str:
+    return f"/hydrophones/{sensor}"
+
+
+@dataclass
+class HydrophoneLog:
+    t_s: np.ndarray  # (n_epochs,)
+    track_id: np.ndarray  # (n,)
+    obs: np.ndarray  # (n, n_epochs, n_obs)
+    model: dict  # JSON-able model description (see tma.scenarios.bearing_doppler3d)
+
+    @property
+    def n_tracks(self) -> int:
+        return self.track_id.size
+
+    @property
+    def per_sensor(self) -> int:
+        return 2 if self.model["no_doppler"] else 3
+
+
+def write_hydrophone_log(path, log: HydrophoneLog, metadata=None) -> int:
+    sensors = log.model["sensors_m"]
+    per = log.per_sensor
+    channels = [Channel(topic(i), SCHEMA, {"sensor_xyz_m": json.dumps(s),
+                                           "units": "t_s: s; doppler_hz: Hz"})
+                for i, s in enumerate(sensors)]
+    meta = {**(metadata or {}), "tma.model": {k: json.dumps(v) for k, v in log.model.items()}}
+    with LogWriter(path, channels, meta) as w:
+        for k, t in enumerate(log.t_s.tolist()):
+            for i in range(len(sensors)):
+                msg = {"t_s": t, "sensor_id": i, "track_id": log.track_id}
+                for f, name in enumerate(FIELDS[:per]):
+                    msg[name] = log.obs[:, k, per * i + f]
+                w.write(topic(i), t, msg)
+        return w.n_messages
+
+
+def read_hydrophone_log(path) -> HydrophoneLog:
+    where = str(path)
+    probe, metadata = read_log(path, {})
+    if "tma.model" not in metadata:
+        raise InputError(f"{where}: missing metadata record 'tma.model'")
+    model = {k: json.loads(v) for k, v in metadata["tma.model"].items()}
+    n_sensors = len(model["sensors_m"])
+    per = 2 if model["no_doppler"] else 3
+    messages, _ = read_log(path, {topic(i): SCHEMA for i in range(n_sensors)})
+    t = np.array([m["t_s"] for m in messages[topic(0)]], float)
+    track_id = np.asarray(messages[topic(0)][0]["track_id"], np.int64) if t.size else np.zeros(0)
+    obs = np.full((track_id.size, t.size, n_sensors * per), np.nan)
+    for i in range(n_sensors):
+        msgs = messages[topic(i)]
+        if len(msgs) != t.size:
+            raise InputError(f"{where}: {topic(i)} has {len(msgs)} epochs, {topic(0)} {t.size}")
+        for k, m in enumerate(msgs):
+            if m["t_s"] != t[k] or len(m["track_id"]) != track_id.size:
+                raise InputError(f"{where}: {topic(i)} is not aligned with {topic(0)} at "
+                                 f"t = {m['t_s']}")
+            for f, name in enumerate(FIELDS[:per]):
+                if name not in m:
+                    raise InputError(f"{where}: {topic(i)} lacks {name}")
+                obs[:, k, per * i + f] = np.array([np.nan if v is None else v for v in m[name]],
+                                                  float)
+    if t.size and np.any(np.diff(t) <= 0):
+        raise InputError(f"{where}: epochs are not increasing")
+    return HydrophoneLog(t, track_id, obs, model)

@@ -1,0 +1,88 @@
+"""Metrics of ``bearing_doppler3d``: per epoch and component bias, RMSE, the filter's own std
+beside the measured std, NEES with its chi-square band, and divergence.
+
+A path diverges when its horizontal position error exceeds ``divergence_m`` at any epoch
+t >= ``divergence_after_s`` (or when its filter reported a non-finite covariance). Heading
+errors are wrapped to [-pi, pi).
+"""
+
+import numpy as np
+import pandas as pd
+from scipy.stats import chi2
+
+from tma.angles import wrap_to_pi
+from tma.models.auv3d import PHI, STATE_NAMES
+
+DIVERGENCE_M = 1000.0
+DIVERGENCE_AFTER_S = 10.0
+
+
+def _cube(df: pd.DataFrame, columns, n_steps):
+    return np.stack([df[c].to_numpy().reshape(-1, n_steps) for c in columns], axis=-1)
+
+
+def errors(estimates: pd.DataFrame, truth: pd.DataFrame):
+    """Errors (n, K, 6), own covariance entries, times and the filter flags, path-aligned."""
+    est = estimates.sort_values(["track_id", "step"], kind="stable").reset_index(drop=True)
+    tru = truth[truth["track_id"].isin(est["track_id"].unique())].sort_values(
+        ["track_id", "step"], kind="stable").reset_index(drop=True)
+    if not (len(tru) == len(est) and np.array_equal(tru["track_id"], est["track_id"])
+            and np.array_equal(tru["step"], est["step"])):
+        raise ValueError("estimates and truth do not cover the same (track, step) pairs")
+    K = int(est["step"].max()) + 1
+    e = _cube(est, STATE_NAMES, K) - _cube(tru, STATE_NAMES, K)
+    e[..., PHI] = wrap_to_pi(e[..., PHI])
+    t = est["t_s"].to_numpy()[:K]
+    ok = est["filter_ok"].to_numpy().reshape(-1, K)[:, 0].astype(bool)
+    return e, est, t, ok
+
+
+def divergent_paths(e, t, ok, threshold_m=DIVERGENCE_M, after_s=DIVERGENCE_AFTER_S):
+    horizontal = np.hypot(e[..., 0], e[..., 1])
+    late = t >= after_s
+    with np.errstate(invalid="ignore"):
+        big = np.any(~(horizontal[:, late] <= threshold_m), axis=1)  # NaN counts as divergent
+    return big | ~ok
+
+
+def nees(e, est: pd.DataFrame, K):
+    """NEES per path and covariance epoch (n, K) (NaN where no covariance was stored)."""
+    n = e.shape[0]
+    P = np.full((n, K, 6, 6), np.nan)
+    for i in range(6):
+        for j in range(i, 6):
+            P[..., i, j] = P[..., j, i] = est[f"P_{i}{j}"].to_numpy().reshape(n, K)
+    stored = np.isfinite(P).all(axis=(0, 2, 3))
+    out = np.full((n, K), np.nan)
+    Ps, es = P[:, stored], e[:, stored]
+    good = np.isfinite(Ps).all(axis=(2, 3)) & np.isfinite(es).all(axis=2)
+    sol = np.zeros_like(es)
+    if good.any():
+        sol[good] = np.linalg.solve(Ps[good], es[good][..., None])[..., 0]
+    out[:, stored] = np.where(good, np.einsum("nki,nki->nk", es, sol), np.nan)
+    return out
+
+
+def nees_band(n_paths, dof=6, level=0.95):
+    """Two-sided band of the mean NEES of n_paths consistent estimates."""
+    return (chi2.ppf((1 - level) / 2, dof * n_paths) / n_paths,
+            chi2.ppf((1 + level) / 2, dof * n_paths) / n_paths)
+
+
+def per_step(e, est, t, keep, K):
+    """Per epoch and component: bias, RMSE, measured std, own std (RMS of reported sd)."""
+    n = e.shape[0]
+    sd = _cube(est, [f"sd_{c}" for c in STATE_NAMES], K)
+    rows = []
+    for c, name in enumerate(STATE_NAMES):
+        sub, own = e[keep, :, c], sd[keep, :, c]
+        rows.append(pd.DataFrame({
+            "step": np.arange(K), "t_s": t, "component": name,
+            "bias": sub.mean(0), "rmse": np.sqrt((sub**2).mean(0)), "std": sub.std(0, ddof=1),
+            "own_sd": np.sqrt((own**2).mean(0)),
+            "rmse_all_paths": np.sqrt(np.nanmean(e[:, :, c] ** 2, axis=0)),
+        }))
+    out = pd.concat(rows, ignore_index=True)
+    out["n_paths"] = int(keep.sum())
+    out["n_all_paths"] = n
+    return out

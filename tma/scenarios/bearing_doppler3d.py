@@ -1,0 +1,159 @@
+"""Scenario ``bearing_doppler3d``: an AUV tracked by 8 fixed hydrophones (bearing + Doppler).
+
+See ``../shared/specs/bearing_doppler3d.md`` and ``tma.models.auv3d``. Truth by
+Euler-Maruyama (``truth_step_s``), observations every ``obs_period_s`` from t = 0 to
+``duration_s``; ``no_doppler`` drops the frequency readings (bearings alone). Each shard draws
+the initial states, the driving noise and the observation noise (Doppler noise is drawn even
+without Doppler, so both variants share truth and angle noise) from
+``SeedSequence(seed, spawn_key=(shard,))``.
+"""
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+import pyarrow as pa
+
+from tma.config import require
+from tma.io.hydrophone_log import HydrophoneLog, read_hydrophone_log, write_hydrophone_log
+from tma.models.auv3d import STATE_NAMES, AuvModel, euler_maruyama
+
+FAMILY = "bearing_doppler3d"
+
+
+def _sensors():
+    return [[x, y, z] for x, y in ((-10000.0, 0.0), (10000.0, 0.0), (-5000.0, 1000.0),
+                                   (5000.0, 1000.0)) for z in (-25.0, -50.0)]
+
+
+@dataclass
+class InitialConfig:
+    """Initial distribution: Gaussian position, uniform speed, Gaussian heading, uniform a."""
+
+    position_mean_m: list[float] = field(default_factory=lambda: [0.0, 20000.0, -1000.0])
+    position_sd_m: list[float] = field(default_factory=lambda: [1000.0, 1000.0, 100.0])
+    speed_min_m_s: float = 5.0
+    speed_max_m_s: float = 12.0
+    heading_mean_rad: float = -np.pi / 2
+    heading_sd_rad: float = 0.1
+    accel_min_m_s2: float = -0.2
+    accel_max_m_s2: float = 0.2
+
+
+@dataclass
+class Config:
+    family: str = FAMILY
+    n_tracks: int = 10000  # test paths
+    no_doppler: bool = False
+    duration_s: float = 100.0  # T
+    obs_period_s: float = 1.0
+    truth_step_s: float = 1e-3  # Euler-Maruyama
+    filter_step_s: float = 1e-2  # the filters' Euler prediction step
+    lam: float = 0.01  # 1/s
+    nu: float = 0.0
+    mu: float = 0.01
+    sensors_m: list[list[float]] = field(default_factory=_sensors)
+    omega0_hz: float = 20.0
+    sound_speed_m_s: float = 1500.0
+    sd_angle: float = 0.017452406437283512  # sin(1 deg), on xi and eta
+    sd_doppler_hz: float = 0.005
+    initial: InitialConfig = field(default_factory=InitialConfig)
+    seed: int = 20260104
+    shard_size: int = 2500
+
+    def __post_init__(self):
+        w = "scenario 'bearing_doppler3d'"
+        require(self.family == FAMILY, w, f"family must be '{FAMILY}'")
+        require(self.n_tracks > 0 and self.shard_size > 0, w, "n_tracks, shard_size must be > 0")
+        for name in ("duration_s", "obs_period_s", "truth_step_s", "filter_step_s"):
+            require(getattr(self, name) > 0, w, f"{name} must be positive")
+        ratio = self.obs_period_s / self.truth_step_s
+        require(abs(ratio - round(ratio)) < 1e-9, w, "obs_period_s must be a multiple of "
+                "truth_step_s")
+        require(self.initial.speed_min_m_s > 0, w, "speeds must be positive")
+        require(all(len(s) == 3 for s in self.sensors_m), w, "sensors_m: [x, y, z] each")
+
+
+def label(cfg: Config) -> str:
+    return f"{'bearings' if cfg.no_doppler else 'doppler'}-n{cfg.n_tracks}"
+
+
+def n_shards(cfg: Config) -> int:
+    return -(-cfg.n_tracks // cfg.shard_size)
+
+
+def model_record(cfg: Config) -> dict:
+    """What the filters may know: everything but the seed and the number of paths."""
+    record = asdict(cfg)
+    for key in ("family", "n_tracks", "seed", "shard_size"):
+        record.pop(key)
+    return record
+
+
+def auv_model(record: dict) -> AuvModel:
+    return AuvModel(record["lam"], record["nu"], record["mu"], np.asarray(record["sensors_m"]),
+                    record["omega0_hz"], record["sound_speed_m_s"], record["sd_angle"],
+                    record["sd_doppler_hz"], not record["no_doppler"])
+
+
+def initial_states(initial: dict, n: int, rng) -> np.ndarray:
+    x = np.empty((n, 6))
+    x[:, :3] = np.asarray(initial["position_mean_m"]) + np.asarray(
+        initial["position_sd_m"]) * rng.standard_normal((n, 3))
+    x[:, 3] = rng.uniform(initial["speed_min_m_s"], initial["speed_max_m_s"], n)
+    x[:, 4] = initial["heading_mean_rad"] + initial["heading_sd_rad"] * rng.standard_normal(n)
+    x[:, 5] = rng.uniform(initial["accel_min_m_s2"], initial["accel_max_m_s2"], n)
+    return x
+
+
+def epochs(record: dict) -> np.ndarray:
+    n = int(round(record["duration_s"] / record["obs_period_s"])) + 1
+    return np.arange(n) * record["obs_period_s"]
+
+
+def simulate_paths(record: dict, n: int, rng):
+    """Truth at the observation epochs (n, n_epochs, 6) and observations (n, n_epochs, n_obs)."""
+    t = epochs(record)
+    model_doppler = auv_model({**record, "no_doppler": False})
+    x = initial_states(record["initial"], n, rng)
+    truth = np.empty((n, t.size, 6))
+    truth[:, 0] = x
+    for k in range(1, t.size):
+        x = euler_maruyama(x, record["obs_period_s"], record["truth_step_s"], record["lam"],
+                           record["nu"], record["mu"], rng)
+        truth[:, k] = x
+    clean = model_doppler.observe(truth.reshape(-1, 6)).reshape(n, t.size, -1)
+    obs = clean + model_doppler.obs_sd * rng.standard_normal(clean.shape)
+    if record["no_doppler"]:
+        obs = obs.reshape(n, t.size, -1, 3)[..., :2].reshape(n, t.size, -1)
+    return truth, obs
+
+
+def simulate_shard(cfg: Config, shard_index: int):
+    first = shard_index * cfg.shard_size
+    n = min(cfg.shard_size, cfg.n_tracks - first)
+    rng = np.random.default_rng(np.random.SeedSequence(cfg.seed, spawn_key=(shard_index,)))
+    record = model_record(cfg)
+    truth, obs = simulate_paths(record, n, rng)
+    track_id = np.arange(first, first + n, dtype=np.int64)
+    t = epochs(record)
+    log = HydrophoneLog(t, track_id, obs, record)
+    table = {"track_id": np.repeat(track_id, t.size), "step": np.tile(np.arange(t.size), n),
+             "t_s": np.tile(t, n)}
+    for i, name in enumerate(STATE_NAMES):
+        table[name] = truth[..., i].ravel()
+    return log, pa.table(table)
+
+
+def write_log(path, log: HydrophoneLog, metadata=None) -> int:
+    return write_hydrophone_log(path, log, metadata)
+
+
+def read_log(path) -> HydrophoneLog:
+    return read_hydrophone_log(path)
+
+
+def model_record_of(dataset) -> dict:
+    """The model record of a dataset of this family (from its manifest's config)."""
+    return model_record(Config(**{k: v for k, v in dataset.manifest["config"].items()
+                                  if k != "initial"},
+                               initial=InitialConfig(**dataset.manifest["config"]["initial"])))
