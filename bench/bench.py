@@ -9,8 +9,11 @@
 (c) ``ranges2d``: time per 1e4 bisections and per 1e5 samples of each sampler, and the
     headline ratio of samples needed (prior / adaptive) for the same accuracy.
 
+(d) ``bearing_doppler3d``: microseconds per path per observation of each filter, vectorised
+    and one path at a time; (e) peak memory of CMNF training (``--cmnf-paths 100000``).
+
 Options: ``--tracks N`` (2000), ``--sigma DEG`` (0.5), ``--runs N`` (30), ``--skip-stages``,
-``--only FAMILY``.
+``--only FAMILY``, ``--paths3d N`` (2500), ``--cmnf-paths N`` (10000).
 """
 
 import argparse
@@ -125,13 +128,94 @@ def bench_ranges(runs: int):
           f"(time ratio {used['prior_is'][1] / used['adaptive_is'][1]:.2f}x)")
 
 
+def bench_filters3d(paths: int, single: int, duration: float):
+    from tma.estimators.cmnf import apply, model_prediction, train
+    from tma.io.hydrophone_log import HydrophoneLog
+    from tma.parallel import keep_freed_memory
+    from tma.scenarios.bearing_doppler3d import (
+        Config as AuvConfig,
+    )
+    from tma.scenarios.bearing_doppler3d import (
+        auv_model,
+        epochs,
+        model_record,
+        simulate_paths,
+    )
+    from tma.scenarios.bearing_doppler3d import (
+        simulate_shard as simulate_auv,
+    )
+
+    keep_freed_memory()
+    log, _ = simulate_auv(AuvConfig(n_tracks=paths, shard_size=paths, duration_s=duration), 0)
+    n_obs = log.t_s.size
+    print(f"(d) bearing_doppler3d filters, {paths} paths x {n_obs} epochs, one thread "
+          "(microseconds per path per observation)")
+    record = model_record(AuvConfig(duration_s=duration))
+    model, t = auv_model(record), epochs(record)
+    with threadpool_limits(limits=1):
+        start = time.perf_counter()
+        truth, obs = simulate_paths(record, 2000, np.random.default_rng(1))
+        gains = train(truth, obs, model_prediction(model, record, t), model.observe, 1e-12)
+        t_train = time.perf_counter() - start
+        for name in ("ekf", "srekf", "cmnf"):
+            if name == "cmnf":
+                def run(lg):
+                    return apply(gains, lg.obs, model_prediction(model, record, t), model.observe)
+            else:
+                est = build_estimator({"name": name})
+                run = est.estimate
+            start = time.perf_counter()
+            run(log)
+            vec = (time.perf_counter() - start) / (paths * n_obs)
+            start = time.perf_counter()
+            for i in range(single):
+                run(HydrophoneLog(log.t_s, log.track_id[i:i + 1], log.obs[i:i + 1], log.model))
+            one = (time.perf_counter() - start) / (single * n_obs)
+            print(f"    {name:6s} vectorised {1e6 * vec:8.2f}   one path at a time "
+                  f"{1e6 * one:9.2f}   ratio {one / vec:6.1f}x")
+    print(f"    cmnf training on 2,000 paths (simulation included): {t_train:.1f} s")
+
+
+def bench_cmnf_memory(paths: int):
+    """Peak memory of CMNF training on ``paths`` paths, in a fresh process."""
+    code = f"""
+import resource, time, numpy as np
+from tma.parallel import keep_freed_memory
+from tma.estimators.bundle import _bundle_shard, SHARD
+from tma.estimators.cmnf import train, model_prediction
+from tma.scenarios.bearing_doppler3d import Config, auv_model, epochs, model_record
+keep_freed_memory()
+record = model_record(Config())
+start = time.perf_counter()
+parts = [_bundle_shard((record, 7, i, min(SHARD, {paths} - i * SHARD)))
+         for i in range(-(-{paths} // SHARD))]
+truth = np.concatenate([p[0] for p in parts]); obs = np.concatenate([p[1] for p in parts])
+del parts
+sim = time.perf_counter() - start
+model = auv_model(record)
+start = time.perf_counter()
+train(truth, obs.astype(float), model_prediction(model, record, epochs(record)),
+      model.observe, 1e-12)
+print(f"{{sim:.0f}} {{time.perf_counter() - start:.0f}} "
+      f"{{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f}}")
+"""
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, check=True,
+                         capture_output=True, text=True).stdout.split()
+    print(f"(e) cmnf training on {paths:,} paths of 100 s: simulation {out[0]} s (one process), "
+          f"training {out[1]} s, peak memory {int(out[2]) / 1024:.1f} GiB")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--tracks", type=int, default=2000)
     parser.add_argument("--sigma", type=float, default=0.5)
     parser.add_argument("--runs", type=int, default=30, help="ranges2d repeated runs")
     parser.add_argument("--skip-stages", action="store_true")
-    parser.add_argument("--only", choices=["bearings2d", "ranges2d"], default=None)
+    parser.add_argument("--only", choices=["bearings2d", "ranges2d", "bearing_doppler3d"],
+                        default=None)
+    parser.add_argument("--paths3d", type=int, default=2500, help="3D filter benchmark paths")
+    parser.add_argument("--cmnf-paths", type=int, default=10_000,
+                        help="CMNF training size for the memory measurement (e.g. 100000)")
     args = parser.parse_args()
     if args.only in (None, "bearings2d"):
         bench_lm(args.tracks, args.sigma)
@@ -139,6 +223,9 @@ def main():
             bench_stages()
     if args.only in (None, "ranges2d"):
         bench_ranges(args.runs)
+    if args.only in (None, "bearing_doppler3d"):
+        bench_filters3d(args.paths3d, 5, 100.0)
+        bench_cmnf_memory(args.cmnf_paths)
 
 
 if __name__ == "__main__":

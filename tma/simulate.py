@@ -42,14 +42,33 @@ class ShardTask:
         return sha256_json({"config": self.config, "shard": self.index, "version": __version__})
 
 
-def simulate_shard(task: ShardTask) -> dict:
-    """Simulate and write one shard (worker function)."""
+def _finished(task: ShardTask):
     if is_finished(task.log_path, task.key):
         record = finished_record(task.log_path)
         if not record["truth_rows"] or is_finished(task.truth_path, task.key):
             return record
+    return None
+
+
+def simulate_group(tasks: list[ShardTask]) -> list[dict]:
+    """Simulate and write shards that share their random draws (worker function): the raw
+    simulation runs once, each dataset's shard is derived from it."""
+    records = [_finished(t) for t in tasks]
+    todo = [i for i, r in enumerate(records) if r is None]
+    if todo:
+        module, cfg = load_scenario(tasks[todo[0]].config)
+        raw = module.simulate_raw(cfg, tasks[todo[0]].index) if len(todo) > 1 else None
+        for i in todo:
+            records[i] = _write_shard(tasks[i], raw)
+    return records
+
+
+def _write_shard(task: ShardTask, raw=None) -> dict:
     module, cfg = load_scenario(task.config)
-    log, truth = module.simulate_shard(cfg, task.index)
+    if raw is None:
+        log, truth = module.simulate_shard(cfg, task.index)
+    else:
+        log, truth = module.from_raw(cfg, task.index, raw)
     metadata = {"tma.dataset": {"family": module.FAMILY, "shard": task.index,
                                 "config_sha256": sha256_json(task.config),
                                 "package_version": __version__}}
@@ -76,8 +95,18 @@ def simulate_datasets(scenario_nodes, data_dir, *, n_jobs=2, force=False, progre
         shard_tasks = [ShardTask(str(root), plain, i) for i in range(module.n_shards(cfg))]
         plans.append((root, module, plain, shard_tasks))
         tasks += shard_tasks
-    results = iter(run_tasks(simulate_shard, tasks, n_jobs=n_jobs, desc="simulate",
-                             progress=progress))
+    groups = {}  # shards of different datasets that share their random draws run together
+    for t in tasks:
+        module, cfg = load_scenario(t.config)
+        key = (sha256_json(module.simulation_key(cfg, t.index))
+               if hasattr(module, "simulation_key") else (t.root, t.index))
+        groups.setdefault(key, []).append(t)
+    done = {}
+    for group, records in zip(groups.values(), run_tasks(
+            simulate_group, list(groups.values()), n_jobs=n_jobs, desc="simulate",
+            progress=progress), strict=True):
+        done.update({(t.root, t.index): r for t, r in zip(group, records, strict=True)})
+    results = iter(done[(t.root, t.index)] for t in tasks)
     for root, module, plain, shard_tasks in plans:
         if shard_tasks is None:
             continue

@@ -9,15 +9,16 @@ definite and is exactly what the square-root filter propagates. Observations are
 scalars in sequence against one linearisation point per epoch (the batch EKF update, since R
 is diagonal); a missing reading (NaN) is skipped.
 
-Outputs per path and epoch: the estimate, its standard deviations, and the covariance's upper
-triangle every ``covariance_every`` epochs (NaN between, for NEES); ``filter_ok`` is False
-for a path whose covariance became non-finite (it is kept, the others go on).
+Outputs per path and epoch: the estimate and its standard deviations; the covariance's upper
+triangle every ``covariance_every`` epochs goes to the run's ``covariance.parquet`` (for
+NEES); ``filter_ok`` is False for a path whose covariance became non-finite (it is kept, the
+others go on).
 """
 
 import numpy as np
 
 from tma.io.hydrophone_log import HydrophoneLog
-from tma.models.auv3d import A, PHI, STATE_NAMES, V, X, Y
+from tma.models.auv3d import PHI, STATE_NAMES, A, V, X, Y
 from tma.scenarios.bearing_doppler3d import auv_model
 
 IU = np.triu_indices(6)
@@ -73,13 +74,15 @@ class AuvEstimator:
         # a wrecked path overflows on its own (paths never mix); it is flagged, not raised
         with np.errstate(all="ignore"):
             est, cov, ok = self.run(model, record, log.t_s, log.obs)  # (n,K,6), (n,K,6,6), (n,)
-        return output_columns(est, cov, ok, log.t_s, self.config.covariance_every)
+        return output_columns(est, cov, ok, log.t_s, self.config.covariance_every, log.track_id)
 
     def run(self, model, record, t, obs):
         raise NotImplementedError
 
 
-def output_columns(est, cov, ok, t, covariance_every):
+def output_columns(est, cov, ok, t, covariance_every, track_id):
+    """Per-epoch estimates and standard deviations, plus ``extras['covariance']``: the upper
+    triangle of the covariance every ``covariance_every`` epochs and at the last (for NEES)."""
     n, K, _ = est.shape
     out = {"t_s": np.broadcast_to(t, (n, K)).copy(), "filter_ok": ok}
     for i, name in enumerate(STATE_NAMES):
@@ -87,11 +90,12 @@ def output_columns(est, cov, ok, t, covariance_every):
     sd = np.sqrt(np.einsum("nkii->nki", cov))
     for i, name in enumerate(STATE_NAMES):
         out[f"sd_{name}"] = sd[..., i]
-    keep = np.zeros(K, dtype=bool)
-    keep[::covariance_every] = True
-    keep[-1] = True
+    steps = np.unique(np.r_[np.arange(0, K, covariance_every), K - 1])
+    covariance = {"track_id": np.repeat(track_id, steps.size),
+                  "step": np.tile(steps, n)}
     for i, j in zip(*IU, strict=True):
-        out[f"P_{i}{j}"] = np.where(keep, cov[..., i, j], np.nan)
+        covariance[f"P_{i}{j}"] = cov[:, steps, i, j].ravel()
+    out["extras"] = {"covariance": covariance}
     return out
 
 

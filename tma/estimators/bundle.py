@@ -5,7 +5,7 @@ as an artefact keyed by the model, size and seed."""
 
 import numpy as np
 
-from tma.io.artefacts import load_arrays, load_or_build
+from tma.io.artefacts import load_or_build
 from tma.parallel import run_tasks
 from tma.scenarios.bearing_doppler3d import simulate_paths
 

@@ -16,7 +16,7 @@ from tma.estimators.auv_base import (
     initial_moments,
     to_paths_first,
 )
-from tma.models.auv3d import A, PHI, V, X, Y
+from tma.models.auv3d import PHI, A, V, X, Y
 
 
 @dataclass
@@ -33,23 +33,22 @@ def predict_covariance(P, x, dt, lam, mu):
     """P <- Phi P Phi^T + b b^T dt with Phi = I + A dt; P (6, 6, n), x (6, n).
 
     Only rows and columns X, Y, phi, a of A are non-zero, so M = Phi P changes four rows of P
-    and M Phi^T four columns of M (``drift_times_rows`` is the general form).
+    and M Phi^T four columns of M (``drift_times_rows`` is the general form). Updated in place,
+    in an order where each row (column) reads only rows (columns) not yet updated.
     """
     c, s, v, a = np.cos(x[PHI]), np.sin(x[PHI]), x[V], x[A]
     cdt, sdt, vsdt, vcdt = c * dt, s * dt, v * s * dt, v * c * dt
-    adt, idt, ldt = -a / (v * v) * dt, dt / v, -lam * dt
-    M = P.copy()
-    M[X] += cdt * P[V] - vsdt * P[PHI]
-    M[Y] += sdt * P[V] + vcdt * P[PHI]
-    M[PHI] += adt * P[V] + idt * P[A]
-    M[A] += ldt * P[A]
-    out = M.copy()
-    out[:, X] += cdt * M[:, V] - vsdt * M[:, PHI]
-    out[:, Y] += sdt * M[:, V] + vcdt * M[:, PHI]
-    out[:, PHI] += adt * M[:, V] + idt * M[:, A]
-    out[:, A] += ldt * M[:, A]
-    out[A, A] += mu * mu * dt
-    return out
+    adt, idt, keep_a = -a / (v * v) * dt, dt / v, 1.0 - lam * dt
+    P[X] += cdt * P[V] - vsdt * P[PHI]
+    P[Y] += sdt * P[V] + vcdt * P[PHI]
+    P[PHI] += adt * P[V] + idt * P[A]
+    P[A] *= keep_a
+    P[:, X] += cdt * P[:, V] - vsdt * P[:, PHI]
+    P[:, Y] += sdt * P[:, V] + vcdt * P[:, PHI]
+    P[:, PHI] += adt * P[:, V] + idt * P[:, A]
+    P[:, A] *= keep_a
+    P[A, A] += mu * mu * dt
+    return P
 
 
 def sequential_update(x, P, obs_k, model):

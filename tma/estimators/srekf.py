@@ -14,7 +14,7 @@ import numpy as np
 
 from tma.config import require
 from tma.estimators.auv_base import AuvEstimator, drift_step, initial_moments, to_paths_first
-from tma.models.auv3d import A, PHI, V
+from tma.models.auv3d import PHI, A, V
 
 ORDER = np.array([3, 5, 4, 0, 1, 2])  # (v, a, phi, X, Y, Z) in the model's state indices
 INVERSE = np.argsort(ORDER)
@@ -31,14 +31,14 @@ class Config:
 
 
 def phi_times(S, x, dt, lam):
-    """(I + A dt) S in the square-root order; S (6, 6, n), x (6, n) in model order."""
+    """(I + A dt) S in the square-root order, in place; S (6, 6, n), x (6, n) in model order.
+    Rows X, Y read phi, phi reads a: update X, Y, then phi, then a."""
     c, s, v, a = np.cos(x[PHI]), np.sin(x[PHI]), x[V], x[A]
-    L = S.copy()
-    L[SA] += dt * (-lam * S[SA])
-    L[SPHI] += dt * ((-a / v**2) * S[SV] + S[SA] / v)
-    L[SX] += dt * (c * S[SV] - (v * s) * S[SPHI])
-    L[SY] += dt * (s * S[SV] + (v * c) * S[SPHI])
-    return L
+    S[SX] += (c * dt) * S[SV] - (v * s * dt) * S[SPHI]
+    S[SY] += (s * dt) * S[SV] + (v * c * dt) * S[SPHI]
+    S[SPHI] += (-a / v**2 * dt) * S[SV] + (dt / v) * S[SA]
+    S[SA] *= 1.0 - lam * dt
+    return S
 
 
 def fold_noise(L, q):

@@ -45,22 +45,23 @@ def divergent_paths(e, t, ok, threshold_m=DIVERGENCE_M, after_s=DIVERGENCE_AFTER
     return big | ~ok
 
 
-def nees(e, est: pd.DataFrame, K):
-    """NEES per path and covariance epoch (n, K) (NaN where no covariance was stored)."""
-    n = e.shape[0]
-    P = np.full((n, K, 6, 6), np.nan)
+def nees(e, covariance: pd.DataFrame, track_ids):
+    """NEES per path at the epochs with a stored covariance: (n, n_stored) and the epochs."""
+    cov = covariance.sort_values(["track_id", "step"], kind="stable")
+    steps = np.unique(cov["step"].to_numpy())
+    if not np.array_equal(np.unique(cov["track_id"]), np.asarray(track_ids)):
+        raise ValueError("covariance and estimates cover different tracks")
+    n = len(track_ids)
+    P = np.empty((n, steps.size, 6, 6))
     for i in range(6):
         for j in range(i, 6):
-            P[..., i, j] = P[..., j, i] = est[f"P_{i}{j}"].to_numpy().reshape(n, K)
-    stored = np.isfinite(P).all(axis=(0, 2, 3))
-    out = np.full((n, K), np.nan)
-    Ps, es = P[:, stored], e[:, stored]
-    good = np.isfinite(Ps).all(axis=(2, 3)) & np.isfinite(es).all(axis=2)
+            P[..., i, j] = P[..., j, i] = cov[f"P_{i}{j}"].to_numpy().reshape(n, steps.size)
+    es = e[:, steps]
+    good = np.isfinite(P).all(axis=(2, 3)) & np.isfinite(es).all(axis=2)
     sol = np.zeros_like(es)
     if good.any():
-        sol[good] = np.linalg.solve(Ps[good], es[good][..., None])[..., 0]
-    out[:, stored] = np.where(good, np.einsum("nki,nki->nk", es, sol), np.nan)
-    return out
+        sol[good] = np.linalg.solve(P[good], es[good][..., None])[..., 0]
+    return np.where(good, np.einsum("nki,nki->nk", es, sol), np.nan), steps
 
 
 def nees_band(n_paths, dof=6, level=0.95):

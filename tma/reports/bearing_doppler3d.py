@@ -11,6 +11,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 import pyarrow as pa  # noqa: E402
+import pyarrow.parquet as pq  # noqa: E402
 
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
 from tma.metrics.bearing_doppler3d import (  # noqa: E402
@@ -50,10 +51,10 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
         divergent = divergent_paths(err, t, ok)
         keep = ~divergent
         steps = per_step(err, est, t, keep, K)
-        path_nees = nees(err, est, K)
-        stored = np.isfinite(path_nees).any(axis=0)
-        nees_steps = pd.DataFrame({"step": np.flatnonzero(stored), "t_s": t[stored],
-                                   "nees_mean": np.nanmean(path_nees[keep][:, stored], axis=0)})
+        covariance = pq.read_table(e.run_root / "covariance.parquet").to_pandas()
+        path_nees, stored = nees(err, covariance, np.unique(est["track_id"]))
+        nees_steps = pd.DataFrame({"step": stored, "t_s": t[stored],
+                                   "nees_mean": np.nanmean(path_nees[keep], axis=0)})
         steps = steps.merge(nees_steps, on=["step", "t_s"], how="left")
         write_parquet_atomic(e.run_root / "metrics.parquet",
                              pa.Table.from_pandas(steps, preserve_index=False))

@@ -111,7 +111,8 @@ def epochs(record: dict) -> np.ndarray:
 
 
 def simulate_paths(record: dict, n: int, rng):
-    """Truth at the observation epochs (n, n_epochs, 6) and observations (n, n_epochs, n_obs)."""
+    """Truth at the observation epochs (n, n_epochs, 6) and observations (n, n_epochs, n_obs);
+    without Doppler the frequency readings are dropped after drawing all noise."""
     t = epochs(record)
     model_doppler = auv_model({**record, "no_doppler": False})
     x = initial_states(record["initial"], n, rng)
@@ -128,13 +129,29 @@ def simulate_paths(record: dict, n: int, rng):
     return truth, obs
 
 
-def simulate_shard(cfg: Config, shard_index: int):
-    first = shard_index * cfg.shard_size
-    n = min(cfg.shard_size, cfg.n_tracks - first)
+def simulation_key(cfg: Config, shard_index: int) -> dict:
+    """What a shard's random draws depend on: datasets differing only in ``no_doppler`` share
+    truth and noise, so the simulate stage computes such shards once (``simulate_raw``)."""
+    return {"config": {**model_record(cfg), "no_doppler": None, "n_tracks": cfg.n_tracks,
+                       "seed": cfg.seed, "shard_size": cfg.shard_size}, "shard": shard_index}
+
+
+def simulate_raw(cfg: Config, shard_index: int):
+    """Truth and the full (Doppler) observations of a shard."""
+    n = min(cfg.shard_size, cfg.n_tracks - shard_index * cfg.shard_size)
     rng = np.random.default_rng(np.random.SeedSequence(cfg.seed, spawn_key=(shard_index,)))
-    record = model_record(cfg)
-    truth, obs = simulate_paths(record, n, rng)
+    return simulate_paths({**model_record(cfg), "no_doppler": False}, n, rng)
+
+
+def from_raw(cfg: Config, shard_index: int, raw):
+    """The shard's log and truth table from ``simulate_raw``'s output."""
+    truth, obs = raw
+    n, K, _ = truth.shape
+    if cfg.no_doppler:
+        obs = obs.reshape(n, K, -1, 3)[..., :2].reshape(n, K, -1)
+    first = shard_index * cfg.shard_size
     track_id = np.arange(first, first + n, dtype=np.int64)
+    record = model_record(cfg)
     t = epochs(record)
     log = HydrophoneLog(t, track_id, obs, record)
     table = {"track_id": np.repeat(track_id, t.size), "step": np.tile(np.arange(t.size), n),
@@ -142,6 +159,10 @@ def simulate_shard(cfg: Config, shard_index: int):
     for i, name in enumerate(STATE_NAMES):
         table[name] = truth[..., i].ravel()
     return log, pa.table(table)
+
+
+def simulate_shard(cfg: Config, shard_index: int):
+    return from_raw(cfg, shard_index, simulate_raw(cfg, shard_index))
 
 
 def write_log(path, log: HydrophoneLog, metadata=None) -> int:
