@@ -11,6 +11,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from tma.errors import ConfigError, TmaError
 from tma.io.dataset import Dataset, datasets_dir
+from tma.parallel import keep_freed_memory
 from tma.scenarios import dataset_name, load_scenario
 
 CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
@@ -19,6 +20,7 @@ log = logging.getLogger("tma")
 
 def run_stage(fn, cfg: DictConfig):
     """Run a stage function; report TmaError as one line on stderr and exit with status 2."""
+    keep_freed_memory()  # the main process runs vectorised work too (training, serial shards)
     try:
         return fn(cfg)
     except TmaError as exc:

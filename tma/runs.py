@@ -89,13 +89,30 @@ class ShardTask:
     key: str
 
 
-def estimate_shard(task: ShardTask) -> dict:
-    """Run one estimator over one dataset shard (worker function)."""
+def estimate_shard_group(tasks: list[ShardTask]) -> list[dict]:
+    """Run several estimators over one dataset shard (worker function): the log is read and
+    verified once; each estimator's output and timing are its own."""
+    records = [_finished_record(t) for t in tasks]
+    todo = [i for i, r in enumerate(records) if r is None]
+    if todo:
+        dataset = Dataset.open(tasks[todo[0]].dataset_root)
+        log = scenario_module(dataset.family).read_log(
+            dataset.verified_path(tasks[todo[0]].shard))
+        for i in todo:
+            records[i] = estimate_shard(tasks[i], log)
+    return records
+
+
+def _finished_record(task: ShardTask):
     out = Path(task.out_path)
     if is_finished(out, task.key):
         return json.loads(out.with_name(out.name + ".done.json").read_text())
-    dataset = Dataset.open(task.dataset_root)
-    log = scenario_module(dataset.family).read_log(dataset.verified_path(task.shard))
+    return None
+
+
+def estimate_shard(task: ShardTask, log) -> dict:
+    """Run one estimator over one dataset shard's log and write its output."""
+    out = Path(task.out_path)
     estimator = build_estimator(task.estimator_config)
     start = perf_counter()
     columns = estimator.estimate(log)
@@ -182,9 +199,15 @@ def estimate_runs(data_dir, jobs, *, n_jobs=2, progress=True, force=False):
                     missing_ok=True)
         planned.append((root, dataset, est_cfg, run_tasks_))
         tasks += run_tasks_
-    records = iter(run_tasks(estimate_shard, tasks, n_jobs=n_jobs, desc="estimate",
-                             progress=progress))
-    return [finish_run(root, ds, cfg, ts, [next(records) for _ in ts])
+    groups = {}  # every estimator on the same dataset shard shares one read of the log
+    for t in tasks:
+        groups.setdefault((t.dataset_root, t.shard), []).append(t)
+    done = {}
+    for group, records in zip(groups.values(), run_tasks(
+            estimate_shard_group, list(groups.values()), n_jobs=n_jobs, desc="estimate",
+            progress=progress), strict=True):
+        done.update({t.out_path: r for t, r in zip(group, records, strict=True)})
+    return [finish_run(root, ds, cfg, ts, [done[t.out_path] for t in ts])
             for root, ds, cfg, ts in planned]
 
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.errors import InputError
-from tma.io.mcap_log import Channel, LogWriter, read_log
+from tma.io.mcap_log import Channel, LogWriter, float_array, read_log
 
 SCHEMA = "tma.HydrophoneBatch"
 FIELDS = ("elevation_sin", "bearing_cos", "doppler_hz")
@@ -79,8 +79,7 @@ def read_hydrophone_log(path) -> HydrophoneLog:
             for f, name in enumerate(FIELDS[:per]):
                 if name not in m:
                     raise InputError(f"{where}: {topic(i)} lacks {name}")
-                obs[:, k, per * i + f] = np.array([np.nan if v is None else v for v in m[name]],
-                                                  float)
+                obs[:, k, per * i + f] = float_array(m[name])
     if t.size and np.any(np.diff(t) <= 0):
         raise InputError(f"{where}: epochs are not increasing")
     return HydrophoneLog(t, track_id, obs, model)

@@ -34,6 +34,14 @@ def _strided_array(obj):
     raise TypeError(f"cannot serialise {type(obj).__name__} to JSON")
 
 
+def float_array(values) -> np.ndarray:
+    """A JSON number array as float64, null -> NaN (fast path when there is no null)."""
+    try:
+        return np.asarray(values, dtype=float)
+    except TypeError:
+        return np.array([np.nan if v is None else v for v in values], dtype=float)
+
+
 def schema_bytes(name: str) -> bytes:
     return (SCHEMA_DIR / f"{name}.json").read_bytes()
 

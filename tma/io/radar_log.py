@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.errors import InputError
-from tma.io.mcap_log import Channel, LogWriter, read_log
+from tma.io.mcap_log import Channel, LogWriter, float_array, read_log
 
 PLOTS_TOPIC = "/radar/plots"
 SCHEMAS = {PLOTS_TOPIC: "tma.PlotBatch"}
@@ -66,7 +66,7 @@ def read_radar_log(path) -> RadarLog:
     for k, m in enumerate(msgs):
         rows = np.searchsorted(track_id, np.asarray(m["track_id"], np.int64))
         for axis, key in enumerate(("x_m", "y_m")):
-            plots[rows, k, axis] = np.array([np.nan if v is None else v for v in m[key]], float)
+            plots[rows, k, axis] = float_array(m[key])
     log = RadarLog(t, track_id, plots, sensor)
     log.validate(where)
     return log

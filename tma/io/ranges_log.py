@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.errors import InputError
-from tma.io.mcap_log import Channel, LogWriter, read_log
+from tma.io.mcap_log import Channel, LogWriter, float_array, read_log
 
 RANGES_TOPIC = "/ranging/ranges"
 SCHEMAS = {RANGES_TOPIC: "tma.RangeBatch"}
@@ -82,7 +82,7 @@ def read_ranges_log(path) -> RangesLog:
     track_id = np.unique(np.concatenate([np.asarray(m["track_id"], np.int64) for m in msgs]))
     ranges = np.full((track_id.size, len(lm_ids), t.size), np.nan)
     for m in msgs:
-        values = np.array([np.nan if v is None else v for v in m["range_m"]], dtype=float)
+        values = float_array(m["range_m"])
         rows = np.searchsorted(track_id, np.asarray(m["track_id"], np.int64))
         ranges[rows, lm_ids.index(m["landmark_id"]), np.searchsorted(t, m["t_s"])] = values
     log = RangesLog(t, np.array([landmarks[i] for i in lm_ids], float), track_id, ranges, model)
