@@ -13,7 +13,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.errors import InputError
-from tma.io.mcap_log import Channel, LogWriter, float_array, read_log
+from tma.io.mcap_log import (
+    Channel,
+    LogWriter,
+    float_array,
+    json_record,
+    read_json_record,
+    read_log,
+)
 
 SCHEMA = "tma.HydrophoneBatch"
 FIELDS = ("elevation_sin", "bearing_cos", "doppler_hz")
@@ -45,7 +52,7 @@ def write_hydrophone_log(path, log: HydrophoneLog, metadata=None) -> int:
     channels = [Channel(topic(i), SCHEMA, {"sensor_xyz_m": json.dumps(s),
                                            "units": "t_s: s; doppler_hz: Hz"})
                 for i, s in enumerate(sensors)]
-    meta = {**(metadata or {}), "tma.model": {k: json.dumps(v) for k, v in log.model.items()}}
+    meta = {**(metadata or {}), "tma.model": json_record(log.model)}
     with LogWriter(path, channels, meta) as w:
         for k, t in enumerate(log.t_s.tolist()):
             for i in range(len(sensors)):
@@ -58,10 +65,8 @@ def write_hydrophone_log(path, log: HydrophoneLog, metadata=None) -> int:
 
 def read_hydrophone_log(path) -> HydrophoneLog:
     where = str(path)
-    probe, metadata = read_log(path, {})
-    if "tma.model" not in metadata:
-        raise InputError(f"{where}: missing metadata record 'tma.model'")
-    model = {k: json.loads(v) for k, v in metadata["tma.model"].items()}
+    _, metadata = read_log(path, {})
+    model = read_json_record(metadata, "tma.model", where)
     n_sensors = len(model["sensors_m"])
     per = 2 if model["no_doppler"] else 3
     messages, _ = read_log(path, {topic(i): SCHEMA for i in range(n_sensors)})

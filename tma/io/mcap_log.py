@@ -34,6 +34,18 @@ def _strided_array(obj):
     raise TypeError(f"cannot serialise {type(obj).__name__} to JSON")
 
 
+def json_record(record: dict) -> dict:
+    """A metadata record whose values are JSON (MCAP metadata values are strings)."""
+    return {k: orjson.dumps(v, option=_JSON_OPTIONS).decode() for k, v in record.items()}
+
+
+def read_json_record(metadata: dict, name: str, where: str) -> dict:
+    """Decode the JSON-valued metadata record ``name``; a clear error if it is absent."""
+    if name not in metadata:
+        raise InputError(f"{where}: missing metadata record '{name}'")
+    return {k: orjson.loads(v) for k, v in metadata[name].items()}
+
+
 def float_array(values) -> np.ndarray:
     """A JSON number array as float64, null -> NaN (fast path when there is no null)."""
     try:

@@ -6,13 +6,19 @@ The metadata record ``tma.sensor`` describes the radar and its noise (JSON-encod
 a scan has no plot (estimators skip it).
 """
 
-import json
 from dataclasses import dataclass
 
 import numpy as np
 
 from tma.errors import InputError
-from tma.io.mcap_log import Channel, LogWriter, float_array, read_log
+from tma.io.mcap_log import (
+    Channel,
+    LogWriter,
+    float_array,
+    json_record,
+    read_json_record,
+    read_log,
+)
 
 PLOTS_TOPIC = "/radar/plots"
 SCHEMAS = {PLOTS_TOPIC: "tma.PlotBatch"}
@@ -43,7 +49,7 @@ class RadarLog:
 
 
 def write_radar_log(path, log: RadarLog, metadata=None) -> int:
-    meta = {**(metadata or {}), "tma.sensor": {k: json.dumps(v) for k, v in log.sensor.items()}}
+    meta = {**(metadata or {}), "tma.sensor": json_record(log.sensor)}
     with LogWriter(path, CHANNELS, meta) as w:
         for k, t in enumerate(log.t_s.tolist()):
             w.write(PLOTS_TOPIC, t, {"t_s": t, "track_id": log.track_id,
@@ -57,9 +63,7 @@ def read_radar_log(path) -> RadarLog:
     where = str(path)
     if not msgs:
         raise InputError(f"{where}: no messages on {PLOTS_TOPIC}")
-    if "tma.sensor" not in metadata:
-        raise InputError(f"{where}: missing metadata record 'tma.sensor'")
-    sensor = {k: json.loads(v) for k, v in metadata["tma.sensor"].items()}
+    sensor = read_json_record(metadata, "tma.sensor", where)
     t = np.array([m["t_s"] for m in msgs], float)
     track_id = np.unique(np.concatenate([np.asarray(m["track_id"], np.int64) for m in msgs]))
     plots = np.full((track_id.size, t.size, 2), np.nan)

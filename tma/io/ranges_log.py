@@ -6,13 +6,19 @@ prior travel with the log as the MCAP metadata record ``tma.model`` (``sigma_m``
 with NaN where a ship has no range at that epoch.
 """
 
-import json
 from dataclasses import dataclass
 
 import numpy as np
 
 from tma.errors import InputError
-from tma.io.mcap_log import Channel, LogWriter, float_array, read_log
+from tma.io.mcap_log import (
+    Channel,
+    LogWriter,
+    float_array,
+    json_record,
+    read_json_record,
+    read_log,
+)
 
 RANGES_TOPIC = "/ranging/ranges"
 SCHEMAS = {RANGES_TOPIC: "tma.RangeBatch"}
@@ -57,7 +63,7 @@ class RangesLog:
 
 def write_ranges_log(path, log: RangesLog, metadata=None) -> int:
     meta = {**(metadata or {}),
-            "tma.model": {k: json.dumps(v) for k, v in log.model.items()}}
+            "tma.model": json_record(log.model)}
     with LogWriter(path, CHANNELS, meta) as w:
         for k, t in enumerate(log.t_s.tolist()):
             for i, (lx, ly) in enumerate(log.landmarks_m.tolist()):
@@ -73,9 +79,7 @@ def read_ranges_log(path) -> RangesLog:
     where = str(path)
     if not msgs:
         raise InputError(f"{where}: no messages on {RANGES_TOPIC}")
-    if "tma.model" not in metadata:
-        raise InputError(f"{where}: missing metadata record 'tma.model' (sigma_m, prior)")
-    model = {k: json.loads(v) for k, v in metadata["tma.model"].items()}
+    model = read_json_record(metadata, "tma.model", where)
     t = np.unique([m["t_s"] for m in msgs])
     landmarks = {m["landmark_id"]: (m["landmark_x_m"], m["landmark_y_m"]) for m in msgs}
     lm_ids = sorted(landmarks)
