@@ -36,7 +36,7 @@ test: $(STAMP)  ## run the test suite (pytest)
 lint: $(STAMP)  ## ruff
 	$(VENV)/bin/ruff check tma pipeline tests bench
 
-bench: $(STAMP)  ## benchmarks: batch LM vs scipy, stage wall times of the default table
+bench: $(STAMP)  ## benchmarks of every family (ratios against named baselines, stage times)
 	$(PY) bench/bench.py $(ARGS)
 
 clean:  ## remove generated data, tables, Hydra outputs and caches (keeps .venv)

@@ -37,6 +37,9 @@ THETA = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")
 
 
 def bench_lm(n_tracks: int, sigma_deg: float):
+    from tma.parallel import keep_freed_memory
+
+    keep_freed_memory()  # as in the pipeline's workers
     log, _ = simulate_shard(Config(n_tracks=n_tracks, shard_size=n_tracks, sigma_deg=sigma_deg), 0)
     lm = build_estimator({"name": "lm"})
     with threadpool_limits(limits=1):
@@ -194,7 +197,7 @@ del parts
 sim = time.perf_counter() - start
 model = auv_model(record)
 start = time.perf_counter()
-train(truth, obs.astype(float), model_prediction(model, record, epochs(record)),
+train(truth, obs, model_prediction(model, record, epochs(record)),
       model.observe, 1e-12)
 print(f"{{sim:.0f}} {{time.perf_counter() - start:.0f}} "
       f"{{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f}}")

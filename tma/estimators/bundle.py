@@ -40,7 +40,8 @@ def training_bundle(data_dir, model_record, n_paths, seed, n_jobs=1, progress=Fa
 
 
 def bundle_observations(arrays: dict, no_doppler: bool) -> np.ndarray:
-    obs = arrays["obs"].astype(float)
+    """The bundle's observations (float32) for the Doppler or the bearings-only model."""
+    obs = arrays["obs"]
     if no_doppler:
         M, K, m = obs.shape
         obs = obs.reshape(M, K, m // 3, 3)[..., :2].reshape(M, K, -1)

@@ -68,7 +68,7 @@ def train(truth, obs, predict, observe, rtol):
             f = x.mean(0) - F @ xi.mean(0)
             x_tilde = xi @ F.T + f
             gains["F"][k], gains["f"][k] = F, f
-        zeta = obs[:, k] - observe(x_tilde)
+        zeta = obs[:, k].astype(float) - observe(x_tilde)  # the bundle stores float32
         err = x - x_tilde
         H = regression_gain(_cov(err, zeta), _cov(zeta, zeta), rtol)
         h = -H @ zeta.mean(0)
