@@ -14,7 +14,7 @@ from pipeline.simulate import simulate_stage
 from tests.conftest import compose_cfg
 from tma.errors import ConfigError, InputError
 from tma.estimators import build_estimator
-from tma.estimators.auv_base import drift_step
+from tma.estimators.auv_base import drift_step, drift_times_rows
 from tma.estimators.cmnf import CMNF, apply, model_prediction, train
 from tma.estimators.ekf import predict_covariance, sequential_update
 from tma.estimators.srekf import fold_noise, phi_times
@@ -98,6 +98,18 @@ def test_square_root_prediction_is_the_qr_of_the_compound_array():
         np.testing.assert_allclose(np.abs(L[:, :, p]), np.abs(R.T), rtol=1e-10, atol=1e-12)
         np.testing.assert_allclose(L[:, :, p] @ L[:, :, p].T, compound @ compound.T, rtol=1e-10)
         assert np.allclose(np.triu(L[:, :, p], 1), 0) and np.all(np.diag(L[:, :, p]) > 0)
+
+
+def test_structured_covariance_prediction_equals_the_general_form():
+    rng = np.random.default_rng(3)
+    x = _states(5).T.copy()
+    B = rng.normal(size=(6, 6, 5))
+    P = np.einsum("ikn,jkn->ijn", B, B)
+    M = P + 0.01 * drift_times_rows(P, x, 0.01)
+    expected = M + 0.01 * drift_times_rows(M.transpose(1, 0, 2), x, 0.01).transpose(1, 0, 2)
+    expected[5, 5] += 0.01**2 * 0.01
+    np.testing.assert_allclose(predict_covariance(P.copy(), x, 0.01, 0.01, 0.01), expected,
+                               rtol=1e-12, atol=1e-12)
 
 
 def test_sequential_update_equals_the_batch_ekf_update():

@@ -84,13 +84,6 @@ def normal_equations(theta, t_s, own_x_m, own_y_m, measured_rad, valid):
     return r, H, g
 
 
-def gauss_newton_matrix(theta, t_s, own_x_m, own_y_m, valid):
-    """J^T J at ``theta`` per track, ``(n_tracks, 4, 4)`` (approximate inverse covariance
-    divided by the bearing variance)."""
-    zeros = np.zeros((theta.shape[0], np.size(t_s)))
-    return normal_equations(theta, t_s, own_x_m, own_y_m, zeros, valid)[1]
-
-
 class BearingTerms:
     """Fused evaluation of F, H = J^T J and g = J^T r at many trial points (the LM hot path).
 
