@@ -43,6 +43,7 @@ def bench_lm(n_tracks: int, sigma_deg: float):
     log, _ = simulate_shard(Config(n_tracks=n_tracks, shard_size=n_tracks, sigma_deg=sigma_deg), 0)
     lm = build_estimator({"name": "lm"})
     with threadpool_limits(limits=1):
+        lm.estimate(log)  # warm-up (allocator, caches); scipy warms up on its first tracks
         start = time.perf_counter()
         out = lm.estimate(log)
         t_batch = time.perf_counter() - start

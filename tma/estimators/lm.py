@@ -6,7 +6,8 @@ definite, multiplies lambda by ``lambda_up``; an accepted step multiplies it by
 ``lambda_down``; a track stops when an accepted step lowers F by less than ``f_tol_rad2``.
 Every pass makes one fused evaluation of F, J^T J and J^T r at each still-active track's trial
 point (accepted and rejected alike; n_f_evals counts it once), so the per-track sequence is
-exactly the scalar algorithm's while the work stays vectorised, in cache-sized blocks.
+exactly the scalar algorithm's while the work stays vectorised: the evaluation runs in
+cache-sized chunks of tracks, the bookkeeping over every still-active track of the shard.
 """
 
 from dataclasses import dataclass
@@ -39,7 +40,7 @@ class Config:
     lambda_max: float = 1e16  # a track whose lambda exceeds this stops (stalled)
     pd_rtol: float = 1e-12  # A is positive definite if its smallest scaled eigenvalue > this
     min_bearings: int = 5
-    block_tracks: int = 64  # tracks per vectorised block (cache-sized; does not change results)
+    block_tracks: int = 64  # tracks per chunk of the fused evaluation (cache-sized)
 
     def __post_init__(self):
         w = "estimator 'lm'"
@@ -85,17 +86,24 @@ class LevenbergMarquardt(BearingsEstimator):
             "cost_rad2": np.zeros(n),
             "jtj": np.zeros((n, 4, 4)),
         }
-        # Cache-sized blocks of tracks: each track's iterations are independent of the others.
-        for start in range(0, n, cfg.block_tracks):
-            self._solve_block(terms, np.arange(start, min(start + cfg.block_tracks, n)), out)
+        self._iterate(terms, np.arange(n), out)
         out["converged"] = out["stop_reason"] == STOP_F_TOL
         return out
 
-    def _solve_block(self, terms, rows, out):
+    def _evaluate(self, terms, theta, rows):
+        """F, H, g at ``theta`` for tracks ``rows``, in cache-sized chunks of tracks (the
+        per-pass bookkeeping stays vectorised over every active track of the shard)."""
+        size = self.config.block_tracks
+        if rows.size <= size:
+            return terms(theta, rows)
+        parts = [terms(theta[i:i + size], rows[i:i + size]) for i in range(0, rows.size, size)]
+        return tuple(np.concatenate(p) for p in zip(*parts, strict=True))
+
+    def _iterate(self, terms, rows, out):
         """Marquardt iterations for the tracks ``rows``; results written into ``out``."""
         cfg = self.config
         theta = out["theta"][rows]
-        cost, H, g = terms(theta, rows)
+        cost, H, g = self._evaluate(terms, theta, rows)
         n = rows.size
         n_f_evals = np.ones(n, dtype=np.int64)
         n_iter = np.zeros(n, dtype=np.int64)
@@ -115,7 +123,7 @@ class LevenbergMarquardt(BearingsEstimator):
                 not_pd &= wa[:, 0] + lam[active] <= floor
 
             trial = theta[active] + solve_shifted(wa, V[active], d[active], g[active], lam[active])
-            trial_cost, trial_H, trial_g = terms(trial, rows[active])
+            trial_cost, trial_H, trial_g = self._evaluate(terms, trial, rows[active])
             n_f_evals[active] += 1
             decrease = cost[active] - trial_cost
             accepted = decrease >= 0  # NaN (a non-finite trial) counts as rejected

@@ -105,6 +105,8 @@ class BearingTerms:
     def __call__(self, theta, rows):
         """``(F, H, g)`` for ``theta`` (k, 4) of tracks ``rows`` (index array, length k)."""
         t, k = self.t, theta.shape[0]
+        if k and rows[-1] - rows[0] + 1 == k:  # contiguous rows: views, no copies
+            rows = slice(int(rows[0]), int(rows[-1]) + 1)
         sin_m, cos_m = self.sin_m[rows], self.cos_m[rows]
         dx = np.multiply.outer(theta[:, 2], t)
         dx += theta[:, 0, None]
