@@ -80,6 +80,31 @@ class AuvEstimator:
         raise NotImplementedError
 
 
+class KalmanFilterBase(AuvEstimator):
+    """The continuous-discrete Kalman filter driver shared by ``ekf`` and ``srekf``: Euler
+    sub-steps of ``filter_step_s`` between observations, one update per epoch. Subclasses say
+    how they hold the covariance (``initial_factor``, ``predict_factor``, ``update``,
+    ``covariance``)."""
+
+    def run(self, model, record, t, obs):
+        n, K, _ = obs.shape
+        dt = record["filter_step_s"]
+        mean0, cov0 = initial_moments(record["initial"])
+        x = np.repeat(mean0[:, None], n, axis=1)
+        factor = self.initial_factor(cov0, n, record)
+        xs, Ps = np.empty((K, 6, n)), np.empty((K, 6, 6, n))
+        for k in range(K):
+            if k:
+                for _ in range(int(round((t[k] - t[k - 1]) / dt))):
+                    factor = self.predict_factor(factor, x, dt, record)
+                    x = drift_step(x, dt, record["lam"], record["nu"])
+            x, factor = self.update(x, factor, obs[:, k], model)
+            xs[k], Ps[k] = x, self.covariance(factor)
+        est, cov = to_paths_first(xs, Ps)
+        ok = np.isfinite(cov).all(axis=(1, 2, 3)) & np.isfinite(est).all(axis=(1, 2))
+        return est, cov, ok
+
+
 def output_columns(est, cov, ok, t, covariance_every, track_id):
     """Per-epoch estimates and standard deviations, plus ``extras['covariance']``: the upper
     triangle of the covariance every ``covariance_every`` epochs and at the last (for NEES)."""

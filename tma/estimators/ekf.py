@@ -10,12 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.config import require
-from tma.estimators.auv_base import (
-    AuvEstimator,
-    drift_step,
-    initial_moments,
-    to_paths_first,
-)
+from tma.estimators.auv_base import KalmanFilterBase
 from tma.models.auv3d import PHI, A, V, X, Y
 
 
@@ -69,24 +64,18 @@ def sequential_update(x, P, obs_k, model):
     return x, P
 
 
-class EKF(AuvEstimator):
+class EKF(KalmanFilterBase):
     name = "ekf"
     Config = Config
 
-    def run(self, model, record, t, obs):
-        n, K, _ = obs.shape
-        dt, lam, mu = record["filter_step_s"], record["lam"], record["mu"]
-        mean0, cov0 = initial_moments(record["initial"])
-        x = np.repeat(mean0[:, None], n, axis=1)
-        P = np.repeat(cov0[:, :, None], n, axis=2)
-        xs, Ps = np.empty((K, 6, n)), np.empty((K, 6, 6, n))
-        for k in range(K):
-            if k:
-                for _ in range(int(round((t[k] - t[k - 1]) / dt))):
-                    P = predict_covariance(P, x, dt, lam, mu)
-                    x = drift_step(x, dt, lam, record["nu"])
-            x, P = sequential_update(x, P, obs[:, k], model)
-            xs[k], Ps[k] = x, P
-        est, cov = to_paths_first(xs, Ps)
-        ok = np.isfinite(cov).all(axis=(1, 2, 3)) & np.isfinite(est).all(axis=(1, 2))
-        return est, cov, ok
+    def initial_factor(self, cov0, n, record):
+        return np.repeat(cov0[:, :, None], n, axis=2)
+
+    def predict_factor(self, P, x, dt, record):
+        return predict_covariance(P, x, dt, record["lam"], record["mu"])
+
+    def update(self, x, P, obs_k, model):
+        return sequential_update(x, P, obs_k, model)
+
+    def covariance(self, P):
+        return P

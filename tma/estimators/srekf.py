@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.config import require
-from tma.estimators.auv_base import AuvEstimator, drift_step, initial_moments, to_paths_first
+from tma.estimators.auv_base import KalmanFilterBase
 from tma.models.auv3d import PHI, A, V
 
 ORDER = np.array([3, 5, 4, 0, 1, 2])  # (v, a, phi, X, Y, Z) in the model's state indices
@@ -72,37 +72,33 @@ def scalar_update(S, h, r, innovation, valid):
     return S, np.where(valid, gain_col / rho, 0.0) * np.where(valid, innovation, 0.0)
 
 
-class SquareRootEKF(AuvEstimator):
+def square_root_update(x, S, obs_k, model):
+    """One epoch's readings, scalar by scalar, against the predicted mean's linearisation."""
+    h, H = model.observe_with_jacobian(x.T)
+    x_lin = x.copy()
+    r = model.obs_sd**2
+    for j in range(h.shape[1]):
+        valid = np.isfinite(obs_k[:, j])
+        innovation = obs_k[:, j] - h[:, j] - np.einsum("in,in->n", H[:, j].T, x - x_lin)
+        S, step = scalar_update(S, H[:, j].T[ORDER], r[j], innovation, valid)
+        x = x + step[INVERSE]
+    return x, S
+
+
+class SquareRootEKF(KalmanFilterBase):
     name = "srekf"
     Config = Config
 
-    def run(self, model, record, t, obs):
-        n, K, _ = obs.shape
-        dt, lam, mu = record["filter_step_s"], record["lam"], record["mu"]
-        mean0, cov0 = initial_moments(record["initial"])
-        x = np.repeat(mean0[:, None], n, axis=1)
-        S = np.repeat(np.linalg.cholesky(cov0[np.ix_(ORDER, ORDER)])[:, :, None], n, axis=2)
-        q = np.zeros((6, n))
-        q[SA] = mu * np.sqrt(dt)
-        r = model.obs_sd**2
-        xs, Ps = np.empty((K, 6, n)), np.empty((K, 6, 6, n))
-        for k in range(K):
-            if k:
-                for _ in range(int(round((t[k] - t[k - 1]) / dt))):
-                    S = fold_noise(phi_times(S, x, dt, lam), q)
-                    x = drift_step(x, dt, lam, record["nu"])
-            h, H = model.observe_with_jacobian(x.T)
-            x_lin = x.copy()
-            for j in range(h.shape[1]):
-                hj = H[:, j].T[ORDER]  # (6, n), square-root order
-                valid = np.isfinite(obs[:, k, j])
-                innovation = (obs[:, k, j] - h[:, j]
-                              - np.einsum("in,in->n", H[:, j].T, x - x_lin))
-                S, step = scalar_update(S, hj, r[j], innovation, valid)
-                x = x + step[INVERSE]
-            xs[k] = x
-            P = np.einsum("ikn,jkn->ijn", S, S)
-            Ps[k] = P[np.ix_(INVERSE, INVERSE)]
-        est, cov = to_paths_first(xs, Ps)
-        ok = np.isfinite(cov).all(axis=(1, 2, 3)) & np.isfinite(est).all(axis=(1, 2))
-        return est, cov, ok
+    def initial_factor(self, cov0, n, record):
+        return np.repeat(np.linalg.cholesky(cov0[np.ix_(ORDER, ORDER)])[:, :, None], n, axis=2)
+
+    def predict_factor(self, S, x, dt, record):
+        q = np.zeros((6, S.shape[2]))
+        q[SA] = record["mu"] * np.sqrt(dt)
+        return fold_noise(phi_times(S, x, dt, record["lam"]), q)
+
+    def update(self, x, S, obs_k, model):
+        return square_root_update(x, S, obs_k, model)
+
+    def covariance(self, S):
+        return np.einsum("ikn,jkn->ijn", S, S)[np.ix_(INVERSE, INVERSE)]
