@@ -18,7 +18,7 @@ from tma.io.atomic import sha256_json, write_parquet_atomic
 from tma.io.dataset import MANIFEST, datasets_dir, file_record, shard_relpath, write_manifest
 from tma.io.shards import finished_record, is_finished, mark_finished
 from tma.parallel import run_tasks
-from tma.scenarios import dataset_name, load_scenario
+from tma.scenarios import dataset_name, load_scenario, n_shards
 
 PARTS = "parts"
 
@@ -92,7 +92,7 @@ def simulate_datasets(scenario_nodes, data_dir, *, n_jobs=2, force=False, progre
             continue
         if force and root.exists():
             shutil.rmtree(root)
-        shard_tasks = [ShardTask(str(root), plain, i) for i in range(module.n_shards(cfg))]
+        shard_tasks = [ShardTask(str(root), plain, i) for i in range(n_shards(cfg))]
         plans.append((root, module, plain, shard_tasks))
         tasks += shard_tasks
     groups = {}  # shards of different datasets that share their random draws run together

@@ -17,6 +17,7 @@ others go on).
 
 import numpy as np
 
+from tma.estimators.base import Estimator
 from tma.io.hydrophone_log import HydrophoneLog
 from tma.models.auv3d import PHI, STATE_NAMES, A, V, X, Y
 from tma.scenarios.bearing_doppler3d import auv_model
@@ -58,13 +59,8 @@ def drift_step(x, dt, lam, nu):
     return out
 
 
-class AuvEstimator:
+class AuvEstimator(Estimator):
     family = "bearing_doppler3d"
-    name = ""
-
-    def __init__(self, config):
-        self.config = config
-
     def estimate(self, log: HydrophoneLog) -> dict:
         record = log.model
         model = auv_model(record)

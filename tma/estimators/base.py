@@ -1,4 +1,4 @@
-"""Shared pieces of the bearings-only estimators: input checks and per-track context."""
+"""The estimator interface, and the shared pieces of the bearings-only estimators."""
 
 import numpy as np
 
@@ -19,14 +19,26 @@ def evaluate_in_blocks(terms: BearingTerms, theta, block=BLOCK_TRACKS):
     return cost, jtj
 
 
-class BearingsEstimator:
-    """Base of estimators over ``bearings2d`` logs; subclasses implement ``solve``."""
+class Estimator:
+    """One interface for every estimator: built from its validated ``Config`` dataclass,
+    ``estimate(log) -> dict`` of output columns shaped ``(n_tracks, ...)`` (per-step outputs
+    ``(n_tracks, n_steps)``; an optional ``extras`` dict holds small side tables).
+    ``family`` names the scenario family whose logs it reads."""
 
-    family = "bearings2d"
+    family = ""
     name = ""
 
     def __init__(self, config):
         self.config = config
+
+    def estimate(self, log) -> dict:
+        raise NotImplementedError
+
+
+class BearingsEstimator(Estimator):
+    """Base of estimators over ``bearings2d`` logs; subclasses implement ``solve``."""
+
+    family = "bearings2d"
 
     def estimate(self, log: BearingsLog) -> dict:
         """Estimate theta for every track of ``log``; returns output columns by name."""

@@ -8,6 +8,7 @@ predicts through it and updates nothing.
 import numpy as np
 
 from tma.errors import InputError
+from tma.estimators.base import Estimator
 from tma.io.radar_log import RadarLog
 
 
@@ -66,13 +67,8 @@ def alpha_beta_window(plots, tau):
     return pos, vel
 
 
-class RadarEstimator:
+class RadarEstimator(Estimator):
     family = "radar2d"
-    name = ""
-
-    def __init__(self, config):
-        self.config = config
-
     def estimate(self, log: RadarLog) -> dict:
         tau = scan_period(log, self.config.scan_period_s)
         out = self.track(log, tau)

@@ -6,19 +6,15 @@ track's estimate depends neither on its shard nor on the number of workers.
 
 import numpy as np
 
+from tma.estimators.base import Estimator
 from tma.io.ranges_log import RangesLog
 from tma.models.ranges2d import RangeModel
 
 PLOT_TRACK = 0  # the track whose first draws are kept for the sample plot
 
 
-class RangesEstimator:
+class RangesEstimator(Estimator):
     family = "ranges2d"
-    name = ""
-
-    def __init__(self, config):
-        self.config = config
-
     def estimate(self, log: RangesLog) -> dict:
         """Columns per track, plus ``extras['samples']``: the first draws of the track
         ``plot_track`` (if in this shard and the estimator samples)."""

@@ -1,10 +1,14 @@
 """Scenario families: each module declares a ``Config`` dataclass and simulates one shard.
 
-A scenario module provides ``FAMILY``, ``Config``, ``label(cfg)`` (short human tag used in
-dataset names), ``n_shards(cfg)`` and ``simulate_shard(cfg, index) -> (log, truth_table)``.
+A scenario module provides ``FAMILY``, ``Config`` (with ``n_tracks``, ``shard_size``,
+``seed``), ``label(cfg)`` (short human tag used in dataset names) and
+``simulate_shard(cfg, index) -> (log, truth_table or None)``; shards are cut and seeded by the
+helpers below, the same for every family.
 """
 
 import importlib
+
+import numpy as np
 
 from tma.config import to_plain, validate
 from tma.errors import ConfigError
@@ -16,6 +20,23 @@ SCENARIO_MODULES = {
     "radar2d": "tma.scenarios.radar2d",
     "bearing_doppler3d": "tma.scenarios.bearing_doppler3d",
 }
+
+
+def n_shards(cfg) -> int:
+    """Number of shards of ``cfg.n_tracks`` tracks in shards of ``cfg.shard_size``."""
+    return -(-cfg.n_tracks // cfg.shard_size)
+
+
+def shard_track_ids(cfg, shard_index: int) -> np.ndarray:
+    """Track ids (int64) of shard ``shard_index``: consecutive, the last shard may be short."""
+    first = shard_index * cfg.shard_size
+    return np.arange(first, min(first + cfg.shard_size, cfg.n_tracks), dtype=np.int64)
+
+
+def shard_rng(cfg, shard_index: int) -> np.random.Generator:
+    """The shard's random stream, ``SeedSequence(seed, spawn_key=(shard,))``: a shard's draws
+    depend neither on the other shards nor on the number of workers."""
+    return np.random.default_rng(np.random.SeedSequence(cfg.seed, spawn_key=(shard_index,)))
 
 
 def scenario_module(family: str):

@@ -16,6 +16,7 @@ import pyarrow as pa
 from tma.config import require
 from tma.io.hydrophone_log import HydrophoneLog, read_hydrophone_log, write_hydrophone_log
 from tma.models.auv3d import STATE_NAMES, AuvModel, euler_maruyama
+from tma.scenarios import shard_rng, shard_track_ids
 
 FAMILY = "bearing_doppler3d"
 
@@ -77,10 +78,6 @@ def label(cfg: Config) -> str:
     return f"{'bearings' if cfg.no_doppler else 'doppler'}-n{cfg.n_tracks}"
 
 
-def n_shards(cfg: Config) -> int:
-    return -(-cfg.n_tracks // cfg.shard_size)
-
-
 def model_record(cfg: Config) -> dict:
     """What the filters may know: everything but the seed and the number of paths."""
     record = asdict(cfg)
@@ -138,9 +135,9 @@ def simulation_key(cfg: Config, shard_index: int) -> dict:
 
 def simulate_raw(cfg: Config, shard_index: int):
     """Truth and the full (Doppler) observations of a shard."""
-    n = min(cfg.shard_size, cfg.n_tracks - shard_index * cfg.shard_size)
-    rng = np.random.default_rng(np.random.SeedSequence(cfg.seed, spawn_key=(shard_index,)))
-    return simulate_paths({**model_record(cfg), "no_doppler": False}, n, rng)
+    n = shard_track_ids(cfg, shard_index).size
+    record = {**model_record(cfg), "no_doppler": False}
+    return simulate_paths(record, n, shard_rng(cfg, shard_index))
 
 
 def from_raw(cfg: Config, shard_index: int, raw):
@@ -149,8 +146,7 @@ def from_raw(cfg: Config, shard_index: int, raw):
     n, K, _ = truth.shape
     if cfg.no_doppler:
         obs = obs.reshape(n, K, -1, 3)[..., :2].reshape(n, K, -1)
-    first = shard_index * cfg.shard_size
-    track_id = np.arange(first, first + n, dtype=np.int64)
+    track_id = shard_track_ids(cfg, shard_index)
     record = model_record(cfg)
     t = epochs(record)
     log = HydrophoneLog(t, track_id, obs, record)

@@ -16,6 +16,7 @@ from tma.angles import bearing_from_north, wrap_to_pi
 from tma.config import require
 from tma.io.bearings_log import BearingsLog, read_bearings_log, write_bearings_log
 from tma.models.path import LegPath
+from tma.scenarios import shard_rng, shard_track_ids
 
 FAMILY = "bearings2d"
 
@@ -91,10 +92,6 @@ def label(cfg: Config) -> str:
     return f"sigma{cfg.sigma_deg:g}-n{cfg.n_tracks}"
 
 
-def n_shards(cfg: Config) -> int:
-    return -(-cfg.n_tracks // cfg.shard_size)
-
-
 def observer_path(cfg: Config) -> LegPath:
     o = cfg.observer
     return LegPath(o.start_x_m, o.start_y_m, o.speed_m_s, o.legs)
@@ -108,9 +105,9 @@ def epochs(cfg: Config, path: LegPath) -> np.ndarray:
 
 def simulate_shard(cfg: Config, shard_index: int):
     """Simulate one shard: ``(BearingsLog, truth pyarrow.Table)``."""
-    first = shard_index * cfg.shard_size
-    n = min(cfg.shard_size, cfg.n_tracks - first)
-    rng = np.random.default_rng(np.random.SeedSequence(cfg.seed, spawn_key=(shard_index,)))
+    track_id = shard_track_ids(cfg, shard_index)
+    n = track_id.size
+    rng = shard_rng(cfg, shard_index)
     path = observer_path(cfg)
     t = epochs(cfg, path)
     own_x, own_y = path.position(t)
@@ -129,7 +126,6 @@ def simulate_shard(cfg: Config, shard_index: int):
     )
     measured = wrap_to_pi(true_bearing + np.deg2rad(cfg.sigma_deg) * noise)
 
-    track_id = np.arange(first, first + n, dtype=np.int64)
     log = BearingsLog(
         t_s=t, own_x_m=own_x, own_y_m=own_y, track_id=track_id,
         bearing_deg=np.rad2deg(measured) % 360.0,

@@ -15,6 +15,7 @@ import pyarrow as pa
 from tma.config import require
 from tma.io.radar_log import RadarLog, read_radar_log, write_radar_log
 from tma.models.path import LegPath
+from tma.scenarios import shard_rng, shard_track_ids
 
 FAMILY = "radar2d"
 
@@ -66,10 +67,6 @@ def label(cfg: Config) -> str:
     return f"v{cfg.speed_m_s:g}-{cfg.noise}-n{cfg.n_tracks}"
 
 
-def n_shards(cfg: Config) -> int:
-    return -(-cfg.n_tracks // cfg.shard_size)
-
-
 def vessel_path(cfg: Config) -> LegPath:
     return LegPath(0.0, 0.0, cfg.speed_m_s, cfg.legs, cfg.initial_course_deg)
 
@@ -86,9 +83,9 @@ def sensor_metadata(cfg: Config) -> dict:
 
 
 def simulate_shard(cfg: Config, shard_index: int):
-    first = shard_index * cfg.shard_size
-    n = min(cfg.shard_size, cfg.n_tracks - first)
-    rng = np.random.default_rng(np.random.SeedSequence(cfg.seed, spawn_key=(shard_index,)))
+    track_id = shard_track_ids(cfg, shard_index)
+    n = track_id.size
+    rng = shard_rng(cfg, shard_index)
     path = vessel_path(cfg)
     t = scan_times(cfg, path)
     x, y = path.position(t)
@@ -100,7 +97,6 @@ def simulate_shard(cfg: Config, shard_index: int):
         rng_m = np.hypot(x - rx, y - ry) + cfg.range_sd_m * noise[..., 0]
         bearing = np.arctan2(x - rx, y - ry) + np.deg2rad(cfg.bearing_sd_deg) * noise[..., 1]
         plots = np.stack([rx + rng_m * np.sin(bearing), ry + rng_m * np.cos(bearing)], axis=-1)
-    track_id = np.arange(first, first + n, dtype=np.int64)
     log = RadarLog(t, track_id, plots, sensor_metadata(cfg))
     course = path.course(t)
     truth = pa.table({

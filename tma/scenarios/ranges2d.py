@@ -16,6 +16,7 @@ import pyarrow as pa
 
 from tma.config import require
 from tma.io.ranges_log import RangesLog, read_ranges_log, write_ranges_log
+from tma.scenarios import shard_rng, shard_track_ids
 
 FAMILY = "ranges2d"
 
@@ -66,14 +67,9 @@ def label(cfg: Config) -> str:
     return f"{cfg.mode}-n{cfg.n_tracks}"
 
 
-def n_shards(cfg: Config) -> int:
-    return -(-cfg.n_tracks // cfg.shard_size)
-
-
 def simulate_shard(cfg: Config, shard_index: int):
-    first = shard_index * cfg.shard_size
-    n = min(cfg.shard_size, cfg.n_tracks - first)
-    track_id = np.arange(first, first + n, dtype=np.int64)
+    track_id = shard_track_ids(cfg, shard_index)
+    n = track_id.size
     landmarks = np.asarray(cfg.landmarks_m, float)
     model = {"sigma_m": cfg.sigma_m, "prior_mean_m": list(cfg.prior_mean_m),
              "prior_sd_m": list(cfg.prior_sd_m)}
@@ -82,7 +78,7 @@ def simulate_shard(cfg: Config, shard_index: int):
         log = RangesLog(np.arange(len(cfg.ranges_m[0]), dtype=float), landmarks, track_id,
                         ranges.copy(), model)
         return log, None
-    rng = np.random.default_rng(np.random.SeedSequence(cfg.seed, spawn_key=(shard_index,)))
+    rng = shard_rng(cfg, shard_index)
     pos = np.asarray(cfg.prior_mean_m) + np.asarray(cfg.prior_sd_m) * rng.standard_normal((n, 2))
     dist = np.hypot(pos[:, None, 0] - landmarks[:, 0], pos[:, None, 1] - landmarks[:, 1])
     noise = cfg.sigma_m * rng.standard_normal((n, len(landmarks), cfg.n_pairs))
