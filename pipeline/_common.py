@@ -4,13 +4,17 @@ import copy
 import itertools
 import logging
 import sys
+import traceback
 from pathlib import Path
 
 from hydra.core.hydra_config import HydraConfig
+from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
 from tma.errors import ConfigError, TmaError
+from tma.estimators import build_estimator
 from tma.io.dataset import Dataset, datasets_dir
+from tma.io.owned import plain_name
 from tma.parallel import keep_freed_memory
 from tma.scenarios import dataset_name, load_scenario
 
@@ -18,19 +22,82 @@ CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
 log = logging.getLogger("tma")
 
 
+def fail(message: str, status: int = 2):
+    """Print ``error: message`` as one line on stderr and exit with ``status``."""
+    print(f"error: {' '.join(str(message).split())}", file=sys.stderr)
+    sys.exit(status)
+
+
+def os_error_line(exc: OSError) -> str:
+    where = f"{exc.filename}: " if exc.filename else ""
+    return f"{where}{exc.strerror or exc} (errno {exc.errno}); nothing complete was replaced"
+
+
+class CheckOutputDir(Callback):
+    """Hydra callback: before Hydra writes its logs under ``paths.data_dir``, check that the
+    directory can be created, so a read-only or full disk is one line, not a traceback."""
+
+    def _check(self, directory):
+        try:
+            Path(str(directory)).mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            fail(f"cannot write the output directory: {os_error_line(exc)}")
+
+    def on_run_start(self, config, **kwargs):
+        self._check(config.hydra.run.dir)
+
+    def on_multirun_start(self, config, **kwargs):
+        self._check(config.hydra.sweep.dir)
+
+
 def run_stage(fn, cfg: DictConfig):
-    """Run a stage function; report TmaError as one line on stderr and exit with status 2."""
+    """Run a stage function. A TmaError (bad input or config) or an OSError (read-only or
+    full disk, permissions) is one line on stderr and exit status 2; anything else is a bug:
+    one line naming the file that holds its traceback, exit status 1."""
     keep_freed_memory()  # the main process runs vectorised work too (training, serial shards)
+    logging.raiseExceptions = False  # a full disk must not turn log writes into tracebacks
     try:
+        check_stage_options(cfg)
         return fn(cfg)
     except TmaError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        sys.exit(2)
+        fail(str(exc))
+    except OSError as exc:
+        fail(os_error_line(exc))
+    except Exception as exc:  # the last line of defence against tracebacks
+        fail(f"internal error ({type(exc).__name__}: {exc}); please report it with "
+             f"{_save_traceback()}", status=1)
+
+
+def _save_traceback() -> str:
+    try:
+        path = Path(HydraConfig.get().runtime.output_dir) / "traceback.txt"
+        path.write_text(traceback.format_exc())
+        return f"the traceback in {path}"
+    except Exception:  # no Hydra output dir, or the disk refuses it
+        return "the command that caused it"
+
+
+def check_stage_options(cfg: DictConfig):
+    """Options every stage shares: booleans are booleans, names are plain names."""
+    for key in ("force", "progress"):
+        if key in cfg and not isinstance(cfg[key], bool):
+            raise ConfigError(f"{key} must be true or false, got '{cfg[key]}'")
+    for key in ("dataset", "table", "name"):
+        if cfg.get(key) is not None:
+            plain_name(cfg[key], key)
+    n_jobs_requested(cfg)
+
+
+def n_jobs_requested(cfg: DictConfig) -> int:
+    value = cfg.parallel.n_jobs
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ConfigError(f"parallel.n_jobs must be a whole number >= 1, got '{value}'")
+    return value
 
 
 def n_jobs(cfg: DictConfig) -> int:
     """Worker processes for shards; 1 inside a joblib-launcher job (one parallel layer)."""
-    requested = int(cfg.parallel.n_jobs)
+    requested = n_jobs_requested(cfg)
     try:
         launcher = str(HydraConfig.get().launcher.get("_target_", ""))
     except ValueError:  # not running under Hydra (tests calling stage functions)
@@ -38,8 +105,6 @@ def n_jobs(cfg: DictConfig) -> int:
     if "joblib" in launcher.lower() and requested != 1:
         log.info("joblib launcher active: shards run serially inside each job")
         return 1
-    if requested < 1:
-        raise ConfigError(f"parallel.n_jobs must be >= 1, got {requested}")
     return requested
 
 
@@ -69,6 +134,14 @@ def estimator_nodes(cfg: DictConfig) -> list[dict]:
     if grid:
         return [OmegaConf.to_container(node, resolve=True) for node in grid.values()]
     return [OmegaConf.to_container(cfg.estimator, resolve=True)]
+
+
+def checked_estimator_nodes(cfg: DictConfig) -> list[dict]:
+    """``estimator_nodes`` after building each once, so a bad value fails naming its key."""
+    nodes = estimator_nodes(cfg)
+    for node in nodes:
+        build_estimator(node)
+    return nodes
 
 
 def dataset_roots(cfg: DictConfig) -> list[Path]:

@@ -2,12 +2,13 @@
 
 import hydra
 
-from pipeline._common import CONF_DIR, estimator_nodes, log, open_datasets, run_stage
+from pipeline._common import CONF_DIR, checked_estimator_nodes, log, open_datasets, run_stage
 from tma.aggregate import aggregate
 
 
 def aggregate_stage(cfg):
-    jobs = [(ds, est) for ds in open_datasets(cfg) for est in estimator_nodes(cfg)]
+    estimators = checked_estimator_nodes(cfg)  # a bad estimator config fails before any I/O
+    jobs = [(ds, est) for ds in open_datasets(cfg) for est in estimators]
     for path in aggregate(cfg.paths.data_dir, cfg.paths.tables_dir, jobs, table=cfg.table):
         log.info("wrote %s", path)
 

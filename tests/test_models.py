@@ -1,11 +1,17 @@
-"""The bearings model: analytic Jacobian vs finite differences, normal equations, wrapping."""
+"""The bearings model: analytic Jacobian vs finite differences, normal equations, wrapping,
+missing bearings."""
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tma.angles import wrap_to_180, wrap_to_pi
+from tma.estimators import build_estimator
+from tma.io.bearings_log import BearingsLog
 from tma.models.bearings2d import (
+    BearingTerms,
+    bearing_cost,
     bearing_jacobian,
     bearing_residuals,
     normal_equations,
@@ -65,3 +71,60 @@ def test_bearing_convention_clockwise_from_north():
     theta = np.array([[0.0, 1000.0, 0, 0], [1000.0, 0.0, 0, 0], [-1000.0, 0.0, 0, 0]])
     b = np.rad2deg(predicted_bearings(theta, np.array([0.0]), np.zeros(1), np.zeros(1)))[:, 0]
     np.testing.assert_allclose(b, [0.0, 90.0, -90.0])
+
+
+def _quadrant_case():
+    """Own-ship manoeuvring near the origin, one target in each quadrant (NE, SE, SW, NW)
+    and bearings missing at random epochs and over the first 100 s of two tracks."""
+    rng = np.random.default_rng(4)
+    t = np.arange(0.0, 1201.0, 2.0)
+    ox, oy = 3.0 * t, 1000.0 * np.sin(t / 200.0)
+    theta = np.array([[15e3, 12e3, -4.0, 3.0], [14e3, -13e3, -2.0, 5.0],
+                      [-16e3, -11e3, 6.0, 1.0], [-12e3, 17e3, 3.0, -6.0]])
+    measured = predicted_bearings(theta, t, ox, oy) + rng.normal(0, 0.005, (4, t.size))
+    valid = rng.random(measured.shape) > 0.3
+    valid[1:3, t < 100.0] = False
+    return theta, t, ox, oy, measured, valid
+
+
+def test_masking_a_bearing_equals_deleting_it_in_every_quadrant():
+    theta, t, ox, oy, measured, valid = _quadrant_case()
+    trial = theta + np.array([300.0, -200.0, 0.5, -0.4])  # away from the minimum: g != 0
+    masked = BearingTerms(t, ox, oy, np.where(valid, measured, 0.0), valid)
+    F, H, g = masked(trial, np.arange(4))
+    for i in range(4):
+        keep = valid[i]
+        Fd, Hd, gd = BearingTerms(t[keep], ox[keep], oy[keep], measured[i:i + 1, keep], None)(
+            trial[i:i + 1], np.array([0]))
+        np.testing.assert_allclose(F[i], Fd[0], rtol=1e-12)
+        np.testing.assert_allclose(H[i], Hd[0], rtol=1e-12)
+        np.testing.assert_allclose(g[i], gd[0], rtol=1e-10)
+        np.testing.assert_allclose(F[i], bearing_cost(trial[i:i + 1], t, ox, oy,
+                                                      measured[i:i + 1], valid[i:i + 1]),
+                                   rtol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["lm", "nbearings"])
+def test_estimates_with_missing_bearings_equal_those_without_them(name):
+    theta, t, ox, oy, measured, valid = _quadrant_case()
+    bearing_deg = np.where(valid, np.rad2deg(measured) % 360.0, np.nan)
+    log = BearingsLog(t_s=t, own_x_m=ox, own_y_m=oy, track_id=np.arange(4),
+                      bearing_deg=bearing_deg)
+    estimator = build_estimator({"name": name, "initial_bearing_deg": None}
+                                if name == "lm" else {"name": name})
+    together = estimator.estimate(log)
+    for i in range(4):
+        keep = valid[i]
+        alone = estimator.estimate(BearingsLog(t_s=t[keep], own_x_m=ox[keep], own_y_m=oy[keep],
+                                               track_id=np.array([i]),
+                                               bearing_deg=bearing_deg[i:i + 1, keep]))
+        # equal up to where LM stops (F tolerance 1e-10 rad^2; round-off in the sums differs):
+        # within a thousandth of the estimate's own standard deviation
+        for column, sd in (("x0_m", "range_sd_m"), ("y0_m", "range_sd_m"),
+                           ("vx_m_s", "speed_sd_m_s"), ("vy_m_s", "speed_sd_m_s")):
+            assert abs(together[column][i] - alone[column][0]) < 1e-3 * alone[sd][0], column
+        for column in ("cost_rad2", "range_sd_m", "course_sd_deg"):
+            np.testing.assert_allclose(together[column][i], alone[column][0], rtol=1e-6)
+        assert together["status"][i] == alone["status"][0] == "ok"
+        # the residuals are those of the noise (0.005 rad): no pi^2 of a missing bearing
+        assert together["cost_rad2"][i] < 4 * keep.sum() * 0.005**2

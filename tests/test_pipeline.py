@@ -15,7 +15,8 @@ from tma.errors import IntegrityError
 
 EXPECTED_COLUMNS = (
     "estimator,sigma_deg,n_tracks,ref1,ref1_lo,ref1_hi,ref2,ref2_lo,ref2_hi,ref3,ref3_lo,"
-    "ref3_hi,ref4,ref4_lo,ref4_hi,sqrt_ka_mean,sqrt_ka_median,nf_median,iter_median,n_converged"
+    "ref3_hi,ref4,ref4_lo,ref4_hi,sqrt_ka_mean,sqrt_ka_median,nf_median,iter_median,n_converged,"
+    "n_ok,n_not_converged,n_poor_fit,n_unobservable,consistent,consistent_lo,consistent_hi"
 )
 GRID = ["experiment=bearings2d_table", "scenario.n_tracks=60", "scenario.shard_size=25",
         "grid.scenario.sigma_deg=[0.0,0.5]", "progress=false"]
@@ -107,7 +108,7 @@ def test_rerun_reuses_shards_resumes_and_force_recomputes(paths, tmp_path):
 def test_simulate_resumes_after_a_kill(paths, tmp_path):
     cfg = compose_cfg([*SMALL, *paths, "parallel=serial"])
     simulate_stage(cfg)
-    ds = next((tmp_path / "data" / "datasets").iterdir())
+    ds = next((tmp_path / "data" / "datasets").glob("*/manifest.json")).parent
     reference = _files(ds)
     (ds / "manifest.json").unlink()  # killed before the manifest was written
     simulate_stage(cfg)

@@ -13,6 +13,7 @@ import pandas as pd
 
 from tma.errors import ConfigError
 from tma.io.dataset import Dataset
+from tma.io.owned import remove_stale_temporaries
 from tma.runs import open_run, prepared_config, run_path
 
 REPORT_MODULES = {
@@ -35,10 +36,14 @@ class RunEntry:
 def aggregate(data_dir, tables_dir, jobs, table=None) -> list[Path]:
     """Aggregate the runs of ``jobs`` (``(Dataset, estimator config)`` pairs)."""
     by_family: dict[str, list[RunEntry]] = {}
+    if Path(tables_dir).is_dir():  # what a killed aggregate left; another one may be running
+        remove_stale_temporaries(tables_dir, only_dead=True)
     for dataset, est_cfg in jobs:
+        dataset.verify()
         est_cfg = prepared_config(data_dir, dataset, est_cfg)  # artefacts exist: reused
         root = run_path(data_dir, dataset, est_cfg)
         manifest, estimates = open_run(root)
+        remove_stale_temporaries(root, only_dead=True)
         by_family.setdefault(dataset.family, []).append(
             RunEntry(dataset, est_cfg["name"], root, manifest, estimates.to_pandas()))
     written = []

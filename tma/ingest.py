@@ -9,11 +9,12 @@ Inputs:
 Times are shifted so the dataset starts at t = 0 (the origin is kept in the manifest).
 Tracks that share one own-ship (same own-ship position at every common time) go into one
 shard; otherwise each track gets its own shard. Bad input raises ``InputError`` naming the
-file, the line or time, and what is wrong; nothing is written then.
+file, the line or time, and what is wrong; nothing is written then. The dataset name is a
+plain name; the dataset is built beside its final place and swapped in only when complete,
+so a failed ingest (even with ``force=true``) leaves an existing dataset byte-identical.
 """
 
 import logging
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -23,10 +24,13 @@ from tma.errors import ConfigError, InputError
 from tma.io.atomic import sha256_file
 from tma.io.bearings_log import BearingsLog, read_bearings_log, write_bearings_log
 from tma.io.dataset import MANIFEST, datasets_dir, file_record, shard_relpath, write_manifest
+from tma.io.owned import is_owned, locked, plain_name, recover, remove_owned, staging_dir, swap_in
 
 log = logging.getLogger(__name__)
 CSV_COLUMNS = ("time_s", "own_x_m", "own_y_m", "bearing_deg")
 OWN_SHIP_ATOL_M = 1e-6
+MAX_SPAN_S = 9.2e9  # MCAP log times are nanoseconds in 64 bits: about 292 years
+MAX_TRACK_ID = 2**53  # integers beyond this are not exact in a numeric CSV column
 
 
 def read_bearings_csv(path) -> list[BearingsLog]:
@@ -55,9 +59,18 @@ def read_bearings_csv(path) -> list[BearingsLog]:
             raise InputError(f"{path}: column {col} has missing, NaN or non-numeric values "
                              f"(line {lines})")
         df[col] = values
-    if (df["track_id"] != np.round(df["track_id"])).any():
-        raise InputError(f"{path}: track_id must be an integer")
+    ids = df["track_id"].to_numpy()
+    if (ids != np.round(ids)).any() or (np.abs(ids) > MAX_TRACK_ID).any():
+        line = int(np.argmax((ids != np.round(ids)) | (np.abs(ids) > MAX_TRACK_ID))) + 2
+        raise InputError(f"{path}: track_id {ids[line - 2]:g} on line {line} is not an integer "
+                         f"within +-2^53")
     df["track_id"] = df["track_id"].astype(np.int64)
+    t = df["time_s"].to_numpy()
+    if t.max() - t.min() > MAX_SPAN_S:
+        far = int(np.argmax(np.abs(t - np.median(t)))) + 2
+        raise InputError(f"{path}: time_s {t[far - 2]:g} on line {far} makes the log span "
+                         f"{t.max() - t.min():.3g} s (at most {MAX_SPAN_S:.3g} s): "
+                         "time_s must be seconds")
     b = df["bearing_deg"].to_numpy()
     if np.any(np.abs(b) > 360):
         line = int(np.argmax(np.abs(b) > 360)) + 2
@@ -76,7 +89,8 @@ def read_bearings_csv(path) -> list[BearingsLog]:
             raise InputError(f"{path}: {kind} time_s for track {track} on line "
                              f"{rows['line'].iloc[k + 1]} (time_s must increase within a track)")
 
-    shared = df.groupby("time_s")[["own_x_m", "own_y_m"]].agg(np.ptp).max().max()
+    own = df.groupby("time_s")[["own_x_m", "own_y_m"]]
+    shared = (own.max() - own.min()).to_numpy().max()
     groups = ([df] if shared <= OWN_SHIP_ATOL_M
               else [rows for _, rows in df.groupby("track_id", sort=True)])
     return [_log_from_rows(rows) for rows in groups]
@@ -99,6 +113,7 @@ def ingest(input_path, *, data_dir, name=None, fmt="auto", sigma_deg=None, min_b
     if not input_path:
         raise ConfigError("ingest needs input=<path to a .csv or .mcap bearing log>")
     path = Path(str(input_path))
+    name = plain_name(name if name is not None else path.stem, "name")
     if fmt == "auto":
         fmt = {".csv": "csv", ".mcap": "mcap"}.get(path.suffix.lower())
         if fmt is None:
@@ -108,7 +123,7 @@ def ingest(input_path, *, data_dir, name=None, fmt="auto", sigma_deg=None, min_b
         raise ConfigError(f"format must be auto, csv or mcap, got '{fmt}'")
     if sigma_deg is not None and not 0 < sigma_deg < 90:
         raise ConfigError(f"sigma_deg must be in (0, 90) degrees, got {sigma_deg}")
-    if not path.exists():
+    if not path.is_file():
         raise InputError(f"{path}: no such file")
 
     logs = read_bearings_csv(path) if fmt == "csv" else [read_bearings_log(path)]
@@ -118,6 +133,11 @@ def ingest(input_path, *, data_dir, name=None, fmt="auto", sigma_deg=None, min_b
         raise InputError(f"{path}: a track id appears with two different own-ship paths")
     for lg in logs:
         lg.t_s = lg.t_s - origin
+        if sigma_deg is not None:  # the option overrides what an MCAP log may declare
+            lg.sigma_deg = float(sigma_deg)
+        if lg.t_s[-1] > MAX_SPAN_S:
+            raise InputError(f"{path}: the log spans {lg.t_s[-1]:.3g} s (at most "
+                             f"{MAX_SPAN_S:.3g} s): times must be seconds")
         lg.validate(str(path))
         counts = np.isfinite(lg.bearing_deg).sum(axis=1)
         few = counts < min_bearings
@@ -127,21 +147,32 @@ def ingest(input_path, *, data_dir, name=None, fmt="auto", sigma_deg=None, min_b
                 f"{counts[few].min()} bearing(s); estimating 4 parameters (x0, y0, vx, vy) "
                 f"needs at least {min_bearings}")
 
-    root = datasets_dir(data_dir) / (name or path.stem)
-    if (root / MANIFEST).exists() and not force:
-        raise InputError(f"dataset {root} exists: choose another name= or set force=true")
-    if root.exists():
-        shutil.rmtree(root)
+    root = datasets_dir(data_dir) / name
+    with locked([root]):
+        recover(root)
+        if root.exists() and not is_owned(root):
+            raise InputError(f"{root} exists and was not created by tma: choose another name=")
+        if (root / MANIFEST).exists() and not force:
+            raise InputError(f"dataset {root} exists: choose another name= or set force=true")
+        stage = staging_dir(root, fresh=True)
+        try:
+            _write_dataset(stage, name, path, fmt, logs, origin, sigma_deg, min_bearings)
+        except BaseException:
+            remove_owned(stage)
+            raise
+        return swap_in(stage, root)
+
+
+def _write_dataset(stage, name, path, fmt, logs, origin, sigma_deg, min_bearings):
     shards = {}
     for i, lg in enumerate(logs):
         rel = shard_relpath(i)
-        n_msg = write_bearings_log(root / rel, lg, {"tma.dataset": {"family": "bearings2d",
-                                                                     "source": str(path)}})
-        shards[rel] = {**file_record(root / rel), "messages": n_msg, "tracks": int(lg.n_tracks)}
+        n_msg = write_bearings_log(stage / rel, lg, {"tma.dataset": {"family": "bearings2d",
+                                                                      "source": str(path)}})
+        shards[rel] = file_record(stage / rel, messages=n_msg, tracks=int(lg.n_tracks))
     write_manifest(
-        root, family="bearings2d", source="ingest",
+        stage, family="bearings2d", source="ingest", name=name,
         config={"format": fmt, "min_bearings": min_bearings}, shards=shards, files={},
         extra={"input": {"path": str(path), "sha256": sha256_file(path)},
-               "time_origin_s": origin, "sigma_deg": sigma_deg},
+               "time_origin_s": origin, "sigma_deg": logs[0].sigma_deg},
     )
-    return root

@@ -8,11 +8,14 @@ Layout::
         manifest.json                                # config, dataset hash, file hashes
         timing.json                                  # wall time per shard (not hashed)
 
-``key`` hashes the estimator config, the dataset's content hash and the package version, so a
-run directory's content is a pure function of its inputs: byte-identical for any ``n_jobs``.
+``key`` hashes the full estimator config (every default included), the dataset's content hash
+and the package version, so a run directory's content is a pure function of its inputs:
+byte-identical for any ``n_jobs``. A run is built in its staging directory and swapped in
+when complete (``tma.io.owned``); a finished run is reused only after its manifest and every
+file it lists verify, and the dataset it reads is verified on every use.
 """
 
-import json
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 from time import perf_counter
@@ -23,15 +26,19 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from tma import __version__
-from tma.errors import ConfigError, InputError, IntegrityError
+from tma.config import to_plain
+from tma.errors import ConfigError, InputError, IntegrityError, TmaError
 from tma.estimators import build_estimator, estimator_class
-from tma.io.atomic import sha256_file, sha256_json, write_json_atomic, write_parquet_atomic
-from tma.io.dataset import Dataset
-from tma.io.shards import is_finished, mark_finished
+from tma.io.atomic import sha256_json, write_json_atomic, write_parquet_atomic
+from tma.io.dataset import Dataset, file_record, read_sealed_manifest, sealed
+from tma.io.owned import adopt_broken, locked, recover, staging_dir, swap_in
+from tma.io.shards import finished_record, mark_finished
 from tma.parallel import run_tasks
 from tma.scenarios import scenario_module
 
+log = logging.getLogger(__name__)
 RUN_FORMAT = "tma-run"
+RUN_FORMAT_VERSION = 2
 MANIFEST = "manifest.json"
 ESTIMATES = "estimates.parquet"
 
@@ -104,10 +111,7 @@ def estimate_shard_group(tasks: list[ShardTask]) -> list[dict]:
 
 
 def _finished_record(task: ShardTask):
-    out = Path(task.out_path)
-    if is_finished(out, task.key):
-        return json.loads(out.with_name(out.name + ".done.json").read_text())
-    return None
+    return finished_record(task.out_path, task.key)
 
 
 def estimate_shard(task: ShardTask, log) -> dict:
@@ -129,45 +133,47 @@ def estimate_shard(task: ShardTask, log) -> dict:
 
 def prepared_config(data_dir, dataset: Dataset, estimator_config: dict, n_jobs=1,
                     progress=False) -> dict:
-    """The estimator config after its optional ``prepare`` step (e.g. training an artefact
-    that the run then records by path and hash)."""
+    """The full estimator config (every default filled in, so the run key changes with
+    them) after its optional ``prepare`` step (e.g. training an artefact that the run then
+    records by path and hash)."""
     check_compatible(dataset, estimator_config)
-    build_estimator(estimator_config)  # fail on bad parameters before any work starts
+    # fail on bad parameters before any work starts
+    estimator_config = to_plain(build_estimator(estimator_config).config)
     cls = estimator_class(estimator_config["name"])
     if hasattr(cls, "prepare"):
         estimator_config = cls.prepare(estimator_config, dataset, data_dir, n_jobs, progress)
     return estimator_config
 
 
-def plan_run(data_dir, dataset: Dataset, estimator_config: dict):
-    """Shard tasks of one run (``estimator_config`` as returned by ``prepared_config``)."""
-    root = run_path(data_dir, dataset, estimator_config)
+def plan_run(data_dir, dataset: Dataset, estimator_config: dict, stage: Path):
+    """Shard tasks of one run (``estimator_config`` as returned by ``prepared_config``),
+    writing into ``stage``."""
     key = run_key(dataset, estimator_config)
     tasks = []
     for shard in dataset.shard_paths:
-        out = root / "shards" / (Path(shard).stem + ".parquet")
+        out = stage / "shards" / (Path(shard).stem + ".parquet")
         shard_key = sha256_json({"run": key, "shard": shard,
                                  "sha256": dataset.manifest["shards"][shard]["sha256"]})
         tasks.append(ShardTask(str(dataset.root), shard, estimator_config, str(out), shard_key))
-    return root, tasks
+    return tasks
 
 
-def finish_run(root: Path, dataset: Dataset, estimator_config: dict, tasks, records) -> Path:
+def finish_run(stage: Path, dataset: Dataset, estimator_config: dict, tasks, records) -> None:
     """Concatenate shard outputs into ``estimates.parquet`` and write the run manifest."""
     table = pa.concat_tables(pq.read_table(t.out_path) for t in tasks)
-    write_parquet_atomic(root / ESTIMATES, table)
-    shards = {Path(t.out_path).name: {"sha256": r["sha256"], "rows": r["rows"]}
+    write_parquet_atomic(stage / ESTIMATES, table)
+    shards = {Path(t.out_path).name: file_record(t.out_path, rows=r["rows"])
               for t, r in zip(tasks, records, strict=True)}
-    files = {ESTIMATES: {"sha256": sha256_file(root / ESTIMATES), "rows": table.num_rows}}
+    files = {ESTIMATES: file_record(stage / ESTIMATES, rows=table.num_rows)}
     for name in sorted({n for r in records for n in r.get("extras", [])}):
         parts = [extra_path(Path(t.out_path), name) for t in tasks]
         extra = pa.concat_tables(pq.read_table(p) for p in parts if p.exists())
-        write_parquet_atomic(root / f"{name}.parquet", extra)
-        files[f"{name}.parquet"] = {"sha256": sha256_file(root / f"{name}.parquet"),
-                                    "rows": extra.num_rows}
-    manifest = {
+        write_parquet_atomic(stage / f"{name}.parquet", extra)
+        files[f"{name}.parquet"] = file_record(stage / f"{name}.parquet", rows=extra.num_rows)
+    columns = table.column_names
+    manifest = sealed({
         "format": RUN_FORMAT,
-        "format_version": 1,
+        "format_version": RUN_FORMAT_VERSION,
         "estimator": estimator_config["name"],
         "config": estimator_config,
         "dataset": {"name": dataset.name, "family": dataset.family,
@@ -177,27 +183,56 @@ def finish_run(root: Path, dataset: Dataset, estimator_config: dict, tasks, reco
         "files": files,
         "n_tracks": table.num_rows,
         **({"n_converged": int(pc.sum(table["converged"]).as_py() or 0)}
-           if "converged" in table.column_names else {}),
-    }
-    write_json_atomic(root / MANIFEST, manifest)
+           if "converged" in columns else {}),
+        **({"status_counts": dict(sorted(
+            (str(v["values"]), int(v["counts"]))
+            for v in pc.value_counts(table["status"]).to_pylist()))}
+           if "status" in columns and "step" not in columns else {}),
+    })
+    write_json_atomic(stage / MANIFEST, manifest)
     timing = {"shards": {Path(t.out_path).name: {"seconds": r["seconds"], "rows": r["rows"],
                                                  "epochs": r["epochs"]}
                          for t, r in zip(tasks, records, strict=True)}}
-    write_json_atomic(root / "timing.json", timing)
-    return root
+    write_json_atomic(stage / "timing.json", timing)
+
+
+def _is_good(root: Path) -> bool:
+    """True if the run at ``root`` exists and verifies; a damaged one is logged."""
+    if not root.exists():
+        return False
+    try:
+        open_run(root)
+        return True
+    except TmaError as exc:
+        log.warning("%s; computing the run again", exc)
+        return False
 
 
 def estimate_runs(data_dir, jobs, *, n_jobs=2, progress=True, force=False):
-    """Run every (dataset, estimator config) job, all shards in one worker pool."""
-    planned, tasks = [], []
+    """Run every (dataset, estimator config) job, all shards in one worker pool; returns the
+    run directories."""
+    planned = []
     for dataset, est_cfg in jobs:
+        dataset.verify()
         est_cfg = prepared_config(data_dir, dataset, est_cfg, n_jobs, progress)
-        root, run_tasks_ = plan_run(data_dir, dataset, est_cfg)
-        if force:
-            for t in run_tasks_:
-                Path(t.out_path).with_name(Path(t.out_path).name + ".done.json").unlink(
-                    missing_ok=True)
-        planned.append((root, dataset, est_cfg, run_tasks_))
+        planned.append((run_path(data_dir, dataset, est_cfg), dataset, est_cfg))
+    with locked([p[0] for p in planned]):  # one process per run; a second one waits
+        return _estimate_locked(data_dir, planned, n_jobs=n_jobs, progress=progress,
+                                force=force)
+
+
+def _estimate_locked(data_dir, planned, *, n_jobs, progress, force):
+    todo, tasks = [], []
+    for root, dataset, est_cfg in planned:
+        recover(root)
+        if any(p[0] == root for p in todo) or (not force and _is_good(root)):
+            continue
+        stage = root.with_name(f".{root.name}.partial")
+        if not force:
+            adopt_broken(root, stage)  # its verified shards are reused, the rest recomputed
+        stage = staging_dir(root, fresh=force)
+        run_tasks_ = plan_run(data_dir, dataset, est_cfg, stage)
+        todo.append((root, stage, dataset, est_cfg, run_tasks_))
         tasks += run_tasks_
     groups = {}  # every estimator on the same dataset shard shares one read of the log
     for t in tasks:
@@ -207,18 +242,27 @@ def estimate_runs(data_dir, jobs, *, n_jobs=2, progress=True, force=False):
             estimate_shard_group, list(groups.values()), n_jobs=n_jobs, desc="estimate",
             progress=progress), strict=True):
         done.update({t.out_path: r for t, r in zip(group, records, strict=True)})
-    return [finish_run(root, ds, cfg, ts, [done[t.out_path] for t in ts])
-            for root, ds, cfg, ts in planned]
+    for root, stage, dataset, est_cfg, ts in todo:
+        finish_run(stage, dataset, est_cfg, ts, [done[t.out_path] for t in ts])
+        swap_in(stage, root)
+    return [p[0] for p in planned]
 
 
 def open_run(root) -> tuple[dict, "pa.Table"]:
-    """A finished run's manifest and estimates (hash-checked)."""
+    """A finished run's manifest and estimates, after checking the manifest and every file
+    it lists (size and sha256)."""
     root = Path(root)
+    remedy = "re-run estimate (it recomputes a damaged run)"
     if not (root / MANIFEST).exists():
         raise InputError(f"no finished run at {root}: run `python -m pipeline.estimate` first")
-    manifest = json.loads((root / MANIFEST).read_text())
-    record = manifest["files"][ESTIMATES]
-    if sha256_file(root / ESTIMATES) != record["sha256"]:
-        raise IntegrityError(f"{root / ESTIMATES}: does not match its run manifest; "
-                             "re-run estimate with force=true")
+    manifest = read_sealed_manifest(root / MANIFEST, "run", RUN_FORMAT, RUN_FORMAT_VERSION,
+                                    remedy)
+    listed = {**{f"shards/{k}": v for k, v in manifest.get("shards", {}).items()},
+              **manifest.get("files", {})}
+    if ESTIMATES not in listed:
+        raise IntegrityError(f"{root / MANIFEST}: damaged run manifest; {remedy}")
+    for relpath, record in listed.items():
+        path = root / relpath
+        if not path.is_file() or file_record(path) | {"rows": record.get("rows")} != record:
+            raise IntegrityError(f"{path}: missing or different from its run manifest; {remedy}")
     return manifest, pq.read_table(root / ESTIMATES)

@@ -1,10 +1,13 @@
 """The simulate stage: scenario configs -> datasets (MCAP shards, truth, manifest).
 
 Every shard of every requested dataset is one task, so all shards share one worker pool.
-A shard whose MCAP and truth part are finished (sidecar with matching key and hash) is reused,
-so a killed run resumes; a dataset whose manifest exists is skipped unless ``force``.
+Each dataset is built in its staging directory and swapped in when complete (``tma.io.owned``);
+a shard whose MCAP and truth part are finished there (sidecar with matching key and hash) is
+reused, so a killed run resumes. A dataset that exists and verifies is kept unless ``force``;
+one that fails verification (damaged, edited, of an older format) is simulated again.
 """
 
+import logging
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -14,12 +17,15 @@ import pyarrow.parquet as pq
 
 from tma import __version__
 from tma.config import to_plain
+from tma.errors import TmaError
 from tma.io.atomic import sha256_json, write_parquet_atomic
-from tma.io.dataset import MANIFEST, datasets_dir, file_record, shard_relpath, write_manifest
-from tma.io.shards import finished_record, is_finished, mark_finished
+from tma.io.dataset import Dataset, datasets_dir, file_record, shard_relpath, write_manifest
+from tma.io.owned import locked, recover, staging_dir, swap_in
+from tma.io.shards import finished_record, mark_finished, sidecar
 from tma.parallel import run_tasks
 from tma.scenarios import dataset_name, load_scenario, n_shards
 
+log = logging.getLogger(__name__)
 PARTS = "parts"
 
 
@@ -43,10 +49,9 @@ class ShardTask:
 
 
 def _finished(task: ShardTask):
-    if is_finished(task.log_path, task.key):
-        record = finished_record(task.log_path)
-        if not record["truth_rows"] or is_finished(task.truth_path, task.key):
-            return record
+    record = finished_record(task.log_path, task.key)
+    if record and (not record.get("truth_rows") or finished_record(task.truth_path, task.key)):
+        return record
     return None
 
 
@@ -80,20 +85,37 @@ def _write_shard(task: ShardTask, raw=None) -> dict:
                          truth_rows=0 if truth is None else truth.num_rows)
 
 
+def _is_good(root: Path) -> bool:
+    """True if the dataset at ``root`` exists and verifies; a damaged one is logged."""
+    if not root.exists():
+        return False
+    try:
+        Dataset.open(root).verify()
+        return True
+    except TmaError as exc:
+        log.warning("%s; simulating it again", exc)
+        return False
+
+
 def simulate_datasets(scenario_nodes, data_dir, *, n_jobs=2, force=False, progress=True):
     """Create the dataset of each scenario config node; returns the dataset directories."""
+    configs = [load_scenario(node) for node in scenario_nodes]
+    roots = [datasets_dir(data_dir) / dataset_name(module, cfg) for module, cfg in configs]
+    with locked(roots):  # a second simulate of the same dataset waits, then finds it done
+        return _simulate_locked(configs, roots, n_jobs=n_jobs, force=force, progress=progress)
+
+
+def _simulate_locked(configs, roots, *, n_jobs, force, progress):
     plans, tasks = [], []
-    for node in scenario_nodes:
-        module, cfg = load_scenario(node)
-        root = datasets_dir(data_dir) / dataset_name(module, cfg)
+    for (module, cfg), root in zip(configs, roots, strict=True):
+        recover(root)
         plain = to_plain(cfg)
-        if (root / MANIFEST).exists() and not force:
-            plans.append((root, module, plain, None))
+        if any(p[0] == root for p in plans) or (not force and _is_good(root)):
+            plans.append((root, None, module, plain, None))
             continue
-        if force and root.exists():
-            shutil.rmtree(root)
-        shard_tasks = [ShardTask(str(root), plain, i) for i in range(n_shards(cfg))]
-        plans.append((root, module, plain, shard_tasks))
+        stage = staging_dir(root, fresh=force)
+        shard_tasks = [ShardTask(str(stage), plain, i) for i in range(n_shards(cfg))]
+        plans.append((root, stage, module, plain, shard_tasks))
         tasks += shard_tasks
     groups = {}  # shards of different datasets that share their random draws run together
     for t in tasks:
@@ -106,25 +128,25 @@ def simulate_datasets(scenario_nodes, data_dir, *, n_jobs=2, force=False, progre
             simulate_group, list(groups.values()), n_jobs=n_jobs, desc="simulate",
             progress=progress), strict=True):
         done.update({(t.root, t.index): r for t, r in zip(group, records, strict=True)})
-    results = iter(done[(t.root, t.index)] for t in tasks)
-    for root, module, plain, shard_tasks in plans:
+    for root, stage, module, plain, shard_tasks in plans:
         if shard_tasks is None:
             continue
-        records = [next(results) for _ in shard_tasks]
+        records = [done[(t.root, t.index)] for t in shard_tasks]
         shards = {
-            shard_relpath(t.index): {"sha256": r["sha256"], "messages": r["messages"],
-                                     "tracks": r["tracks"]}
+            shard_relpath(t.index): {"sha256": r["sha256"], "bytes": t.log_path.stat().st_size,
+                                     "messages": r["messages"], "tracks": r["tracks"]}
             for t, r in zip(shard_tasks, records, strict=True)
         }
         files = {}
         if any(r["truth_rows"] for r in records):
             truth = pa.concat_tables(pq.read_table(t.truth_path) for t in shard_tasks)
-            write_parquet_atomic(root / "truth.parquet", truth)
-            files["truth.parquet"] = file_record(root / "truth.parquet", rows=truth.num_rows)
-        write_manifest(root, family=module.FAMILY, source="simulate", config=plain,
-                       shards=shards, files=files,
+            write_parquet_atomic(stage / "truth.parquet", truth)
+            files["truth.parquet"] = file_record(stage / "truth.parquet", rows=truth.num_rows)
+        write_manifest(stage, family=module.FAMILY, source="simulate", config=plain,
+                       shards=shards, files=files, name=root.name,
                        extra={"seed": plain.get("seed"), "time_origin_s": 0.0})
-        shutil.rmtree(root / PARTS, ignore_errors=True)
+        shutil.rmtree(stage / PARTS, ignore_errors=True)  # inside our own staging directory
         for t in shard_tasks:  # resume bookkeeping is no longer needed once the manifest exists
-            t.log_path.with_name(t.log_path.name + ".done.json").unlink(missing_ok=True)
+            sidecar(t.log_path).unlink(missing_ok=True)
+        swap_in(stage, root)
     return [p[0] for p in plans]

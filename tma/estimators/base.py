@@ -1,10 +1,14 @@
 """The estimator interface, and the shared pieces of the bearings-only estimators."""
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from tma.config import require
 from tma.errors import InputError
+from tma.estimators.bearings_status import assess, runs_test_p
 from tma.io.bearings_log import BearingsLog
-from tma.models.bearings2d import BearingTerms
+from tma.models.bearings2d import BearingTerms, bearing_residuals
 
 BLOCK_TRACKS = 64
 
@@ -35,8 +39,28 @@ class Estimator:
         raise NotImplementedError
 
 
+@dataclass
+class BearingsConfig:
+    """Settings every bearings-only estimator shares: what it needs, and how its per-track
+    ``status`` is decided (``tma.estimators.bearings_status``)."""
+
+    min_bearings: int = 5
+    max_range_rel_sd: float = 0.5  # unobservable above this range sd / range
+    fit_alpha: float = 1e-3  # poor_fit below this p-value (chi-square, or runs test)
+    singular_rcond: float = 1e-12  # J^T J scaled eigenvalue ratio at or below: singular
+
+    def __post_init__(self):
+        w = f"estimator '{getattr(self, 'name', '?')}'"
+        require(self.min_bearings >= 4, w, "min_bearings must be at least 4")
+        require(self.max_range_rel_sd > 0, w, "max_range_rel_sd must be positive")
+        require(0 < self.fit_alpha < 1, w, "fit_alpha must lie in (0, 1)")
+        require(0 < self.singular_rcond < 1, w, "singular_rcond must lie in (0, 1)")
+
+
 class BearingsEstimator(Estimator):
-    """Base of estimators over ``bearings2d`` logs; subclasses implement ``solve``."""
+    """Base of estimators over ``bearings2d`` logs; subclasses implement ``solve``. Every
+    output carries per track its kinematics now (at the last bearing), their one-sigma
+    errors and a ``status`` (see ``bearings_status``)."""
 
     family = "bearings2d"
 
@@ -64,12 +88,19 @@ class BearingsEstimator(Estimator):
             cost, jtj = out.pop("cost_rad2"), out.pop("jtj")
         else:
             cost, jtj = evaluate_in_blocks(BearingTerms(t, ox, oy, measured, valid), theta)
+        runs_p = None
+        if log.sigma_deg is None:
+            residuals = bearing_residuals(theta, t, ox, oy, measured, valid)
+            runs_p = runs_test_p(residuals, valid)
+        trust = assess(theta, cost, jtj, n_bearings, out["converged"], t[last], ox[last],
+                       oy[last], log.sigma_deg, runs_p, self.config)
         columns = {
             "x0_m": theta[:, 0], "y0_m": theta[:, 1], "vx_m_s": theta[:, 2], "vy_m_s": theta[:, 3],
             **out,
             "cost_rad2": cost,
             "n_bearings": n_bearings.astype(np.int64),
             "t_last_s": t[last], "own_x_last_m": ox[last], "own_y_last_m": oy[last],
+            **trust,
         }
         for i in range(4):
             for j in range(i, 4):

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.config import require
-from tma.estimators.base import BearingsEstimator
+from tma.estimators.base import BearingsConfig, BearingsEstimator
 from tma.linalg import jacobi_scaled_eigh, solve_shifted
 from tma.models.bearings2d import BearingTerms
 
@@ -24,7 +24,7 @@ STOP_F_TOL, STOP_MAX_ITER, STOP_LAMBDA_MAX = 0, 1, 2
 
 
 @dataclass
-class Config:
+class Config(BearingsConfig):
     name: str = "lm"
     # Prior guess: target at this bearing/distance from own-ship at t = 0 with this
     # course/speed. initial_bearing_deg = null uses each track's first measured bearing.
@@ -39,17 +39,26 @@ class Config:
     max_iter: int = 200  # accepted steps
     lambda_max: float = 1e16  # a track whose lambda exceeds this stops (stalled)
     pd_rtol: float = 1e-12  # A is positive definite if its smallest scaled eigenvalue > this
-    min_bearings: int = 5
     block_tracks: int = 64  # tracks per chunk of the fused evaluation (cache-sized)
 
     def __post_init__(self):
+        super().__post_init__()
         w = "estimator 'lm'"
-        require(self.lambda0 > 0, w, "lambda0 must be positive")
+        b = self.initial_bearing_deg
+        require(b is None or -360 <= b <= 360, w,
+                f"initial_bearing_deg must be null or in [-360, 360], got {b}")
+        require(0 < self.initial_distance_m < 1e9, w,
+                f"initial_distance_m must lie in (0, 1e9) m, got {self.initial_distance_m}")
+        require(-360 <= self.initial_course_deg <= 360, w,
+                f"initial_course_deg must lie in [-360, 360], got {self.initial_course_deg}")
+        require(0 <= self.initial_speed_m_s < 1e4, w,
+                f"initial_speed_m_s must lie in [0, 1e4) m/s, got {self.initial_speed_m_s}")
+        require(0 < self.lambda0 < self.lambda_max, w, "lambda0 must lie in (0, lambda_max)")
         require(self.lambda_up > 1, w, "lambda_up must exceed 1")
         require(0 < self.lambda_down < 1, w, "lambda_down must lie in (0, 1)")
         require(self.f_tol_rad2 > 0, w, "f_tol_rad2 must be positive")
         require(self.max_iter > 0, w, "max_iter must be positive")
-        require(self.min_bearings >= 4, w, "min_bearings must be at least 4")
+        require(0 < self.pd_rtol < 1, w, "pd_rtol must lie in (0, 1)")
         require(self.block_tracks >= 1, w, "block_tracks must be positive")
 
 

@@ -17,18 +17,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.config import require
-from tma.estimators.base import BearingsEstimator
+from tma.estimators.base import BearingsConfig, BearingsEstimator
 from tma.linalg import jacobi_scaled_eigh, solve_shifted
 
 
 @dataclass
-class Config:
+class Config(BearingsConfig):
     name: str = "nbearings"
-    min_bearings: int = 5
     rcond: float = 1e-12  # scaled normal matrix with eigenvalues below rcond*max is singular
 
     def __post_init__(self):
-        require(self.min_bearings >= 4, "estimator 'nbearings'", "min_bearings must be >= 4")
+        super().__post_init__()
+        require(0 < self.rcond < 1, "estimator 'nbearings'", "rcond must lie in (0, 1)")
 
 
 class NBearings(BearingsEstimator):

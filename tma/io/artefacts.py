@@ -14,6 +14,7 @@ import numpy as np
 from tma import __version__
 from tma.errors import IntegrityError
 from tma.io.atomic import atomic_path, sha256_file, sha256_json, write_json_atomic
+from tma.io.owned import locked, remove_stale_temporaries
 
 ARRAYS = "arrays.npz"
 
@@ -26,11 +27,19 @@ def artefact_dir(data_dir, kind: str, spec: dict) -> Path:
 def load_or_build(data_dir, kind: str, spec: dict, build) -> tuple[Path, str]:
     """Path and sha256 of the artefact for ``spec``; ``build()`` -> dict of arrays if absent."""
     root = artefact_dir(data_dir, kind, spec)
+    with locked([root]):  # a second process building the same artefact waits, then reuses it
+        remove_stale_temporaries(root.parent, only_dead=True)
+        return _load_or_build(root, kind, spec, build)
+
+
+def _load_or_build(root: Path, kind: str, spec: dict, build) -> tuple[Path, str]:
     manifest = root / "manifest.json"
-    if manifest.exists():
+    try:
         record = json.loads(manifest.read_text())
         if sha256_file(root / ARRAYS) == record["sha256"]:
             return root / ARRAYS, record["sha256"]
+    except (OSError, ValueError, KeyError, TypeError):  # absent or damaged: build it again
+        pass
     arrays = build()
     with atomic_path(root / ARRAYS) as tmp, open(tmp, "wb") as f:
         np.savez(f, **arrays)

@@ -3,7 +3,9 @@
 A log (and a dataset shard) holds one own-ship and any number of contacts (tracks). Topics:
 
 - ``/ownship/navigation`` (schema ``tma.OwnshipNavigation``): ``{t_s, x_m, y_m}``
-- ``/sonar/bearings`` (schema ``tma.BearingBatch``): ``{t_s, track_id[], bearing_deg[]}``
+- ``/sonar/bearings`` (schema ``tma.BearingBatch``): ``{t_s, track_id[], bearing_deg[]}``;
+  other tools may also send one bearing per message with scalar ``track_id`` and
+  ``bearing_deg``: messages with equal ``t_s`` form one epoch.
 
 Own-ship positions are interpolated linearly to the bearing epochs (equal epochs are exact).
 In memory a log is a rectangular ``(n_tracks, n_epochs)`` array with NaN where a contact has
@@ -15,10 +17,21 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.errors import InputError
-from tma.io.mcap_log import Channel, LogWriter, read_log
+from tma.io.mcap_log import (
+    Channel,
+    LogWriter,
+    float_array,
+    int_array,
+    json_record,
+    number,
+    read_json_record,
+    read_log,
+    schema_errors,
+)
 
 OWNSHIP_TOPIC = "/ownship/navigation"
 BEARINGS_TOPIC = "/sonar/bearings"
+SENSOR = "tma.sensor"  # metadata record: {"sigma_deg": nominal bearing noise}, when known
 SCHEMAS = {OWNSHIP_TOPIC: "tma.OwnshipNavigation", BEARINGS_TOPIC: "tma.BearingBatch"}
 CHANNELS = [
     Channel(OWNSHIP_TOPIC, SCHEMAS[OWNSHIP_TOPIC],
@@ -34,7 +47,10 @@ class BearingsLog:
     """One own-ship and its contacts' bearings on a common epoch grid.
 
     t_s: (n_epochs,) strictly increasing; own_x_m, own_y_m: (n_epochs,);
-    track_id: (n_tracks,) int64; bearing_deg: (n_tracks, n_epochs), NaN = no bearing.
+    track_id: (n_tracks,) int64; bearing_deg: (n_tracks, n_epochs), NaN = no bearing;
+    sigma_deg: the sensor's nominal one-sigma bearing noise (deg), None when unknown (the
+    estimators then estimate it from the residuals). Stored in the metadata record
+    ``tma.sensor``.
     """
 
     t_s: np.ndarray
@@ -42,6 +58,7 @@ class BearingsLog:
     own_y_m: np.ndarray
     track_id: np.ndarray
     bearing_deg: np.ndarray
+    sigma_deg: float | None = None
 
     @property
     def n_tracks(self) -> int:
@@ -68,10 +85,15 @@ class BearingsLog:
             )
         if np.unique(self.track_id).size != self.track_id.size:
             raise InputError(f"{where}: duplicate track ids")
+        if self.sigma_deg is not None and not 0 <= self.sigma_deg < 90:
+            raise InputError(f"{where}: nominal bearing noise sigma_deg {self.sigma_deg!r} is "
+                             "not in [0, 90) degrees")
 
 
 def write_bearings_log(path, log: BearingsLog, metadata=None) -> int:
     """Write ``log`` as MCAP (atomically). Returns the number of messages written."""
+    if log.sigma_deg is not None:
+        metadata = {**(metadata or {}), SENSOR: json_record({"sigma_deg": log.sigma_deg})}
     with LogWriter(path, CHANNELS, metadata) as w:
         for k, t in enumerate(log.t_s.tolist()):
             w.write(OWNSHIP_TOPIC, t, {"t_s": t, "x_m": float(log.own_x_m[k]),
@@ -83,46 +105,67 @@ def write_bearings_log(path, log: BearingsLog, metadata=None) -> int:
         return w.n_messages
 
 
+def _nominal_sigma(metadata: dict, where: str) -> float | None:
+    if SENSOR not in metadata:
+        return None
+    with schema_errors(where, f"the metadata record {SENSOR}"):
+        sigma = read_json_record(metadata, SENSOR, where)["sigma_deg"]
+        return None if sigma is None else number(sigma)
+
+
 def read_bearings_log(path) -> BearingsLog:
-    """Read a bearing log written by ``write_bearings_log`` or any tool using the schemas."""
-    messages, _ = read_log(path, SCHEMAS)
+    """Read a bearing log written by ``write_bearings_log`` or any tool using the schemas.
+
+    ``track_id`` and ``bearing_deg`` may be arrays or scalars (one bearing per message);
+    messages with equal ``t_s`` are one epoch, and a contact may appear once per epoch.
+    A message that does not follow its schema raises InputError naming the file.
+    """
+    messages, metadata = read_log(path, SCHEMAS)
     nav, obs = messages[OWNSHIP_TOPIC], messages[BEARINGS_TOPIC]
     where = str(path)
     if not nav:
         raise InputError(f"{where}: no messages on {OWNSHIP_TOPIC}")
     if not obs:
         raise InputError(f"{where}: no messages on {BEARINGS_TOPIC}")
-    try:
-        nav_t = np.array([m["t_s"] for m in nav], dtype=float)
-        nav_x = np.array([m["x_m"] for m in nav], dtype=float)
-        nav_y = np.array([m["y_m"] for m in nav], dtype=float)
-        t = np.array([m["t_s"] for m in obs], dtype=float)
-        ids_per_epoch = [np.asarray(m["track_id"], dtype=np.int64) for m in obs]
-        vals_per_epoch = [np.asarray(m["bearing_deg"], dtype=float) for m in obs]
-    except (KeyError, TypeError, ValueError) as exc:
-        raise InputError(f"{where}: message does not follow its schema ({exc})") from None
-    if any(i.shape != v.shape for i, v in zip(ids_per_epoch, vals_per_epoch, strict=True)):
+    with schema_errors(where, f"a message on {OWNSHIP_TOPIC}"):
+        nav_t = np.array([number(m["t_s"]) for m in nav])
+        nav_x = np.array([number(m["x_m"]) for m in nav])
+        nav_y = np.array([number(m["y_m"]) for m in nav])
+    with schema_errors(where, f"a message on {BEARINGS_TOPIC}"):
+        t_msg = np.array([number(m["t_s"]) for m in obs])
+        ids_per_msg = [int_array(m["track_id"]) for m in obs]
+        vals_per_msg = [float_array(m["bearing_deg"]) for m in obs]
+    if any(i.size != v.size for i, v in zip(ids_per_msg, vals_per_msg, strict=True)):
         raise InputError(f"{where}: track_id and bearing_deg differ in length in a message")
     if np.any(np.diff(nav_t) <= 0):
         raise InputError(f"{where}: {OWNSHIP_TOPIC} time stamps are not strictly increasing")
-    if t.size and (t[0] < nav_t[0] or t[-1] > nav_t[-1]):
+    back = np.diff(t_msg) < 0
+    if back.any():
+        k = int(np.argmax(back)) + 1
+        raise InputError(f"{where}: {BEARINGS_TOPIC} time stamps are not increasing "
+                         f"at t = {t_msg[k]!r} s")
+    if t_msg[0] < nav_t[0] or t_msg[-1] > nav_t[-1]:
         raise InputError(f"{where}: bearings outside the own-ship navigation time span")
 
-    track_id = np.unique(np.concatenate(ids_per_epoch))
+    t = np.unique(t_msg)  # equal t_s: one epoch sent as several messages
+    all_ids = np.concatenate(ids_per_msg)
+    track_id = np.unique(all_ids)
     bearing = np.full((track_id.size, t.size), np.nan)
-    same = all(i.size == track_id.size for i in ids_per_epoch) and all(
-        np.array_equal(i, track_id) for i in ids_per_epoch
-    )
-    if same:
-        bearing[:] = np.stack(vals_per_epoch, axis=1)
+    if t.size == len(obs) and all(np.array_equal(i, track_id) for i in ids_per_msg):
+        bearing[:] = np.stack(vals_per_msg, axis=1)  # the common case: every contact, every epoch
     else:
-        for k, (ids, vals) in enumerate(zip(ids_per_epoch, vals_per_epoch, strict=True)):
-            if np.unique(ids).size != ids.size:
-                raise InputError(f"{where}: duplicate track_id within the epoch t = {t[k]} s")
-            bearing[np.searchsorted(track_id, ids), k] = vals
+        rows = np.searchsorted(track_id, all_ids)
+        cols = np.repeat(np.searchsorted(t, t_msg), [i.size for i in ids_per_msg])
+        cell = rows * t.size + cols
+        unique, first = np.unique(cell, return_index=True)
+        if unique.size != cell.size:
+            dup = np.setdiff1d(np.arange(cell.size), first)[0]
+            raise InputError(f"{where}: track_id {all_ids[dup]} twice at the epoch "
+                             f"t = {t[cols[dup]]!r} s")
+        bearing[rows, cols] = np.concatenate(vals_per_msg)
     log = BearingsLog(
         t_s=t, own_x_m=np.interp(t, nav_t, nav_x), own_y_m=np.interp(t, nav_t, nav_y),
-        track_id=track_id, bearing_deg=bearing,
+        track_id=track_id, bearing_deg=bearing, sigma_deg=_nominal_sigma(metadata, where),
     )
     log.validate(where)
     return log

@@ -8,8 +8,10 @@ Layout::
         log/shard-00000.mcap # one own-ship + its contacts per shard
 
 The manifest records the resolved config, seed, package version, and for every file its
-sha256 and row or message count; ``content_hash`` is a hash over those file hashes and
-identifies the dataset's bytes.
+size, sha256 and row or message count; ``content_hash`` is a hash over those file records and
+identifies the dataset's bytes; ``manifest_sha256`` hashes the rest of the manifest, so an
+edited value (a relabelled sigma, a forged content hash) is refused rather than trusted.
+Every stage that uses a dataset verifies it first (``Dataset.verify``).
 """
 
 import json
@@ -23,8 +25,10 @@ from tma.errors import InputError, IntegrityError
 from tma.io.atomic import sha256_file, sha256_json, write_json_atomic
 
 FORMAT = "tma-dataset"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 MANIFEST = "manifest.json"
+_REQUIRED = ("family", "name", "source", "config", "shards", "files", "content_hash")
+_RECREATE = "re-create the dataset (simulate creates it again; ingest with force=true)"
 
 
 def datasets_dir(data_dir) -> Path:
@@ -36,16 +40,44 @@ def shard_relpath(index: int) -> str:
 
 
 def file_record(path, **counts) -> dict:
-    return {"sha256": sha256_file(path), **counts}
+    return {"sha256": sha256_file(path), "bytes": Path(path).stat().st_size, **counts}
 
 
-def write_manifest(root, *, family, source, config, shards, files, extra=None) -> dict:
-    """Write ``manifest.json`` atomically; ``shards`` and ``files`` map relpath -> record."""
-    manifest = {
+def sealed(manifest: dict) -> dict:
+    """``manifest`` with ``manifest_sha256``: the hash of everything else in it."""
+    body = {k: v for k, v in manifest.items() if k != "manifest_sha256"}
+    return {**body, "manifest_sha256": sha256_json(body)}
+
+
+def read_sealed_manifest(path, kind: str, fmt: str, version: int, remedy: str) -> dict:
+    """Parse a manifest of format ``fmt``/``version`` written through ``sealed``; a clear
+    InputError (not a tma manifest) or IntegrityError (old, damaged or edited) otherwise."""
+    try:
+        manifest = json.loads(Path(path).read_text())
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise IntegrityError(f"{path}: damaged {kind} manifest, not valid JSON ({exc}); "
+                             f"{remedy}") from None
+    if not isinstance(manifest, dict) or manifest.get("format") != fmt:
+        raise InputError(f"{path}: not a tma {kind} manifest")
+    if manifest.get("format_version") != version:
+        raise IntegrityError(f"{path}: {kind} format version {manifest.get('format_version')} "
+                             f"is not supported by tma {__version__} (expected {version}); "
+                             f"{remedy}")
+    if sealed(manifest)["manifest_sha256"] != manifest.get("manifest_sha256"):
+        raise IntegrityError(f"{path}: the {kind} manifest was edited or damaged (its "
+                             f"manifest_sha256 does not match its content); {remedy}")
+    return manifest
+
+
+def write_manifest(root, *, family, source, config, shards, files, extra=None,
+                   name=None) -> dict:
+    """Write ``manifest.json`` atomically; ``shards`` and ``files`` map relpath -> record.
+    ``name``: the dataset's name when ``root`` is its staging directory."""
+    manifest = sealed({
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
         "family": family,
-        "name": Path(root).name,
+        "name": name or Path(root).name,
         "source": source,
         "package": {"name": "tma", "version": __version__},
         "config": config,
@@ -53,7 +85,7 @@ def write_manifest(root, *, family, source, config, shards, files, extra=None) -
         "files": files,
         "content_hash": sha256_json({"shards": shards, "files": files}),
         **(extra or {}),
-    }
+    })
     write_json_atomic(Path(root) / MANIFEST, manifest)
     return manifest
 
@@ -70,16 +102,22 @@ class Dataset:
         if not path.exists():
             hint = " (incomplete: re-run the stage that writes it)" if root.exists() else ""
             raise InputError(f"no dataset at {root}{hint}")
-        try:
-            manifest = json.loads(path.read_text())
-        except json.JSONDecodeError as exc:
-            raise InputError(f"{path}: not valid JSON ({exc})") from None
-        if manifest.get("format") != FORMAT:
-            raise InputError(f"{path}: not a tma dataset manifest")
-        if manifest.get("format_version") != FORMAT_VERSION:
-            raise InputError(f"{path}: dataset format version {manifest.get('format_version')} "
-                             f"is not supported (expected {FORMAT_VERSION})")
+        manifest = read_sealed_manifest(path, "dataset", FORMAT, FORMAT_VERSION, _RECREATE)
+        missing = [k for k in _REQUIRED if k not in manifest]
+        if missing:
+            raise IntegrityError(f"{path}: damaged manifest, missing {', '.join(missing)}; "
+                                 f"{_RECREATE}")
+        if sha256_json({"shards": manifest["shards"], "files": manifest["files"]}) != (
+                manifest["content_hash"]):
+            raise IntegrityError(f"{path}: content_hash does not match the file records; "
+                                 f"{_RECREATE}")
         return cls(root, manifest)
+
+    def verify(self) -> "Dataset":
+        """Check every listed file: present, of its recorded size and sha256."""
+        for relpath in [*self.shard_paths, *sorted(self.manifest["files"])]:
+            self.verified_path(relpath)
+        return self
 
     @property
     def name(self) -> str:
@@ -107,14 +145,18 @@ class Dataset:
         if record is None:
             raise InputError(f"{self.root}: '{relpath}' is not listed in the manifest")
         path = self.root / relpath
-        if not path.exists():
-            raise IntegrityError(f"{path}: listed in the manifest but missing")
+        if not path.is_file():
+            raise IntegrityError(f"{path}: listed in the manifest but missing; {_RECREATE}")
+        size = path.stat().st_size
+        if size != record["bytes"]:
+            raise IntegrityError(f"{path}: {size} bytes, the manifest records {record['bytes']} "
+                                 f"(truncated or replaced); {_RECREATE}")
         actual = sha256_file(path)
         if actual != record["sha256"]:
             raise IntegrityError(
                 f"{path}: sha256 {actual[:12]}... does not match the manifest "
                 f"({record['sha256'][:12]}...); the dataset was modified or damaged: "
-                "re-create it (simulate/ingest with force=true)"
+                f"{_RECREATE}"
             )
         return path
 

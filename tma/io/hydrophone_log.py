@@ -17,9 +17,13 @@ from tma.io.mcap_log import (
     Channel,
     LogWriter,
     float_array,
+    int_array,
+    is_number,
     json_record,
+    number,
     read_json_record,
     read_log,
+    schema_errors,
 )
 
 SCHEMA = "tma.HydrophoneBatch"
@@ -67,24 +71,40 @@ def read_hydrophone_log(path) -> HydrophoneLog:
     where = str(path)
     _, metadata = read_log(path, {})
     model = read_json_record(metadata, "tma.model", where)
-    n_sensors = len(model["sensors_m"])
-    per = 2 if model["no_doppler"] else 3
+    sensors, no_doppler = model.get("sensors_m"), model.get("no_doppler")
+    if not (isinstance(sensors, list) and sensors and all(
+            isinstance(s, list) and len(s) == 3 and all(map(is_number, s)) for s in sensors)):
+        raise InputError(f"{where}: metadata tma.model: sensors_m must be a list of "
+                         "[x, y, z] positions")
+    if not isinstance(no_doppler, bool):
+        raise InputError(f"{where}: metadata tma.model: no_doppler must be true or false")
+    n_sensors, per = len(sensors), 2 if no_doppler else 3
     messages, _ = read_log(path, {topic(i): SCHEMA for i in range(n_sensors)})
-    t = np.array([m["t_s"] for m in messages[topic(0)]], float)
-    track_id = np.asarray(messages[topic(0)][0]["track_id"], np.int64) if t.size else np.zeros(0)
+    first = messages[topic(0)]
+    with schema_errors(where, f"a message on {topic(0)}"):
+        t = np.array([number(m["t_s"]) for m in first])
+        track_id = int_array(first[0]["track_id"]) if first else np.zeros(0, np.int64)
+    if np.unique(track_id).size != track_id.size:
+        raise InputError(f"{where}: a track_id appears twice in a message on {topic(0)}")
     obs = np.full((track_id.size, t.size, n_sensors * per), np.nan)
     for i in range(n_sensors):
         msgs = messages[topic(i)]
         if len(msgs) != t.size:
             raise InputError(f"{where}: {topic(i)} has {len(msgs)} epochs, {topic(0)} {t.size}")
-        for k, m in enumerate(msgs):
-            if m["t_s"] != t[k] or len(m["track_id"]) != track_id.size:
-                raise InputError(f"{where}: {topic(i)} is not aligned with {topic(0)} at "
-                                 f"t = {m['t_s']}")
-            for f, name in enumerate(FIELDS[:per]):
-                if name not in m:
-                    raise InputError(f"{where}: {topic(i)} lacks {name}")
-                obs[:, k, per * i + f] = float_array(m[name])
+        with schema_errors(where, f"a message on {topic(i)}"):
+            for k, m in enumerate(msgs):
+                if number(m["t_s"]) != t[k] or not np.array_equal(int_array(m["track_id"]),
+                                                                  track_id):
+                    raise InputError(f"{where}: {topic(i)} is not aligned with {topic(0)} at "
+                                     f"t = {t[k]!r} s (time or track ids differ)")
+                for f, name in enumerate(FIELDS[:per]):
+                    if name not in m:
+                        raise InputError(f"{where}: {topic(i)} lacks {name}")
+                    values = float_array(m[name])
+                    if values.size != track_id.size:
+                        raise InputError(f"{where}: {name} and track_id differ in length in a "
+                                         f"message on {topic(i)}")
+                    obs[:, k, per * i + f] = values
     if t.size and np.any(np.diff(t) <= 0):
         raise InputError(f"{where}: epochs are not increasing")
     return HydrophoneLog(t, track_id, obs, model)

@@ -15,9 +15,13 @@ from tma.io.mcap_log import (
     Channel,
     LogWriter,
     float_array,
+    int_array,
+    is_number,
     json_record,
+    number,
     read_json_record,
     read_log,
+    schema_errors,
 )
 
 PLOTS_TOPIC = "/radar/plots"
@@ -44,8 +48,16 @@ class RadarLog:
             raise InputError(f"{where}: scan times are not increasing at t = {self.t_s[k + 1]:g} s")
         if self.t_s.size < 3:
             raise InputError(f"{where}: {self.t_s.size} scans; tracking needs at least 3")
-        if "noise" not in self.sensor:
-            raise InputError(f"{where}: metadata tma.sensor lacks 'noise'")
+        noise = self.sensor.get("noise")
+        if noise not in ("cartesian", "polar"):
+            raise InputError(f"{where}: metadata tma.sensor: noise must be 'cartesian' or "
+                             f"'polar', got {noise!r}")
+        need = (("sigma_m",) if noise == "cartesian"
+                else ("radar_x_m", "radar_y_m", "range_sd_m", "bearing_sd_deg"))
+        bad = [k for k in need if not is_number(self.sensor.get(k))]
+        if bad:
+            raise InputError(f"{where}: metadata tma.sensor: {', '.join(bad)} must be numbers "
+                             f"for {noise} noise")
 
 
 def write_radar_log(path, log: RadarLog, metadata=None) -> int:
@@ -64,13 +76,21 @@ def read_radar_log(path) -> RadarLog:
     if not msgs:
         raise InputError(f"{where}: no messages on {PLOTS_TOPIC}")
     sensor = read_json_record(metadata, "tma.sensor", where)
-    t = np.array([m["t_s"] for m in msgs], float)
-    track_id = np.unique(np.concatenate([np.asarray(m["track_id"], np.int64) for m in msgs]))
+    with schema_errors(where, f"a message on {PLOTS_TOPIC}"):
+        t = np.array([number(m["t_s"]) for m in msgs])
+        ids = [int_array(m["track_id"]) for m in msgs]
+        xs = [float_array(m["x_m"]) for m in msgs]
+        ys = [float_array(m["y_m"]) for m in msgs]
+    for i, x, y in zip(ids, xs, ys, strict=True):
+        if not i.size == x.size == y.size:
+            raise InputError(f"{where}: track_id, x_m and y_m differ in length in a message")
+        if np.unique(i).size != i.size:
+            raise InputError(f"{where}: a track_id appears twice in one scan")
+    track_id = np.unique(np.concatenate(ids))
     plots = np.full((track_id.size, t.size, 2), np.nan)
-    for k, m in enumerate(msgs):
-        rows = np.searchsorted(track_id, np.asarray(m["track_id"], np.int64))
-        for axis, key in enumerate(("x_m", "y_m")):
-            plots[rows, k, axis] = float_array(m[key])
+    for k, (i, x, y) in enumerate(zip(ids, xs, ys, strict=True)):
+        rows = np.searchsorted(track_id, i)
+        plots[rows, k, 0], plots[rows, k, 1] = x, y
     log = RadarLog(t, track_id, plots, sensor)
     log.validate(where)
     return log

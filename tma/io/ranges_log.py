@@ -15,9 +15,14 @@ from tma.io.mcap_log import (
     Channel,
     LogWriter,
     float_array,
+    int_array,
+    integer,
+    is_number,
     json_record,
+    number,
     read_json_record,
     read_log,
+    schema_errors,
 )
 
 RANGES_TOPIC = "/ranging/ranges"
@@ -57,8 +62,17 @@ class RangesLog:
         for key in ("sigma_m", "prior_mean_m", "prior_sd_m"):
             if key not in self.model:
                 raise InputError(f"{where}: metadata tma.model lacks '{key}'")
-        if not float(self.model["sigma_m"]) > 0:
-            raise InputError(f"{where}: sigma_m must be positive")
+        sigma, mean, sd = (self.model[k] for k in ("sigma_m", "prior_mean_m", "prior_sd_m"))
+        if not (is_number(sigma) and sigma > 0):
+            raise InputError(f"{where}: sigma_m must be a positive number")
+        if not (_pair(mean) and _pair(sd) and min(sd) > 0):
+            raise InputError(f"{where}: metadata tma.model: prior_mean_m and prior_sd_m must "
+                             "be two numbers (x, y), prior_sd_m positive")
+
+
+def _pair(value) -> bool:
+    return isinstance(value, list | tuple | np.ndarray) and len(value) == 2 and all(
+        is_number(v) for v in value)
 
 
 def write_ranges_log(path, log: RangesLog, metadata=None) -> int:
@@ -80,15 +94,29 @@ def read_ranges_log(path) -> RangesLog:
     if not msgs:
         raise InputError(f"{where}: no messages on {RANGES_TOPIC}")
     model = read_json_record(metadata, "tma.model", where)
-    t = np.unique([m["t_s"] for m in msgs])
-    landmarks = {m["landmark_id"]: (m["landmark_x_m"], m["landmark_y_m"]) for m in msgs}
-    lm_ids = sorted(landmarks)
-    track_id = np.unique(np.concatenate([np.asarray(m["track_id"], np.int64) for m in msgs]))
+    with schema_errors(where, f"a message on {RANGES_TOPIC}"):
+        t_msg = np.array([number(m["t_s"]) for m in msgs])
+        lm_msg = [integer(m["landmark_id"]) for m in msgs]
+        positions = [(number(m["landmark_x_m"]), number(m["landmark_y_m"])) for m in msgs]
+        ids = [int_array(m["track_id"]) for m in msgs]
+        values = [float_array(m["range_m"]) for m in msgs]
+    landmarks = {}
+    for lm, pos in zip(lm_msg, positions, strict=True):
+        if landmarks.setdefault(lm, pos) != pos:
+            raise InputError(f"{where}: landmark {lm} at two positions, {landmarks[lm]} and {pos}")
+    t, lm_ids = np.unique(t_msg), sorted(landmarks)
+    cols, lm_rows = np.searchsorted(t, t_msg), [lm_ids.index(lm) for lm in lm_msg]
+    if len(set(zip(lm_rows, cols.tolist(), strict=True))) != len(msgs):
+        raise InputError(f"{where}: two messages for the same landmark and epoch")
+    for i, v in zip(ids, values, strict=True):
+        if i.size != v.size:
+            raise InputError(f"{where}: track_id and range_m differ in length in a message")
+        if np.unique(i).size != i.size:
+            raise InputError(f"{where}: a track_id appears twice in one message")
+    track_id = np.unique(np.concatenate(ids))
     ranges = np.full((track_id.size, len(lm_ids), t.size), np.nan)
-    for m in msgs:
-        values = float_array(m["range_m"])
-        rows = np.searchsorted(track_id, np.asarray(m["track_id"], np.int64))
-        ranges[rows, lm_ids.index(m["landmark_id"]), np.searchsorted(t, m["t_s"])] = values
+    for i, v, lm, k in zip(ids, values, lm_rows, cols, strict=True):
+        ranges[np.searchsorted(track_id, i), lm, k] = v
     log = RangesLog(t, np.array([landmarks[i] for i in lm_ids], float), track_id, ranges, model)
     log.validate(where)
     return log

@@ -3,7 +3,7 @@
 A shard output ``X`` is finished when its sidecar ``X.done.json`` exists, records the same
 task key (a hash of everything the output depends on) and the output's sha256 matches. The
 sidecar is written after the output, both atomically, so a killed run leaves either a complete
-pair or something that is recomputed.
+pair or something that is recomputed; a damaged sidecar also just means "recompute".
 """
 
 import json
@@ -12,28 +12,26 @@ from pathlib import Path
 from tma.io.atomic import sha256_file, write_json_atomic
 
 
-def _sidecar(path: Path) -> Path:
+def sidecar(path) -> Path:
+    path = Path(path)
     return path.with_name(path.name + ".done.json")
 
 
-def is_finished(path, key: str) -> bool:
+def finished_record(path, key: str) -> dict | None:
+    """The sidecar record of ``path`` if the output is finished for ``key``, else None."""
     path = Path(path)
-    side = _sidecar(path)
-    if not (path.exists() and side.exists()):
-        return False
     try:
-        record = json.loads(side.read_text())
-    except json.JSONDecodeError:
-        return False
-    return record.get("key") == key and record.get("sha256") == sha256_file(path)
+        record = json.loads(sidecar(path).read_text())
+        if (isinstance(record, dict) and record.get("key") == key
+                and record.get("sha256") == sha256_file(path)):
+            return record
+    except (OSError, ValueError):  # absent, unreadable or not JSON: not finished
+        pass
+    return None
 
 
 def mark_finished(path, key: str, **info) -> dict:
     path = Path(path)
     record = {"key": key, "sha256": sha256_file(path), **info}
-    write_json_atomic(_sidecar(path), record)
+    write_json_atomic(sidecar(path), record)
     return record
-
-
-def finished_record(path) -> dict:
-    return json.loads(_sidecar(Path(path)).read_text())

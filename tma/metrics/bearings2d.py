@@ -7,9 +7,14 @@ epoch, from own-ship then); course and speed are constant. Errors of angles are 
 
 import numpy as np
 import pandas as pd
+from scipy.stats import chi2
 
-from tma.angles import bearing_from_north, course_from_velocity, wrap_to_180
+from tma.angles import wrap_to_180
+from tma.estimators.bearings_status import STATUSES, kinematics_now
 from tma.metrics.stats import wilson_interval
+
+THETA = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")
+NEES_95 = float(chi2.ppf(0.95, 4))  # an ok track's normalised error lies below this 95 % of runs
 
 # region: (bearing deg, distance relative, course deg, speed relative), all with <=
 REGIONS = {
@@ -20,34 +25,50 @@ REGIONS = {
 }
 
 
-def kinematics_at(x0, y0, vx, vy, t, own_x, own_y):
-    """Bearing (rad), distance (m), course (rad), speed (m/s) at time t from own-ship."""
-    dx, dy = x0 + vx * t - own_x, y0 + vy * t - own_y
-    return (bearing_from_north(dx, dy), np.hypot(dx, dy), course_from_velocity(vx, vy),
-            np.hypot(vx, vy))
+def jtj_matrices(estimates: pd.DataFrame) -> np.ndarray:
+    """The stored upper triangle ``jtj_ij`` as full matrices ``(n, 4, 4)``."""
+    jtj = np.empty((len(estimates), 4, 4))
+    for i in range(4):
+        for j in range(i, 4):
+            jtj[:, i, j] = jtj[:, j, i] = estimates[f"jtj_{i}{j}"].to_numpy()
+    return jtj
+
+
+def normalised_error(df: pd.DataFrame) -> np.ndarray:
+    """(theta_hat - theta)^T Sigma^-1 (theta_hat - theta) with Sigma = (J^T J)^-1 sigma^2,
+    i.e. e^T J^T J e / sigma^2 (no inverse needed); NaN where sigma is 0. ``df``: estimates
+    merged with the truth (truth columns suffixed ``_true``)."""
+    e = df[list(THETA)].to_numpy() - df[[f"{c}_true" for c in THETA]].to_numpy()
+    sigma2 = np.deg2rad(df["sigma_used_deg"].to_numpy()) ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        nees = np.einsum("ni,nij,nj->n", e, jtj_matrices(df), e) / sigma2
+    return np.where(sigma2 > 0, nees, np.nan)
 
 
 def track_metrics(estimates: pd.DataFrame, truth: pd.DataFrame) -> pd.DataFrame:
-    """One row per track: errors, region successes, sqrt(Ka) (deg), Nf, Iter, converged."""
+    """One row per track: errors, region successes, sqrt(Ka) (deg), Nf, Iter, converged,
+    status and the normalised error of theta (NEES, chi-square(4) for a consistent fit)."""
     df = estimates.merge(truth, on="track_id", how="left", suffixes=("", "_true"),
                          validate="one_to_one")
     if df["x0_m_true"].isna().any():
         raise ValueError("estimates hold track ids that the truth table lacks")
     at_end = (df["t_last_s"].to_numpy(), df["own_x_last_m"].to_numpy(),
               df["own_y_last_m"].to_numpy())
-    est = kinematics_at(*(df[c].to_numpy() for c in ("x0_m", "y0_m", "vx_m_s", "vy_m_s")), *at_end)
-    tru = kinematics_at(*(df[c].to_numpy() for c in ("x0_m_true", "y0_m_true", "vx_m_s_true",
-                                                     "vy_m_s_true")), *at_end)
+    # (range, bearing, course, speed) at the last bearing
+    est, _ = kinematics_now(df[list(THETA)].to_numpy(), *at_end)
+    tru, _ = kinematics_now(df[[f"{c}_true" for c in THETA]].to_numpy(), *at_end)
     out = pd.DataFrame({
         "track_id": df["track_id"],
-        "bearing_err_deg": wrap_to_180(np.rad2deg(est[0] - tru[0])),
-        "distance_rel_err": (est[1] - tru[1]) / tru[1],
+        "bearing_err_deg": wrap_to_180(np.rad2deg(est[1] - tru[1])),
+        "distance_rel_err": (est[0] - tru[0]) / tru[0],
         "course_err_deg": wrap_to_180(np.rad2deg(est[2] - tru[2])),
         "speed_rel_err": (est[3] - tru[3]) / tru[3],
         "sqrt_ka_deg": np.rad2deg(np.sqrt(df["cost_rad2"] / df["n_bearings"])),
         "n_f_evals": df["n_f_evals"].astype(float),
         "n_iter": df["n_iter"].astype(float),
         "converged": df["converged"].astype(bool),
+        "status": df["status"],
+        "nees": normalised_error(df),
     })
     for name, (bearing, distance, course, speed) in REGIONS.items():
         out[name] = (
@@ -73,7 +94,14 @@ def summary_row(metrics: pd.DataFrame, estimator: str, sigma_deg: float) -> dict
         "nf_median": float(metrics["n_f_evals"].median()),
         "iter_median": float(metrics["n_iter"].median()),
         "n_converged": int(metrics["converged"].sum()),
+        **{f"n_{s}": int((metrics["status"] == s).sum()) for s in STATUSES},
     })
+    ok = metrics["status"] == "ok"
+    nees = metrics.loc[ok, "nees"]
+    k, m = int((nees <= NEES_95).sum()), int(nees.notna().sum())
+    lo, hi = wilson_interval(k, m)
+    row.update({"consistent": k / m if m else np.nan, "consistent_lo": float(lo),
+                "consistent_hi": float(hi)})
     return row
 
 
@@ -81,4 +109,5 @@ TABLE_COLUMNS = [
     "estimator", "sigma_deg", "n_tracks",
     *[f"{r}{s}" for r in REGIONS for s in ("", "_lo", "_hi")],
     "sqrt_ka_mean", "sqrt_ka_median", "nf_median", "iter_median", "n_converged",
+    *[f"n_{s}" for s in STATUSES], "consistent", "consistent_lo", "consistent_hi",
 ]

@@ -89,17 +89,14 @@ class BearingTerms:
 
     Precomputes sin and cos of the measured bearings once, so the wrapped residual is
     ``atan2(sin X dy - cos X dx, cos X dy + sin X dx)`` (already in (-pi, pi], no separate
-    wrap), and a missing bearing (sin = cos = 0, weight 0) contributes exactly zero.
+    wrap). A missing bearing has weight 0: its residual is multiplied by it, because
+    atan2(+-0, -0) is +-pi, not 0, whatever sin and cos are set to.
     """
 
     def __init__(self, t_s, own_x_m, own_y_m, measured_rad, valid):
         self.t, self.ox, self.oy = t_s, own_x_m, own_y_m
         self.sin_m, self.cos_m = np.sin(measured_rad), np.cos(measured_rad)
-        self.weight = None
-        if valid is not None:
-            self.weight = valid.astype(float)
-            self.sin_m *= self.weight
-            self.cos_m *= self.weight
+        self.weight = None if valid is None else valid.astype(float)
         self.powers = np.stack([np.ones_like(t_s), t_s, t_s * t_s], axis=1)
 
     def __call__(self, theta, rows):
@@ -115,12 +112,14 @@ class BearingTerms:
         dy += theta[:, 1, None]
         dy -= self.oy
         r = np.arctan2(sin_m * dy - cos_m * dx, cos_m * dy + sin_m * dx)
-        F = np.einsum("ij,ij->i", r, r)
         inv_r2 = dx * dx
         inv_r2 += dy * dy
         np.reciprocal(inv_r2, out=inv_r2)
         if self.weight is not None:
-            inv_r2 *= self.weight[rows]
+            weight = self.weight[rows]
+            r *= weight
+            inv_r2 *= weight
+        F = np.einsum("ij,ij->i", r, r)
         a = np.multiply(dy, inv_r2, out=dy)  # d bearing / d x
         b = np.multiply(dx, inv_r2, out=dx)  # minus d bearing / d y
         products = np.empty((5, k, t.size))

@@ -1,7 +1,9 @@
 """``bearings2d`` outputs: the comparison table (md, csv, png) and, for datasets without
 truth (ingested logs), a per-track report of the estimated kinematics now with 1-sigma
-uncertainties from the Gauss-Newton covariance (J^T J)^-1 sigma^2."""
+uncertainties from the Gauss-Newton covariance (J^T J)^-1 sigma^2 and each track's status
+(computed by the estimators, ``tma.estimators.bearings_status``)."""
 
+import logging
 from pathlib import Path
 
 import matplotlib
@@ -12,11 +14,11 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 import pyarrow as pa  # noqa: E402
 
+from tma.estimators.bearings_status import STATUSES  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
 from tma.metrics.bearings2d import (  # noqa: E402
     REGIONS,
     TABLE_COLUMNS,
-    kinematics_at,
     summary_row,
     track_metrics,
 )
@@ -28,8 +30,13 @@ N simulated targets. Ref1..Ref4: share of targets whose estimate lies inside the
 region (bearing and distance at the end of the observation, course, speed; Ref1 is the
 strictest), with the 95 % Wilson interval. sqrt(Ka) = sqrt(F(theta_hat)/n) in degrees: a
 good maximum-likelihood fit gives sqrt(Ka) close to sigma. Nf: evaluations of F, Iter:
-accepted LM steps (medians; direct estimators have none). Every number is read from the
-run files under `data/runs/`."""
+accepted LM steps (medians; direct estimators have none). Status: tracks per verdict
+(ok / not_converged / poor_fit / unobservable, see the README). Consistent: share of the ok
+tracks whose normalised error (theta_hat - theta)^T Sigma^-1 (theta_hat - theta), Sigma =
+(J^T J)^-1 sigma^2, lies below the chi-square(4) 95 % point; about 95 % for honest one-sigma
+errors. Every number is read from the run files under `data/runs/`."""
+
+log = logging.getLogger(__name__)
 
 REGION_NOTE = "\n".join(
     f"- {r.capitalize()}: bearing <= {b} deg, distance <= {d:.0%}, course <= {c} deg, "
@@ -63,7 +70,10 @@ def write_table(rows: list[dict], tables_dir, name="bearings2d") -> list[Path]:
         "sqrt(Ka) median (deg)": table["sqrt_ka_median"].map(_num),
         "Nf median": table["nf_median"].map(lambda x: _num(x, "{:g}")),
         "Iter median": table["iter_median"].map(lambda x: _num(x, "{:g}")),
-        "converged": table["n_converged"],
+        "status ok / not_conv / poor_fit / unobs": [
+            " / ".join(str(v) for v in r) for r in table[[f"n_{s}" for s in STATUSES]].to_numpy()],
+        "consistent (ok)": [_pct(*v) if pd.notna(v[0]) else "-" for v in
+                            table[["consistent", "consistent_lo", "consistent_hi"]].to_numpy()],
     })
     write_markdown(paths[1], "Bearings-only TMA: success rates by estimator and noise", INTRO,
                    markdown_table(shown), "Success regions:\n" + REGION_NOTE)
@@ -90,53 +100,48 @@ def write_table(rows: list[dict], tables_dir, name="bearings2d") -> list[Path]:
     return paths
 
 
-def track_report(estimates: pd.DataFrame, sigma_deg=None, time_origin_s=0.0) -> pd.DataFrame:
-    """Per-track kinematics at each track's last bearing ("now") with 1-sigma errors.
+REPORT_COLUMNS = ["range_now_m", "range_sd_m", "bearing_now_deg", "bearing_sd_deg",
+                  "course_deg", "course_sd_deg", "speed_m_s", "speed_sd_m_s", "sigma_used_deg",
+                  "fit_p_value", "status"]
 
-    Covariance of theta: (J^T J)^-1 sigma^2 with sigma the nominal bearing noise, or, when
-    ``sigma_deg`` is None, the residual estimate sigma^2 = F / (n - 4). Propagated to range,
-    bearing, course and speed by their Jacobians (delta method).
-    """
+
+def status_note(report: pd.DataFrame) -> list[str]:
+    """Why a track is not ok, in words (empty for ok tracks)."""
+    notes = []
+    for row in report.itertuples(index=False):
+        note = {
+            "poor_fit": f"residual RMS {row.sqrt_ka_deg:.3g} deg vs sigma "
+                        f"{row.sigma_used_deg:.3g} deg (p = {row.fit_p_value:.1e}): outliers, a "
+                        "manoeuvring target, or bearings not in degrees?",
+            "not_converged": "the estimator stopped before converging (max_iter or lambda_max)",
+            "unobservable": f"range sd {row.range_sd_m / row.range_now_m:.0%} of the range: "
+                            "not observable from this geometry (no own-ship manoeuvre? target "
+                            "too far?)",
+            "ok": "",
+        }[row.status]
+        if pd.isna(row.range_sd_m):
+            note = "; ".join(filter(None, [note if row.status != "unobservable" else "",
+                                           "J^T J is singular: no uncertainty can be given"]))
+        notes.append(note)
+    return notes
+
+
+def track_report(estimates: pd.DataFrame, time_origin_s=0.0) -> pd.DataFrame:
+    """Per-track kinematics at each track's last bearing ("now") with 1-sigma errors and
+    the status, as the estimator computed them; a note says why a track is not ok."""
     e = estimates
-    n = len(e)
-    jtj = np.empty((n, 4, 4))
-    for i in range(4):
-        for j in range(i, 4):
-            jtj[:, i, j] = jtj[:, j, i] = e[f"jtj_{i}{j}"].to_numpy()
-    dof = np.maximum(e["n_bearings"].to_numpy() - 4, 1)
-    sigma2 = (np.full(n, np.deg2rad(sigma_deg) ** 2) if sigma_deg is not None
-              else e["cost_rad2"].to_numpy() / dof)
-    cov_theta = np.full((n, 4, 4), np.nan)
-    ok = np.linalg.cond(jtj) < 1e14
-    cov_theta[ok] = np.linalg.inv(jtj[ok]) * sigma2[ok, None, None]
-
     t = e["t_last_s"].to_numpy()
-    ox, oy = e["own_x_last_m"].to_numpy(), e["own_y_last_m"].to_numpy()
-    x0, y0, vx, vy = (e[c].to_numpy() for c in ("x0_m", "y0_m", "vx_m_s", "vy_m_s"))
-    bearing, rng, course, speed = kinematics_at(x0, y0, vx, vy, t, ox, oy)
-    dx, dy = x0 + vx * t - ox, y0 + vy * t - oy
-    # d(range, bearing, course, speed) / d(x0, y0, vx, vy); position now = p0 + v t
-    G = np.zeros((n, 4, 4))
-    G[:, 0, :2] = np.column_stack([dx, dy]) / rng[:, None]
-    G[:, 1, :2] = np.column_stack([dy, -dx]) / (rng**2)[:, None]
-    G[:, 0, 2:] = G[:, 0, :2] * t[:, None]
-    G[:, 1, 2:] = G[:, 1, :2] * t[:, None]
-    G[:, 2, 2:] = np.column_stack([vy, -vx]) / (speed**2)[:, None]
-    G[:, 3, 2:] = np.column_stack([vx, vy]) / speed[:, None]
-    sd = np.sqrt(np.einsum("nij,njk,nik->ni", G, cov_theta, G))
-    return pd.DataFrame({
+    report = pd.DataFrame({
         "track_id": e["track_id"],
         "n_bearings": e["n_bearings"],
         "t_now_s": t + time_origin_s,
-        "x_now_m": x0 + vx * t, "y_now_m": y0 + vy * t,
-        "range_now_m": rng, "range_sd_m": sd[:, 0],
-        "bearing_now_deg": np.rad2deg(bearing) % 360.0, "bearing_sd_deg": np.rad2deg(sd[:, 1]),
-        "course_deg": np.rad2deg(course), "course_sd_deg": np.rad2deg(sd[:, 2]),
-        "speed_m_s": speed, "speed_sd_m_s": sd[:, 3],
+        "x_now_m": e["x0_m"] + e["vx_m_s"] * t, "y_now_m": e["y0_m"] + e["vy_m_s"] * t,
+        **{c: e[c] for c in REPORT_COLUMNS},
         "sqrt_ka_deg": np.rad2deg(np.sqrt(e["cost_rad2"] / e["n_bearings"])),
-        "sigma_used_deg": np.rad2deg(np.sqrt(sigma2)),
         "converged": e["converged"].astype(bool),
     })
+    report["note"] = status_note(report)
+    return report
 
 
 def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str) -> list[Path]:
@@ -144,7 +149,8 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str)
     paths = [tables_dir / f"{name}.csv", tables_dir / f"{name}.md"]
     write_csv(report, paths[0])
     def pm(value, sd, fmt):
-        return [f"{v:{fmt}} ± {e:{fmt}}" for v, e in report[[value, sd]].to_numpy()]
+        return [f"{v:{fmt}} ± {e:{fmt}}" if np.isfinite(e) else f"{v:{fmt}} ± ? (unobservable)"
+                for v, e in report[[value, sd]].to_numpy()]
 
     shown = pd.DataFrame({
         "track": report["track_id"], "n": report["n_bearings"],
@@ -154,11 +160,13 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str)
         "course (deg)": pm("course_deg", "course_sd_deg", ".1f"),
         "speed (m/s)": pm("speed_m_s", "speed_sd_m_s", ".2f"),
         "sqrt(Ka) (deg)": report["sqrt_ka_deg"].map("{:.3g}".format),
-        "converged": report["converged"],
+        "status": report["status"],
+        "why": report["note"],
     })
     intro = (f"Estimates per track of `{source}` (no ground truth). 'now' is each track's last "
              "bearing epoch; ± is one standard deviation from (J^T J)^-1 sigma^2, sigma as in "
-             "column sigma_used_deg of the CSV (nominal, or estimated from the residuals).")
+             "column sigma_used_deg of the CSV (nominal, or estimated from the residuals). "
+             "Trust only `ok` tracks; 'why' says what is wrong with the others.")
     write_markdown(paths[1], f"Bearings-only TMA estimates: {name}", intro, markdown_table(shown))
     return paths
 
@@ -171,8 +179,10 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
         truth = entry.dataset.read_truth()
         if truth is None:
             m = entry.dataset.manifest
-            report = track_report(entry.estimates, sigma_deg=m.get("sigma_deg"),
-                                  time_origin_s=m.get("time_origin_s", 0.0))
+            report = track_report(entry.estimates, time_origin_s=m.get("time_origin_s", 0.0))
+            for row in report[report["status"] != "ok"].itertuples(index=False):
+                log.warning("%s track %s: %s: %s", entry.dataset.name, row.track_id, row.status,
+                            row.note)
             write_parquet_atomic(entry.run_root / "report.parquet",
                                  pa.Table.from_pandas(report, preserve_index=False))
             name = table_name if len(entries) == 1 else f"{entry.dataset.name}-{entry.estimator}"

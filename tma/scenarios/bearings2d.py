@@ -128,7 +128,7 @@ def simulate_shard(cfg: Config, shard_index: int):
 
     log = BearingsLog(
         t_s=t, own_x_m=own_x, own_y_m=own_y, track_id=track_id,
-        bearing_deg=np.rad2deg(measured) % 360.0,
+        bearing_deg=np.rad2deg(measured) % 360.0, sigma_deg=cfg.sigma_deg,
     )
     truth = pa.table({
         "track_id": track_id,

@@ -1,0 +1,111 @@
+"""How far to trust a bearings-only fit: per track a ``status`` and one-sigma errors.
+
+The covariance of theta = (x0, y0, vx, vy) is the Gauss-Newton one, (J^T J)^-1 sigma^2, with
+sigma the nominal bearing noise when the log declares it, else the residual estimate
+sigma^2 = F / (n - 4). It is propagated to range, bearing, course and speed at each track's
+last bearing ("now") by their Jacobians (delta method). ``status``, first rule that applies:
+
+- ``unobservable``: J^T J is numerically singular (scaled by its diagonal, smallest over
+  - ``not_converged``: the estimator stopped for any reason other than its F tolerance;
+- ``poor_fit``: the residuals do not look like the declared noise: with sigma known
+  (> 0), F / sigma^2 exceeds the chi-square(n - 4) quantile at level ``fit_alpha`` (outliers,
+  a manoeuvring target, bearings in radians); with sigma unknown, the Wald-Wolfowitz runs
+  test on the residual signs rejects randomness at ``fit_alpha`` (systematic misfit);
+- ``unobservable``: J^T J is numerically singular (scaled by its diagonal, smallest over
+  largest eigenvalue <= ``singular_rcond``), or range_sd / range > ``max_range_rel_sd``
+  (range is not determined: no own-ship manoeuvre, a target too far away);
+- ``ok`` otherwise.
+
+The ``_sd`` columns are blank only where J^T J is singular (no uncertainty can be given),
+which is never an ``ok`` track.
+"""
+
+import numpy as np
+from scipy.stats import chi2, norm
+
+from tma.angles import bearing_from_north, course_from_velocity
+from tma.linalg import jacobi_scaled_eigh
+
+STATUSES = ("ok", "not_converged", "poor_fit", "unobservable")
+
+
+def kinematics_now(theta, t_s, own_x_m, own_y_m):
+    """Range (m), bearing (rad), course (rad), speed (m/s) at times ``t_s`` from own-ship,
+    and their Jacobian with respect to theta, ``(n, 4, 4)`` (rows in that order)."""
+    x0, y0, vx, vy = theta.T
+    dx, dy = x0 + vx * t_s - own_x_m, y0 + vy * t_s - own_y_m
+    rng, speed = np.hypot(dx, dy), np.hypot(vx, vy)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        G = np.zeros((theta.shape[0], 4, 4))
+        G[:, 0, :2] = np.column_stack([dx, dy]) / rng[:, None]
+        G[:, 1, :2] = np.column_stack([dy, -dx]) / (rng**2)[:, None]
+        G[:, :2, 2:] = G[:, :2, :2] * t_s[:, None, None]  # position now = p0 + v t
+        G[:, 2, 2:] = np.column_stack([vy, -vx]) / (speed**2)[:, None]
+        G[:, 3, 2:] = np.column_stack([vx, vy]) / speed[:, None]
+    return (rng, bearing_from_north(dx, dy), course_from_velocity(vx, vy), speed), G
+
+
+def runs_test_p(residuals, valid):
+    """Two-sided p-value of the Wald-Wolfowitz runs test on the signs of each row's valid
+    residuals (normal approximation; exact when every sign is the same)."""
+    n_rows, K = residuals.shape
+    valid = np.ones_like(residuals, dtype=bool) if valid is None else valid
+    positive = residuals > 0
+    index = np.where(valid, np.arange(K), -1)
+    previous = np.maximum.accumulate(index, axis=1)  # last valid index <= k
+    previous = np.concatenate([np.full((n_rows, 1), -1), previous[:, :-1]], axis=1)
+    prev_sign = np.take_along_axis(positive, np.maximum(previous, 0), axis=1)
+    runs = 1 + np.sum(valid & (previous >= 0) & (positive != prev_sign), axis=1)
+    n1 = np.sum(valid & positive, axis=1).astype(float)
+    n2 = np.sum(valid & ~positive, axis=1).astype(float)
+    n = n1 + n2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mean = 1 + 2 * n1 * n2 / n
+        var = 2 * n1 * n2 * (2 * n1 * n2 - n) / (n * n * (n - 1))
+        p = 2 * norm.sf(np.abs(runs - mean) / np.sqrt(var))
+    one_sign = (n1 == 0) | (n2 == 0)
+    return np.where(one_sign, np.minimum(1.0, 2 * 0.5**n), p)
+
+
+def assess(theta, cost_rad2, jtj, n_bearings, converged, t_now_s, own_x_now_m, own_y_now_m,
+           sigma_deg, runs_p, cfg) -> dict:
+    """Status and one-sigma errors per track (see the module docstring).
+
+    ``sigma_deg``: the nominal bearing noise or None (then estimated from the residuals);
+    ``runs_p``: runs-test p-values (used only when sigma is None); ``cfg`` holds
+    ``singular_rcond``, ``fit_alpha``, ``max_range_rel_sd``. Returns output columns.
+    """
+    n = theta.shape[0]
+    dof = np.maximum(n_bearings - 4, 1)
+    if sigma_deg is None:
+        sigma2 = cost_rad2 / dof
+        fit_p = runs_p
+    else:
+        sigma2 = np.full(n, np.deg2rad(sigma_deg) ** 2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            fit_p = (chi2.sf(cost_rad2 / sigma2, dof) if sigma_deg > 0 else np.full(n, np.nan))
+
+    finite = np.isfinite(theta).all(axis=1) & np.isfinite(jtj).all(axis=(1, 2))
+    w, V, d = jacobi_scaled_eigh(np.where(finite[:, None, None], jtj, np.eye(4)))
+    singular = ~finite | (w[:, 0] <= cfg.singular_rcond * np.abs(w[:, -1]))
+    # (J^T J)^-1 = D^-1 (V diag(1/w) V^T) D^-1, from the scaled (well-conditioned) form
+    inv_w = np.where(singular[:, None], np.nan, 1.0 / np.where(singular[:, None], 1.0, w))
+    cov = np.einsum("nij,nj,nkj->nik", V, inv_w, V) / (d[:, :, None] * d[:, None, :])
+    cov *= sigma2[:, None, None]
+    (rng, bearing, course, speed), G = kinematics_now(theta, t_now_s, own_x_now_m, own_y_now_m)
+    with np.errstate(invalid="ignore"):
+        sd = np.sqrt(np.einsum("nij,njk,nik->ni", G, cov, G))
+        poorly_fit = fit_p < cfg.fit_alpha
+        vague = ~(sd[:, 0] <= cfg.max_range_rel_sd * rng)  # a NaN sd counts as vague
+
+    status = np.select([~converged, poorly_fit, singular | vague],
+                       ["not_converged", "poor_fit", "unobservable"], "ok")
+    return {
+        "range_now_m": rng, "range_sd_m": sd[:, 0],
+        "bearing_now_deg": np.rad2deg(bearing) % 360.0, "bearing_sd_deg": np.rad2deg(sd[:, 1]),
+        "course_deg": np.rad2deg(course), "course_sd_deg": np.rad2deg(sd[:, 2]),
+        "speed_m_s": speed, "speed_sd_m_s": sd[:, 3],
+        "sigma_used_deg": np.rad2deg(np.sqrt(sigma2)),
+        "fit_p_value": fit_p,
+        "status": status,
+    }
