@@ -14,15 +14,16 @@ from pipeline.simulate import simulate_stage
 from tests.conftest import compose_cfg
 from tma.errors import ConfigError, InputError
 from tma.estimators import build_estimator
-from tma.estimators.auv_base import drift_step, drift_times_rows
+from tma.estimators.auv_base import drift_step, drift_times_rows, output_columns
 from tma.estimators.cmnf import CMNF, apply, model_prediction, train
 from tma.estimators.ekf import predict_covariance, sequential_update
 from tma.estimators.srekf import fold_noise, phi_times
 from tma.io.atomic import sha256_file
 from tma.io.hydrophone_log import SCHEMA, read_hydrophone_log, topic, write_hydrophone_log
 from tma.io.mcap_log import Channel, LogWriter
-from tma.metrics.bearing_doppler3d import divergent_paths
+from tma.metrics.bearing_doppler3d import divergent_paths, path_metrics
 from tma.models.auv3d import euler_maruyama
+from tma.scenarios import load_scenario
 from tma.scenarios.bearing_doppler3d import (
     Config,
     auv_model,
@@ -222,6 +223,62 @@ def test_divergence_counting_on_a_constructed_case():
     np.testing.assert_array_equal(divergent_paths(e, t, ok), [True, False, True, True, True])
 
 
+def test_path_status_counts_nan_and_flagged_paths_as_divergent():
+    t = np.arange(0.0, 21.0)
+    e = np.zeros((4, t.size, 6))
+    e[1, 15:, :2] = np.nan  # no estimate from 15 s on
+    e[2, 12, 0] = 1500.0
+    ok = np.array([True, True, True, False])
+    m = path_metrics([10, 11, 12, 13], e, t, ok)
+    assert list(m["status"]) == ["ok", "divergent", "divergent", "divergent"]
+    assert list(m["track_id"]) == [10, 11, 12, 13]
+    assert m["horizontal_err_max_m"].iloc[2] == 1500.0 and np.isnan(m["horizontal_err_max_m"][1])
+
+
+def test_negative_variance_is_flagged_not_a_silent_nan_std():
+    est = np.zeros((2, 3, 6))
+    cov = np.broadcast_to(np.eye(6), (2, 3, 6, 6)).copy()
+    cov[1, 2, 4, 4] = -1e-9  # a covariance that lost definiteness
+    with np.errstate(invalid="ignore"):
+        out = output_columns(est, cov, np.array([True, True]), np.arange(3.0), 1,
+                             np.array([0, 1]))
+    np.testing.assert_array_equal(out["filter_ok"], [True, False])
+
+
+@pytest.mark.parametrize(("kw", "key"), [
+    ({"lam": -0.01}, "lam"),
+    ({"mu": -1.0}, "mu"),
+    ({"filter_step_s": 0.3}, "filter_step_s"),
+    ({"duration_s": 10.5}, "duration_s"),
+    ({"sd_doppler_hz": 0.0}, "sd_doppler_hz"),
+    ({"sensors_m": [[0.0, 0.0]]}, "sensors_m"),
+    ({"seed": -1}, "seed"),
+])
+def test_impossible_scenarios_are_refused(kw, key):
+    with pytest.raises(ConfigError, match=key):
+        Config(**kw)
+
+
+def test_impossible_initial_distributions_are_refused_naming_the_key():
+    with pytest.raises(ConfigError, match=r"initial.speed_min_m_s"):
+        load_scenario({"family": "bearing_doppler3d",
+                       "initial": {"speed_min_m_s": 7.0, "speed_max_m_s": 7.0}})
+    with pytest.raises(ConfigError, match=r"initial.position_sd_m\[2\] must be finite"):
+        load_scenario({"family": "bearing_doppler3d",
+                       "initial": {"position_sd_m": [1.0, 1.0, float("inf")]}})
+
+
+@pytest.mark.parametrize(("node", "key"), [
+    ({"name": "cmnf", "pinv_rtol": 2.0}, "pinv_rtol"),
+    ({"name": "cmnf", "covariance_every": 0}, "covariance_every"),
+    ({"name": "prior_mean", "bundle_seed": -7}, "bundle_seed"),
+    ({"name": "srekf", "covariance_every": -1}, "covariance_every"),
+])
+def test_impossible_filter_configs_are_refused(node, key):
+    with pytest.raises(ConfigError, match=key):
+        build_estimator(node)
+
+
 def test_missing_readings_missing_channel_and_bad_covariance(tmp_path):
     log, _ = simulate_shard(Config(n_tracks=6, shard_size=6, **SHORT), 0)
     log.obs[1, 3, 5:9] = np.nan  # a sensor's readings missing at one epoch
@@ -266,6 +323,10 @@ def test_wrong_family_and_pipeline(tmp_path):
     table = pd.read_csv(tmp_path / "tables" / "bearing_doppler3d.csv")
     assert len(table) == 8 and set(table.doppler) == {True, False}
     assert (table.training_paths.dropna() == 400).all()
+    paths = sorted((tmp_path / "data" / "runs").glob("*/*/path_metrics.parquet"))
+    assert len(paths) == 8
+    shares = sorted((pd.read_parquet(p)["status"] == "divergent").mean() for p in paths)
+    assert shares == sorted(table.divergence_share)
     ekf = table[(table.estimator == "ekf") & table.doppler].iloc[0]
     prior = table[(table.estimator == "prior_mean") & table.doppler].iloc[0]
     assert ekf.rmse_X_T < prior.rmse_X_T and ekf.rmse_phi_T < prior.rmse_phi_T

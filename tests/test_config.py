@@ -1,5 +1,6 @@
 """Hydra composition of every config group, and clear errors for bad configs."""
 
+from dataclasses import fields
 from pathlib import Path
 
 import pytest
@@ -10,7 +11,7 @@ from omegaconf import OmegaConf
 from pipeline._common import CONF_DIR, estimator_nodes, scenario_nodes
 from tests.conftest import compose_cfg, run_cli
 from tma.errors import ConfigError
-from tma.estimators import ESTIMATORS, build_estimator
+from tma.estimators import ESTIMATORS, build_estimator, estimator_class
 from tma.scenarios import load_scenario
 
 CONF = Path(CONF_DIR)
@@ -99,3 +100,45 @@ def test_cli_errors_are_one_clear_line(tmp_path):
                    check=False)
     assert proc.returncode == 2
     assert "python -m pipeline.simulate" in proc.stderr
+
+
+def test_non_finite_values_anywhere_are_refused_naming_the_dotted_key():
+    cases = [
+        ({"family": "radar2d", "sigma_m": float("nan")}, r"scenario 'radar2d': sigma_m must"),
+        ({"family": "radar2d", "radar_xy_m": [0.0, float("-inf")]}, r"radar_xy_m\[1\] must"),
+        ({"family": "radar2d", "legs": [{"duration_s": 45.0}, {"duration_s": float("inf")}]},
+         r"legs\[1\]\.duration_s must be finite"),
+        ({"family": "bearing_doppler3d", "initial": {"heading_sd_rad": float("nan")}},
+         r"initial\.heading_sd_rad must be finite"),
+        ({"family": "bearing_doppler3d", "sensors_m": [[0.0, 0.0, float("nan")]]},
+         r"sensors_m\[0\]\[2\] must be finite"),
+    ]
+    for node, message in cases:
+        with pytest.raises(ConfigError, match=message):
+            load_scenario(node)
+    for name in ESTIMATORS:  # every estimator, including the bearings-only ones
+        for f in fields(estimator_class(name).Config):
+            if "float" in str(f.type) and "list" not in str(f.type):
+                with pytest.raises(ConfigError,
+                                   match=rf"estimator '{name}': {f.name} must be finite"):
+                    build_estimator({"name": name, f.name: float("nan")})
+    cfg = compose_cfg(["estimator=imm", "estimator.cv_accel_psd=inf"])  # from the CLI
+    with pytest.raises(ConfigError, match="cv_accel_psd must be finite"):
+        build_estimator(OmegaConf.to_container(cfg.estimator))
+
+
+def test_fields_declared_nonfinite_accept_inf_but_not_nan():
+    from dataclasses import dataclass, field
+
+    from tma.config import validate
+
+    @dataclass
+    class Schema:
+        limit: float = field(default=float("inf"), metadata={"nonfinite": True})
+        gain: float = 1.0
+
+    assert validate(Schema, {}, "x").limit == float("inf")
+    assert validate(Schema, {"limit": float("-inf")}, "x").limit == float("-inf")
+    for node, key in (({"limit": float("nan")}, "limit"), ({"gain": float("inf")}, "gain")):
+        with pytest.raises(ConfigError, match=f"x: {key} must be finite"):
+            validate(Schema, node, "x")

@@ -8,11 +8,12 @@ from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
 from pipeline.simulate import simulate_stage
 from tests.conftest import compose_cfg
-from tma.errors import InputError
+from tma.errors import ConfigError, InputError
 from tma.estimators import build_estimator
 from tma.estimators.radar_base import alpha_beta_window
 from tma.fuzzy import memory_length_selector, sigmoid
 from tma.io.radar_log import RadarLog, read_radar_log, write_radar_log
+from tma.metrics.radar2d import per_scan_errors, summary_row
 from tma.models.turn import coordinated_turn
 from tma.scenarios.radar2d import Config, simulate_shard
 
@@ -105,7 +106,8 @@ def test_vectorised_equals_single_run(name):
     for i in range(6):
         one = RadarLog(log.t_s, log.track_id[i:i + 1], log.plots_m[i:i + 1], log.sensor)
         single = est.estimate(one)
-        for key in batch:
+        assert single["status"][0] == batch["status"][i] == "ok"
+        for key in batch.keys() - {"status"}:
             np.testing.assert_allclose(single[key][0], batch[key][i], rtol=1e-12, atol=1e-12)
 
 
@@ -148,5 +150,59 @@ def test_polar_noise_and_pipeline_table(tmp_path):
     fuzzy = table[table.estimator == "fuzzy_mm"]
     assert (fuzzy.m_median == 10).all() and (fuzzy.m_min_turn_median < 10).all()
     assert (table.straight1_mean_m < 15).all()
+    metrics = sorted((tmp_path / "data" / "runs").glob("*/*/metrics.parquet"))
+    assert len(metrics) == 6
+    lost = sorted(pd.read_parquet(p).groupby("track_id")["status"].first().eq("track_lost")
+                  .mean() for p in metrics)
+    assert lost == sorted(table.track_loss)
     for name in ("radar2d.md", "radar2d.png", "radar2d_memory.png"):
         assert (tmp_path / "tables" / name).exists()
+
+
+def test_nan_estimates_and_flagged_runs_count_as_track_lost():
+    _, truth = _log(n=4)
+    truth = truth.to_pandas()
+    est = truth.assign(x_m=truth["x_m"] + 5.0, status="ok")  # 5 m off: within the gate
+    est.loc[(est.track_id == 1) & (est.step >= 20), "x_m"] = np.nan  # no estimate from 60 s
+    est.loc[est.track_id == 3, "status"] = "divergent"  # the tracker's own verdict
+    per_scan = per_scan_errors(est, truth)
+    status = per_scan.groupby("track_id")["status"].first()
+    assert list(status) == ["ok", "track_lost", "ok", "track_lost"]
+    assert summary_row(per_scan, "imm", 10.0)["track_loss"] == 0.5
+
+
+def test_imm_model_probabilities_survive_underflowing_likelihoods():
+    """Tiny process noise in a 20 m/s turn: both models' likelihoods underflow to 0, which
+    made the model probabilities 0/0 = NaN for the rest of the run."""
+    log, _ = _log(n=5, speed_m_s=20.0)
+    out = build_estimator({"name": "imm", "cv_accel_psd": 1e-9, "ct_accel_psd": 1e-9,
+                           "ct_omega_psd": 0.0, "initial_omega_sd": 0.0}).estimate(log)
+    assert np.isfinite(out["x_m"]).all() and np.isfinite(out["p_turn"][:, 1:]).all()
+    assert (out["status"] == "ok").all()
+
+
+def test_tracker_without_a_start_is_flagged_divergent():
+    log, _ = _log(n=3)
+    log.plots_m[1, 1] = np.nan  # the IMM starts from the line through plots 0 and 1
+    out = build_estimator({"name": "imm"}).estimate(log)
+    assert list(out["status"]) == ["ok", "divergent", "ok"]
+
+
+@pytest.mark.parametrize(("node", "key"), [
+    ({"name": "imm", "initial_probs": [-1.0, 2.0]}, "initial_probs"),
+    ({"name": "imm", "cv_accel_psd": -0.01}, "cv_accel_psd"),
+    ({"name": "imm", "p_stay": float("nan")}, "p_stay"),
+    ({"name": "fuzzy_mm", "bad_centre": 4.0}, "bad_centre"),
+    ({"name": "alphabeta", "scan_period_s": -3.0}, "scan_period_s"),
+])
+def test_impossible_tracker_configs_are_refused(node, key):
+    with pytest.raises(ConfigError, match=key):
+        build_estimator(node)
+
+
+def test_impossible_scenarios_are_refused():
+    with pytest.raises(ConfigError, match=r"legs\[1\]"):
+        Config(legs=[{"duration_s": 45.0}, {"turn_radius_m": -300.0, "duration_s": 45.0,
+                                            "direction": "left"}])
+    with pytest.raises(ConfigError, match="scan_period_s"):
+        Config(scan_period_s=100.0)  # a 120 s path seen in 2 scans

@@ -10,13 +10,15 @@ from pipeline.estimate import estimate_stage
 from pipeline.simulate import simulate_stage
 from tests.conftest import compose_cfg
 from tma.density.bisection import BisectionDensity
-from tma.errors import InputError
+from tma.errors import ConfigError, InputError
 from tma.estimators import build_estimator
 from tma.estimators.adaptive_is import scalar_log_kernel
 from tma.estimators.quadrature import Config as QuadConfig
 from tma.estimators.quadrature import posterior_mean
+from tma.estimators.ratio import RatioMoments
 from tma.io.ranges_log import read_ranges_log, write_ranges_log
 from tma.models.ranges2d import RangeModel
+from tma.reports.ranges2d import summary_row, track_metrics
 from tma.scenarios.ranges2d import Config, simulate_shard
 
 BOX = ((-400.0, 400.0), (-400.0, 400.0))
@@ -139,10 +141,81 @@ def test_ranges_log_round_trip_and_bad_input(tmp_path):
         one.validate("test")
 
 
-def test_prior_box_without_the_posterior_is_reported():
+def test_a_box_without_the_posterior_is_flagged_per_track(caplog):
+    """A box that misses the posterior (adaptive_is) or a search box whose edge holds
+    posterior mass (quadrature) leaves the track without an estimate, flagged and logged;
+    the other tracks go on."""
     est = build_estimator({"name": "adaptive_is", "box_m": [100.0, 400.0, 100.0, 400.0]})
-    with pytest.raises(InputError, match=r"of the posterior mass lies outside the box"):
-        est.estimate(_log())
+    out = est.estimate(_log(n=2))
+    assert list(out["status"]) == ["box_too_small"] * 2
+    assert np.isnan(out["x_m"]).all() and not out["reached_accuracy"].any()
+    assert out["mass_outside"].min() > 0.99
+    assert "enlarge estimator.box_m" in caplog.text
+    out = build_estimator({"name": "quadrature", "search_sd": 0.5}).estimate(_log())
+    assert list(out["status"]) == ["box_too_small"] and np.isnan(out["y_m"]).all()
+    assert "raise search_sd" in caplog.text
+
+
+def test_sampler_status_ok_or_not_converged():
+    log = _log(n=2)
+    out = build_estimator({"name": "prior_is", "max_samples": 50_000}).estimate(log)
+    assert list(out["status"]) == ["not_converged"] * 2  # 0.1 m needs ~10^6 prior draws
+    assert np.isfinite(out["x_m"]).all()
+    out = build_estimator({"name": "prior_is", "n_samples": 1000}).estimate(log)
+    assert list(out["status"]) == ["ok"] * 2
+
+
+def test_weights_far_above_the_first_batch_do_not_overflow():
+    """A first batch far from a sharp posterior fixes the weight scale; a later draw near the
+    peak used to overflow exp() to inf and the estimate to NaN."""
+    m = RatioMoments()
+    m.add(np.array([[0.0, 0.0]]), np.array([-2000.0]))
+    m.add(np.array([[1.0, 2.0], [3.0, 4.0]]), np.array([0.0, np.log(3.0)]))
+    np.testing.assert_allclose(m.estimate(), [2.5, 3.5])
+    assert m.n == 3 and np.isfinite(m.standard_error()).all()
+
+
+@pytest.mark.parametrize(("node", "key"), [
+    ({"name": "prior_is", "min_samples": 1}, "min_samples"),
+    ({"name": "prior_is", "max_samples": 10, "min_samples": 100}, "max_samples"),
+    ({"name": "prior_is", "seed": -1}, "seed"),
+    ({"name": "adaptive_is", "box_m": [0.0, 1.0, float("nan"), 1.0]}, r"box_m\[2\]"),
+    ({"name": "adaptive_is", "shift": 0.0}, "shift"),
+    ({"name": "adaptive_is", "max_mass_outside": 2.0}, "max_mass_outside"),
+    ({"name": "quadrature", "log_cut": float("inf")}, "log_cut"),
+    ({"name": "quadrature", "search_sd": -1.0}, "search_sd"),
+])
+def test_impossible_estimator_configs_are_refused(node, key):
+    with pytest.raises(ConfigError, match=key):
+        build_estimator(node)
+
+
+@pytest.mark.parametrize(("kw", "key"), [
+    ({"ranges_m": [[2981.0, -5.0], [2969.0, 3002.0]]}, "ranges_m"),
+    ({"mode": "population", "n_pairs": 1, "landmarks_m": [[0.0, 0.0]]}, "at least 2 ranges"),
+    ({"prior_sd_m": [100.0, 0.0]}, "prior_sd_m"),
+    ({"seed": -3}, "seed"),
+])
+def test_impossible_scenarios_are_refused(kw, key):
+    with pytest.raises(ConfigError, match=key):
+        Config(**kw)
+
+
+def test_status_in_metrics_and_counted_in_the_table():
+    est = pd.DataFrame({"track_id": [0, 1, 2], "x_m": [1.0, np.nan, 1.2],
+                        "y_m": [2.0, np.nan, 2.1], "se_x_m": 0.1, "se_y_m": 0.1, "re_x": 1.0,
+                        "re_y": 1.0, "corr_x": 0.5, "corr_y": 0.5, "samples_used": 100,
+                        "n_evaluations": 0, "reached_accuracy": [True, False, False],
+                        "status": ["ok", "box_too_small", "not_converged"]})
+    ref = pd.DataFrame({"track_id": [0, 1, 2], "x_m": [1.0, 1.0, 1.0], "y_m": [2.0] * 3})
+    m = track_metrics(est, ref, None, 0.95)
+    assert list(m["status"]) == ["ok", "box_too_small", "not_converged"]
+    row = summary_row("prior_is", m, 0.1)
+    assert (row["n_ok"], row["n_not_converged"], row["n_box_too_small"], row["n_failed"]) == (
+        1, 1, 1, 0)
+    assert row["n_runs"] == 3 and row["reached_accuracy"] == pytest.approx(1 / 3)
+    assert row["err_abs_max_m"] == pytest.approx(0.2)  # over the runs with an estimate
+    assert row["x_mean_m"] == pytest.approx(1.1)
 
 
 def test_pipeline_table(tmp_path):
@@ -159,5 +232,11 @@ def test_pipeline_table(tmp_path):
     assert list(table.estimator) == ["quadrature", "prior_is", "adaptive_is"]
     assert (table.n_runs == 6).all()
     assert (table.loc[1:, "err_abs_max_m"] < 1.5).all()
+    assert (table.n_ok + table.n_not_converged == 6).all()
+    assert table.reached_accuracy.tolist() == (table.n_ok / 6).tolist()
+    metrics = list((tmp_path / "data" / "runs").glob("*/*/metrics.parquet"))
+    assert len(metrics) == 3
+    for path in metrics:
+        assert set(pd.read_parquet(path)["status"]) <= {"ok", "not_converged"}
     assert "prior / adaptive" in (tmp_path / "tables" / "ranges2d.md").read_text()
     assert (tmp_path / "tables" / "ranges2d.png").stat().st_size > 10_000

@@ -2,12 +2,16 @@
 
 Each scenario and estimator declares its parameters as a dataclass (names with units, defaults,
 docs). A Hydra node is merged onto it, so unknown keys and wrong types fail with a message that
-names the key, instead of surfacing later as a numpy error.
+names the key, instead of surfacing later as a numpy error. Every float anywhere in the config
+(nested dataclasses and lists included) must be finite; a field declared with
+``field(metadata={"nonfinite": True})`` may be +-inf (e.g. "no limit"), never NaN. The
+dataclass's ``__post_init__`` then checks ranges and consistency.
 """
 
-from dataclasses import asdict, is_dataclass
+import math
+from dataclasses import asdict, fields, is_dataclass
 
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, ListConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from tma.errors import ConfigError
@@ -19,6 +23,7 @@ def validate(schema, node, where: str):
         node = OmegaConf.to_container(node, resolve=True)
     try:
         merged = OmegaConf.merge(OmegaConf.structured(schema), node or {})
+        check_finite(merged, where)  # before __post_init__: its range checks assume numbers
         return OmegaConf.to_object(merged)
     except OmegaConfBaseException as exc:
         msg = getattr(exc, "msg", None) or str(exc).splitlines()[0]
@@ -26,6 +31,24 @@ def validate(schema, node, where: str):
         raise ConfigError(f"{where}: {msg}" + (f" (key '{key}')" if key else "")) from None
     except (TypeError, ValueError) as exc:
         raise ConfigError(f"{where}: {exc}") from None
+
+
+def check_finite(node, where: str, key: str = "", allow_inf: bool = False):
+    """Raise ConfigError naming the dotted key of the first NaN or infinite float in ``node``
+    (a merged DictConfig/ListConfig or a value); fields whose metadata has ``nonfinite``
+    may be infinite (never NaN)."""
+    if isinstance(node, DictConfig):
+        cls = OmegaConf.get_type(node)
+        inf_ok = ({f.name for f in fields(cls) if f.metadata.get("nonfinite")}
+                  if is_dataclass(cls) else set())
+        for k in node:
+            check_finite(node[k], where, f"{key}.{k}" if key else str(k), k in inf_ok)
+    elif isinstance(node, ListConfig):
+        for i, value in enumerate(node):
+            check_finite(value, where, f"{key}[{i}]", allow_inf)
+    elif isinstance(node, float) and not (math.isfinite(node)
+                                          or (allow_inf and math.isinf(node))):
+        raise ConfigError(f"{where}: {key} must be finite, got {node}")
 
 
 def to_plain(obj):
@@ -41,3 +64,8 @@ def require(condition: bool, where: str, message: str):
     """Raise ConfigError(where: message) unless ``condition`` holds."""
     if not condition:
         raise ConfigError(f"{where}: {message}")
+
+
+def is_probability_vector(p, n: int, tol: float = 1e-9) -> bool:
+    """``p`` has ``n`` entries in [0, 1] summing to 1 (within ``tol``)."""
+    return len(p) == n and all(0.0 <= x <= 1.0 for x in p) and abs(sum(p) - 1.0) <= tol

@@ -3,8 +3,8 @@
 The density (``tma.density.bisection``) lives on the square ``box_m`` (default +-400 m, the
 prior's 99.99 % region); its build costs one evaluation of f2 per bisection, counted in
 ``samples_used``. Posterior mass outside the box is invisible to this sampler: it is measured
-with ``check_samples`` draws from the prior and, above ``max_mass_outside``, reported as an
-error that names the share.
+with ``check_samples`` draws from the prior and, above ``max_mass_outside``, the track gets
+status ``box_too_small`` and no estimate (a logged warning names the share).
 """
 
 import math
@@ -14,9 +14,12 @@ import numpy as np
 
 from tma.config import require
 from tma.density.bisection import BisectionDensity
-from tma.errors import InputError
 from tma.estimators.prior_is import budget
-from tma.estimators.ranges_base import RangesEstimator, sampling_columns
+from tma.estimators.ranges_base import RangesEstimator, no_estimate_columns, sampling_columns
+from tma.estimators.ratio import SamplingBudget
+
+MAX_CHECK = 10_000_000  # prior draws held in memory at once by the mass check
+MAX_BISECTIONS = 10_000_000  # cells are built as Python lists (~200 B each)
 
 
 @dataclass
@@ -41,11 +44,17 @@ class Config:
     def __post_init__(self):
         w = "estimator 'adaptive_is'"
         require(len(self.box_m) == 4 and self.box_m[0] < self.box_m[1]
-                and self.box_m[2] < self.box_m[3], w, "box_m must be [x0, x1, y0, y1]")
-        require(self.n_bisections >= 0, w, "n_bisections must be >= 0")
-        require(self.shift >= 0, w, "shift must be >= 0")
+                and self.box_m[2] < self.box_m[3], w,
+                "box_m must be [x0, x1, y0, y1] with x0 < x1 and y0 < y1")
+        require(0 <= self.n_bisections <= MAX_BISECTIONS, w,
+                f"n_bisections must be in [0, {MAX_BISECTIONS}]")
+        # without the shift a cell whose point misses the peak is never drawn: biased
+        require(self.shift > 0, w, "shift must be positive")
         require(self.split in ("heaviest", "draw"), w, "split must be heaviest or draw")
-        require(self.accuracy_m > 0 and 0 < self.confidence < 1, w, "bad accuracy target")
+        require(1 <= self.check_samples <= MAX_CHECK, w,
+                f"check_samples must be in [1, {MAX_CHECK}]")
+        require(0 <= self.max_mass_outside <= 1, w, "max_mass_outside must lie in [0, 1]")
+        SamplingBudget.check(self, w)
 
 
 def mass_outside(model, box, n, rng) -> float:
@@ -61,7 +70,7 @@ def mass_outside(model, box, n, rng) -> float:
 def scalar_log_kernel(model):
     """log f2 for one point with Python floats (the bisection evaluates one point at a time)."""
     (mx, my), (sx, sy) = model.prior_mean_m.tolist(), model.prior_sd_m.tolist()
-    terms = [(lx, ly, n * 0.5 / model.sigma_m**2, r) for (lx, ly), n, r in
+    terms = [(lx, ly, float(n * 0.5 / model.sigma_m**2), r) for (lx, ly), n, r in
              zip(model.landmarks_m.tolist(), model.counts.tolist(),
                  model.mean_range_m.tolist(), strict=True) if n]
 
@@ -84,9 +93,12 @@ class AdaptiveIS(RangesEstimator):
         box = ((cfg.box_m[0], cfg.box_m[1]), (cfg.box_m[2], cfg.box_m[3]))
         outside = mass_outside(model, box, cfg.check_samples, rng)
         if outside > cfg.max_mass_outside:
-            raise InputError(
+            out = no_estimate_columns(
+                "box_too_small",
                 f"adaptive_is: about {outside:.1%} of the posterior mass lies outside the box "
                 f"{cfg.box_m} m (limit {cfg.max_mass_outside:g}): enlarge estimator.box_m")
+            out["mass_outside"] = outside
+            return out
         density = BisectionDensity.build(scalar_log_kernel(model), box, cfg.n_bisections,
                                          cfg.shift, rng, cfg.split)
 

@@ -21,7 +21,10 @@ class Config:
     scan_period_s: float | None = None  # null = the log's; if set, must agree with the log
 
     def __post_init__(self):
-        require(self.memory >= 2, "estimator 'alphabeta'", "memory must be >= 2")
+        w = "estimator 'alphabeta'"
+        require(self.memory >= 2, w, "memory must be >= 2")
+        require(self.scan_period_s is None or self.scan_period_s > 0, w,
+                "scan_period_s must be null or positive")
 
 
 class AlphaBeta(RadarEstimator):

@@ -11,8 +11,8 @@ is diagonal); a missing reading (NaN) is skipped.
 
 Outputs per path and epoch: the estimate and its standard deviations; the covariance's upper
 triangle every ``covariance_every`` epochs goes to the run's ``covariance.parquet`` (for
-NEES); ``filter_ok`` is False for a path whose covariance became non-finite (it is kept, the
-others go on).
+NEES); ``filter_ok`` is False for a path whose estimate or covariance became non-finite or
+whose covariance has a negative variance (it is kept, the others go on).
 """
 
 import numpy as np
@@ -31,10 +31,11 @@ def initial_moments(initial: dict):
                      0.5 * (initial["speed_min_m_s"] + initial["speed_max_m_s"]),
                      initial["heading_mean_rad"],
                      0.5 * (initial["accel_min_m_s2"] + initial["accel_max_m_s2"])])
+    f = np.float64  # numpy scalars: an absurd scale gives inf (flagged), not OverflowError
     var = np.array([*np.square(initial["position_sd_m"]),
-                    (initial["speed_max_m_s"] - initial["speed_min_m_s"]) ** 2 / 12,
-                    initial["heading_sd_rad"] ** 2,
-                    (initial["accel_max_m_s2"] - initial["accel_min_m_s2"]) ** 2 / 12])
+                    f(initial["speed_max_m_s"] - initial["speed_min_m_s"]) ** 2 / 12,
+                    f(initial["heading_sd_rad"]) ** 2,
+                    f(initial["accel_max_m_s2"] - initial["accel_min_m_s2"]) ** 2 / 12])
     return mean, np.diag(var)
 
 
@@ -70,7 +71,8 @@ class AuvEstimator(Estimator):
         # a wrecked path overflows on its own (paths never mix); it is flagged, not raised
         with np.errstate(all="ignore"):
             est, cov, ok = self.run(model, record, log.t_s, log.obs)  # (n,K,6), (n,K,6,6), (n,)
-        return output_columns(est, cov, ok, log.t_s, self.config.covariance_every, log.track_id)
+            return output_columns(est, cov, ok, log.t_s, self.config.covariance_every,
+                                  log.track_id)
 
     def run(self, model, record, t, obs):
         raise NotImplementedError
@@ -105,10 +107,14 @@ def output_columns(est, cov, ok, t, covariance_every, track_id):
     """Per-epoch estimates and standard deviations, plus ``extras['covariance']``: the upper
     triangle of the covariance every ``covariance_every`` epochs and at the last (for NEES)."""
     n, K, _ = est.shape
+    variance = np.einsum("nkii->nki", cov)
+    # a negative variance (a covariance that lost definiteness) has no std: flagged too
+    ok = (ok & np.isfinite(est).all(axis=(1, 2)) & np.isfinite(cov).all(axis=(1, 2, 3))
+          & (variance >= 0).all(axis=(1, 2)))
     out = {"t_s": np.broadcast_to(t, (n, K)).copy(), "filter_ok": ok}
     for i, name in enumerate(STATE_NAMES):
         out[name] = est[..., i]
-    sd = np.sqrt(np.einsum("nkii->nki", cov))
+    sd = np.sqrt(variance)
     for i, name in enumerate(STATE_NAMES):
         out[f"sd_{name}"] = sd[..., i]
     steps = np.unique(np.r_[np.arange(0, K, covariance_every), K - 1])

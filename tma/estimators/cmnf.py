@@ -18,7 +18,7 @@ import numpy as np
 
 from tma.config import require
 from tma.estimators.auv_base import AuvEstimator
-from tma.estimators.bundle import bundle_observations, training_bundle
+from tma.estimators.bundle import MAX_PATHS, bundle_observations, training_bundle
 from tma.io.artefacts import load_arrays, load_or_build
 from tma.scenarios.bearing_doppler3d import auv_model, epochs
 
@@ -34,12 +34,20 @@ class Config:
 
     def __post_init__(self):
         w = "estimator 'cmnf'"
-        require(self.training_paths >= 100, w, "training_paths must be >= 100")
-        require(self.pinv_rtol > 0, w, "pinv_rtol must be positive")
+        require(100 <= self.training_paths <= MAX_PATHS, w,
+                f"training_paths must be in [100, {MAX_PATHS}]")
+        require(self.training_seed >= 0, w, "training_seed must be >= 0")
+        require(0 < self.pinv_rtol < 1, w, "pinv_rtol must lie in (0, 1) (relative threshold)")
+        require(self.covariance_every >= 1, w, "covariance_every must be >= 1")
+        require(self.artefact is None or {"path", "sha256"} <= set(self.artefact), w,
+                "artefact must be null or {path, sha256} (set by the estimate stage)")
 
 
 def regression_gain(cov_xy, cov_yy, rtol):
-    """cov_xy cov_yy^+ with the pseudo-inverse taken on the standardised (correlation) matrix."""
+    """cov_xy cov_yy^+ with the pseudo-inverse taken on the standardised (correlation) matrix;
+    NaN if a covariance is not finite (an overflowed bundle: the SVD would not converge)."""
+    if not (np.isfinite(cov_xy).all() and np.isfinite(cov_yy).all()):
+        return np.full(cov_xy.shape, np.nan)
     d = np.sqrt(np.diag(cov_yy))
     d = np.where(d > 0, d, 1.0)
     return (cov_xy / d) @ np.linalg.pinv(cov_yy / np.outer(d, d), rcond=rtol, hermitian=True) / d
@@ -121,8 +129,10 @@ class CMNF(AuvEstimator):
             obs = bundle_observations(arrays, record["no_doppler"])
             model = auv_model(record)
             t = epochs(record)
-            return train(arrays["truth"], obs, model_prediction(model, record, t), model.observe,
-                         config["pinv_rtol"])
+            # a bundle that overflowed gives non-finite gains: the paths are flagged online
+            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+                return train(arrays["truth"], obs, model_prediction(model, record, t),
+                             model.observe, config["pinv_rtol"])
 
         path, sha = load_or_build(data_dir, "cmnf", spec, build)
         return {**config, "artefact": {"path": str(path), "sha256": sha}}

@@ -19,6 +19,10 @@ from tma.config import require
 from tma.estimators.radar_base import RadarEstimator, alpha_beta_window, state_columns
 from tma.fuzzy import memory_length_selector
 
+# The bank refits J - 1 windows of up to J scans at every scan (cost ~ J^2 per scan) and the
+# rule base has J rules of J - 1 inputs: beyond this, memory is a mistake, not a setting.
+MAX_MEMORY = 200
+
 
 @dataclass
 class Config:
@@ -33,8 +37,16 @@ class Config:
 
     def __post_init__(self):
         w = "estimator 'fuzzy_mm'"
-        require(self.memory >= 3, w, "memory must be >= 3")
+        require(3 <= self.memory <= MAX_MEMORY, w, f"memory must be in [3, {MAX_MEMORY}]")
+        require(self.bad_slope > 0, w, "bad_slope must be positive (Bad rises with the residual)")
+        require(self.residual_clip > 0, w, "residual_clip must be positive")
+        require(0 < self.bad_centre < self.residual_clip, w,
+                "bad_centre must lie in (0, residual_clip): residuals are clipped there")
         require(self.sigma_prior_m > 0, w, "sigma_prior_m must be positive")
+        require(self.sigma_hat_m is None or self.sigma_hat_m > 0, w,
+                "sigma_hat_m must be null or positive")
+        require(self.scan_period_s is None or self.scan_period_s > 0, w,
+                "scan_period_s must be null or positive")
 
 
 def bank_estimates(plots, tau, J):
@@ -63,7 +75,8 @@ class FuzzyMultiModel(RadarEstimator):
         est_pos, est_vel = bank_pos[:, :, -1].copy(), bank_vel[:, :, -1].copy()  # growing fit
         m = np.full((n, n_scans), np.nan)
         sigma_hat = np.full((n, n_scans), np.nan)
-        sum_sq, count = np.full(n, cfg.sigma_prior_m**2), np.ones(n)
+        # a numpy scalar: an absurd prior gives inf, not OverflowError
+        sum_sq, count = np.full(n, np.float64(cfg.sigma_prior_m) ** 2), np.ones(n)
         raw_prev, m_prev = None, np.full(n, J)
         for i in range(n_scans):
             sigma = (np.full(n, cfg.sigma_hat_m) if cfg.sigma_hat_m is not None
@@ -80,6 +93,9 @@ class FuzzyMultiModel(RadarEstimator):
                            cfg.residual_clip)
             raw = np.where(has, selector(np.where(has[:, None], L, 0.0)),
                            raw_prev if raw_prev is not None else J)
+            # steep memberships can leave no rule firing (0/0): then the shortest memory,
+            # the choice of "all Bad"
+            raw = np.where(np.isfinite(raw), raw, 2.0)
             both = raw if raw_prev is None else np.maximum(raw, raw_prev)
             chosen = np.clip(np.floor(both + 0.5), 2, J).astype(np.int64)
             chosen = np.where(has, chosen, m_prev)

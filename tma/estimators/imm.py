@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tma.config import require
+from tma.config import is_probability_vector, require
 from tma.estimators.radar_base import RadarEstimator, state_columns
 from tma.models.turn import constant_velocity, coordinated_turn, white_acceleration_noise
 
@@ -33,20 +33,26 @@ class Config:
     def __post_init__(self):
         w = "estimator 'imm'"
         require(0 < self.p_stay <= 1, w, "p_stay must lie in (0, 1]")
-        require(len(self.initial_probs) == 2 and abs(sum(self.initial_probs) - 1) < 1e-9, w,
-                "initial_probs must be two probabilities summing to 1")
+        for key in ("cv_accel_psd", "ct_accel_psd", "ct_omega_psd", "initial_omega_sd"):
+            require(getattr(self, key) >= 0, w, f"{key} must be >= 0")
+        require(is_probability_vector(self.initial_probs, 2), w,
+                "initial_probs must be two probabilities in [0, 1] summing to 1 (CV, CT)")
+        require(self.scan_period_s is None or self.scan_period_s > 0, w,
+                "scan_period_s must be null or positive")
 
 
 def measurement_covariance(sensor: dict, plots):
     """R (n, 2, 2) per plot."""
     n = plots.shape[0]
     if sensor["noise"] == "cartesian":
-        return np.broadcast_to(sensor["sigma_m"] ** 2 * np.eye(2), (n, 2, 2)).copy()
+        # numpy scalars: an absurd sigma gives inf (runs flagged), not OverflowError
+        return np.broadcast_to(np.float64(sensor["sigma_m"]) ** 2 * np.eye(2), (n, 2, 2)).copy()
     dx, dy = plots[:, 0] - sensor["radar_x_m"], plots[:, 1] - sensor["radar_y_m"]
     r, b = np.hypot(dx, dy), np.arctan2(dx, dy)
     J = np.stack([np.stack([np.sin(b), r * np.cos(b)], -1),
                   np.stack([np.cos(b), -r * np.sin(b)], -1)], axis=1)
-    D = np.diag([sensor["range_sd_m"] ** 2, np.deg2rad(sensor["bearing_sd_deg"]) ** 2])
+    D = np.diag([np.float64(sensor["range_sd_m"]) ** 2,
+                 np.deg2rad(sensor["bearing_sd_deg"]) ** 2])
     return J @ D @ J.transpose(0, 2, 1)
 
 
@@ -73,7 +79,7 @@ class IMM(RadarEstimator):
             P[:, :, p, p] = R[:, a, a]
             P[:, :, p, v] = P[:, :, v, p] = R[:, a, a] / tau
             P[:, :, v, v] = 2 * R[:, a, a] / tau**2
-        P[:, :, 4, 4] = cfg.initial_omega_sd**2
+        P[:, :, 4, 4] = np.float64(cfg.initial_omega_sd) ** 2  # inf, not OverflowError
         mu = np.broadcast_to(np.asarray(cfg.initial_probs, float), (n, 2)).copy()
         probs[:, 1] = mu
         trans = np.array([[cfg.p_stay, 1 - cfg.p_stay], [1 - cfg.p_stay, cfg.p_stay]])
@@ -98,20 +104,34 @@ class IMM(RadarEstimator):
             # 3. update where there is a plot
             has = np.isfinite(z[:, i]).all(axis=1)
             R = measurement_covariance(log.sensor, np.where(has[:, None], z[:, i], 0.0))
-            likelihood = np.ones((n, 2))
+            likelihood, log_lik = np.ones((n, 2)), np.zeros((n, 2))
             for j in range(2):
                 nu = np.where(has[:, None], z[:, i] - x[j] @ H.T, 0.0)
                 S = H @ P[j] @ H.T + R
+                # a wrecked run (non-finite or singular S) must not stop the others: it is
+                # given S = I here and its estimate made NaN below (flagged divergent)
+                wrecked = ~(np.isfinite(S).all(axis=(1, 2)) & (np.linalg.det(S) > 0))
+                S[wrecked] = np.eye(2)
                 K = P[j] @ H.T @ np.linalg.inv(S)
                 x[j] = x[j] + np.einsum("nij,nj->ni", K, nu)
                 P[j] = np.where(has[:, None, None], P[j] - K @ S @ K.transpose(0, 2, 1), P[j])
                 P[j] = 0.5 * (P[j] + P[j].transpose(0, 2, 1))
+                x[j][wrecked] = np.nan
                 maha = np.einsum("ni,nij,nj->n", nu, np.linalg.inv(S), nu)
+                det = np.linalg.det(S)
                 likelihood[:, j] = np.where(
-                    has, np.exp(-0.5 * maha) / (2 * np.pi * np.sqrt(np.linalg.det(S))), 1.0)
-            # 4. model probabilities and the combined estimate
+                    has, np.exp(-0.5 * maha) / (2 * np.pi * np.sqrt(det)), 1.0)
+                log_lik[:, j] = np.where(has, -0.5 * (maha + np.log(det)), 0.0)
+            # 4. model probabilities and the combined estimate; far from a plot both
+            # likelihoods underflow (0/0): there they are normalised in log space
             mu = likelihood * c
-            mu /= mu.sum(axis=1, keepdims=True)
+            total = mu.sum(axis=1, keepdims=True)
+            under = ~(total[:, 0] > 0)
+            if under.any():
+                shifted = log_lik[under] - log_lik[under].max(axis=1, keepdims=True)
+                mu[under] = np.exp(shifted) * c[under]
+                total[under] = mu[under].sum(axis=1, keepdims=True)
+            mu /= total
             probs[:, i] = mu
             est[:, i] = np.einsum("nj,jnk->nk", mu, x)
         return {**state_columns(est[..., [0, 2]], est[..., [1, 3]]),

@@ -3,7 +3,6 @@ x_s L(x) and L(x), x ~ prior, with the delta-method error (``tma.estimators.rati
 
 from dataclasses import dataclass
 
-from tma.config import require
 from tma.estimators.ranges_base import RangesEstimator, sampling_columns
 from tma.estimators.ratio import SamplingBudget
 
@@ -21,10 +20,7 @@ class Config:
     seed: int = 1
 
     def __post_init__(self):
-        w = "estimator 'prior_is'"
-        require(self.accuracy_m > 0, w, "accuracy_m must be positive")
-        require(0 < self.confidence < 1, w, "confidence must lie in (0, 1)")
-        require(self.batch > 0 and self.max_samples > 0, w, "batch and max_samples must be > 0")
+        SamplingBudget.check(self, "estimator 'prior_is'")
 
 
 def budget(cfg) -> SamplingBudget:

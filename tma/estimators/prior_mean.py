@@ -8,7 +8,7 @@ import numpy as np
 
 from tma.config import require
 from tma.estimators.auv_base import AuvEstimator
-from tma.estimators.bundle import training_bundle
+from tma.estimators.bundle import MAX_PATHS, training_bundle
 from tma.io.artefacts import load_arrays
 
 
@@ -21,7 +21,13 @@ class Config:
     artefact: dict[str, str] | None = None  # filled in by the estimate stage
 
     def __post_init__(self):
-        require(self.bundle_paths >= 100, "estimator 'prior_mean'", "bundle_paths must be >= 100")
+        w = "estimator 'prior_mean'"
+        require(100 <= self.bundle_paths <= MAX_PATHS, w,
+                f"bundle_paths must be in [100, {MAX_PATHS}]")
+        require(self.bundle_seed >= 0, w, "bundle_seed must be >= 0")
+        require(self.covariance_every >= 1, w, "covariance_every must be >= 1")
+        require(self.artefact is None or {"path", "sha256"} <= set(self.artefact), w,
+                "artefact must be null or {path, sha256} (set by the estimate stage)")
 
 
 class PriorMean(AuvEstimator):

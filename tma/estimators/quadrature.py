@@ -4,6 +4,8 @@ A coarse grid over the prior's +-``search_sd`` box locates the posterior mass (p
 log f2 within ``log_cut`` of the maximum); the integration box is that region's bounding box
 plus a margin of two grid steps, covered by ``n_panels`` x ``n_panels`` panels with
 ``n_nodes`` Gauss-Legendre nodes per axis each. The reference for every sampling estimator.
+A track whose posterior mass reaches the edge of the search box gets status
+``box_too_small`` and no estimate (a logged warning says to raise ``search_sd``).
 """
 
 from dataclasses import dataclass
@@ -12,8 +14,11 @@ import numpy as np
 
 from tma.config import require
 from tma.errors import InputError
-from tma.estimators.ranges_base import RangesEstimator
+from tma.estimators.ranges_base import RangesEstimator, no_estimate_columns
 from tma.models.ranges2d import RangeModel
+
+MAX_AXIS_POINTS = 4001  # per axis of a 2-D grid: 16e6 values (128 MB) per array
+MAX_LOG_CUT = 700.0  # exp(-700) ~ 1e-304: a deeper cut neglects nothing more in float64
 
 
 @dataclass
@@ -27,8 +32,14 @@ class Config:
 
     def __post_init__(self):
         w = "estimator 'quadrature'"
-        require(self.n_panels > 0 and self.n_nodes > 0, w, "n_panels, n_nodes must be > 0")
-        require(self.search_points >= 11, w, "search_points must be >= 11")
+        require(self.n_panels >= 1 and self.n_nodes >= 1, w, "n_panels, n_nodes must be >= 1")
+        require(self.n_panels * self.n_nodes <= MAX_AXIS_POINTS, w,
+                f"n_panels x n_nodes must be <= {MAX_AXIS_POINTS} (nodes per axis)")
+        require(11 <= self.search_points <= MAX_AXIS_POINTS, w,
+                f"search_points must be in [11, {MAX_AXIS_POINTS}]")
+        # at 1000 prior sds the prior density is exp(-5e5): nothing is further out
+        require(0 < self.search_sd <= 1000, w, "search_sd must lie in (0, 1000]")
+        require(0 < self.log_cut <= MAX_LOG_CUT, w, f"log_cut must lie in (0, {MAX_LOG_CUT:g}]")
 
 
 def integration_box(model: RangeModel, cfg: Config):
@@ -82,9 +93,16 @@ class Quadrature(RangesEstimator):
         key = (model.counts.tobytes(), model.mean_range_m.tobytes(), model.sigma_m,
                model.prior_mean_m.tobytes(), model.prior_sd_m.tobytes())
         if key not in self._cache:
-            x, y, n_eval, _ = posterior_mean(model, self.config)
+            try:
+                x, y, n_eval, _ = posterior_mean(model, self.config)
+            except InputError as exc:  # mass at the edge of the search box
+                self._cache[key] = no_estimate_columns("box_too_small", str(exc),
+                                                       self.config.search_points**2)
+                return self._cache[key]
             self._cache[key] = {
                 "x_m": x, "y_m": y, "se_x_m": 0.0, "se_y_m": 0.0, "re_x": np.nan,
                 "re_y": np.nan, "corr_x": np.nan, "corr_y": np.nan, "n_samples": 0,
-                "n_evaluations": n_eval, "samples_used": n_eval, "reached_accuracy": True}
+                "n_evaluations": n_eval, "samples_used": n_eval,
+                "reached_accuracy": bool(np.isfinite([x, y]).all()),
+                "status": "ok" if np.isfinite([x, y]).all() else "failed"}
         return self._cache[key]

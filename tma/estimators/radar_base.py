@@ -2,7 +2,9 @@
 
 State per run: position (x, y) and velocity (vx, vy), m and m/s, x east, y north. Trackers
 return per-scan arrays (n_runs, n_scans); a scan without a plot (NaN) is skipped: the filter
-predicts through it and updates nothing.
+predicts through it and updates nothing. Each run gets a ``status``: ``ok``, or ``divergent``
+when its estimate is non-finite at any scan from the run's first plot on (a wrecked filter,
+or a tracker that cannot start from the plots it got).
 """
 
 import numpy as np
@@ -67,12 +69,27 @@ def alpha_beta_window(plots, tau):
     return pos, vel
 
 
+def run_status(plots, out) -> np.ndarray:
+    """``ok`` or ``divergent`` per run (see the module docstring)."""
+    has = np.isfinite(plots).all(axis=2)  # (n, n_scans)
+    started = np.cumsum(has, axis=1) > 0
+    finite = np.ones_like(has)
+    for key in ("x_m", "y_m", "vx_m_s", "vy_m_s"):
+        finite &= np.isfinite(out[key])
+    bad = (started & ~finite).any(axis=1) | ~has.any(axis=1)
+    return np.where(bad, "divergent", "ok")
+
+
 class RadarEstimator(Estimator):
     family = "radar2d"
+
     def estimate(self, log: RadarLog) -> dict:
         tau = scan_period(log, self.config.scan_period_s)
-        out = self.track(log, tau)
+        # extreme (valid) noise settings can overflow a run's covariance: flagged, not raised
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+            out = self.track(log, tau)
         out["t_s"] = np.broadcast_to(log.t_s, out["x_m"].shape).copy()
+        out["status"] = run_status(log.plots_m, out)
         return out
 
     def track(self, log: RadarLog, tau: float) -> dict:

@@ -5,13 +5,21 @@ mean(xi)/mean(eta) and, by the delta method for a ratio, its standard error is
 |x_hat_s| RE_s / sqrt(N) with
 RE_s^2 = var(xi)/E[xi]^2 + var(eta)/E[eta]^2 - 2 cov(xi, eta)/(E[xi] E[eta]).
 Sums are kept as streams, so sampling can go on batch by batch until the accuracy target.
-Weights carry a fixed scale (exp of a reference log weight) that cancels in every ratio.
+Weights carry a scale (exp of a reference log weight) that cancels in every ratio; it is
+fixed by the first batch and raised only when a later draw would otherwise overflow.
 """
 
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.stats import norm
+
+from tma.config import require
+
+# A weight above exp(RESCALE_LOG) times the reference rescales the sums to the new maximum:
+# squared weights then stay below exp(2 x 300), far from overflow (exp(709)).
+RESCALE_LOG = 300.0
+MAX_BATCH = 1_000_000  # draws held in memory at once
 
 
 @dataclass
@@ -30,6 +38,15 @@ class RatioMoments:
         if self.ref is None:
             self.ref = float(np.max(log_weight))
             self.s_xi, self.s_xi2, self.s_xieta = np.zeros(2), np.zeros(2), np.zeros(2)
+        elif np.max(log_weight) > self.ref + RESCALE_LOG:
+            new = float(np.max(log_weight))
+            scale = np.exp(self.ref - new)  # underflows to 0 only for negligible old weights
+            self.s_eta *= scale
+            self.s_xi *= scale
+            self.s_xieta *= scale * scale
+            self.s_eta2 *= scale * scale
+            self.s_xi2 *= scale * scale
+            self.ref = new
         eta = np.exp(log_weight - self.ref)
         xi = points * eta[:, None]
         self.n += eta.size
@@ -51,18 +68,27 @@ class RatioMoments:
         return m_xi, m_eta, var_xi, var_eta, cov
 
     def relative_error(self):
-        """RE per coordinate (per single draw; divide by sqrt(N) for the estimate)."""
+        """RE per coordinate (per single draw; divide by sqrt(N) for the estimate); NaN or
+        inf when the draws are degenerate (a coordinate's weighted mean exactly 0)."""
         m_xi, m_eta, var_xi, var_eta, cov = self._moments()
-        re2 = var_xi / m_xi**2 + var_eta / m_eta**2 - 2 * cov / (m_xi * m_eta)
-        return np.sqrt(np.maximum(re2, 0.0))
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            re2 = var_xi / m_xi**2 + var_eta / m_eta**2 - 2 * cov / (m_xi * m_eta)
+            return np.sqrt(np.maximum(re2, 0.0))
 
     def standard_error(self):
-        return np.abs(self.estimate()) * self.relative_error() / np.sqrt(self.n)
+        with np.errstate(invalid="ignore"):  # 0 x inf: degenerate, NaN
+            return np.abs(self.estimate()) * self.relative_error() / np.sqrt(self.n)
 
     def correlation(self):
-        """Correlation of numerator (xi) and denominator (eta) per coordinate."""
+        """Correlation of numerator (xi) and denominator (eta) per coordinate (NaN when a
+        variance is 0, e.g. all draws but one with negligible weight)."""
         _, _, var_xi, var_eta, cov = self._moments()
-        return cov / np.sqrt(var_xi * var_eta)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            product = var_xi * var_eta
+            # the product can overflow for widely spread weights: then the roots separately
+            scale = np.where(np.isfinite(product), np.sqrt(product),
+                             np.sqrt(var_xi) * np.sqrt(var_eta))
+            return cov / scale
 
 
 @dataclass
@@ -77,6 +103,20 @@ class SamplingBudget:
     batch: int
     max_samples: int
     min_samples: int = 50_000  # the error estimate needs enough draws before it can stop
+
+    @staticmethod
+    def check(cfg, where: str):
+        """Range checks of a sampler config's budget fields (and ``plot_points``, ``seed``)."""
+        require(cfg.n_samples is None or cfg.n_samples >= 2, where,
+                "n_samples must be null or >= 2 (the error estimate needs two draws)")
+        require(cfg.accuracy_m > 0, where, "accuracy_m must be positive")
+        require(0 < cfg.confidence < 1, where, "confidence must lie in (0, 1)")
+        require(1 <= cfg.batch <= MAX_BATCH, where, f"batch must be in [1, {MAX_BATCH}]")
+        require(cfg.min_samples >= 2, where, "min_samples must be >= 2")
+        require(cfg.max_samples >= cfg.min_samples, where,
+                "max_samples must be >= min_samples (else the stopping rule is never checked)")
+        require(cfg.plot_points >= 0, where, "plot_points must be >= 0")
+        require(cfg.seed >= 0, where, "seed must be >= 0")
 
     def run(self, draw, rng, keep=0) -> tuple[RatioMoments, bool]:
         """``draw(k, rng) -> (points, log_weight)``; returns the moments and whether the

@@ -90,7 +90,9 @@ class SquareRootEKF(KalmanFilterBase):
     Config = Config
 
     def initial_factor(self, cov0, n, record):
-        return np.repeat(np.linalg.cholesky(cov0[np.ix_(ORDER, ORDER)])[:, :, None], n, axis=2)
+        # cov0 is diagonal (independent initial components): its Cholesky factor is the
+        # root of the diagonal, which exists even where a variance underflowed to 0
+        return np.repeat(np.diag(np.sqrt(np.diag(cov0)[ORDER]))[:, :, None], n, axis=2)
 
     def predict_factor(self, S, x, dt, record):
         q = np.zeros((6, S.shape[2]))

@@ -1,9 +1,10 @@
 """Metrics of ``bearing_doppler3d``: per epoch and component bias, RMSE, the filter's own std
 beside the measured std, NEES with its chi-square band, and divergence.
 
-A path diverges when its horizontal position error exceeds ``divergence_m`` at any epoch
-t >= ``divergence_after_s`` (or when its filter reported a non-finite covariance). Heading
-errors are wrapped to [-pi, pi).
+A path diverges when its horizontal position error exceeds ``divergence_m`` (or is not
+finite) at any epoch t >= ``divergence_after_s``, or when its filter flagged it
+(``filter_ok`` False). Its ``status`` is then ``divergent``, else ``ok``. Heading errors are
+wrapped to [-pi, pi).
 """
 
 import numpy as np
@@ -15,6 +16,7 @@ from tma.models.auv3d import PHI, STATE_NAMES
 
 DIVERGENCE_M = 1000.0
 DIVERGENCE_AFTER_S = 10.0
+STATUSES = ("ok", "divergent")
 
 
 def _cube(df: pd.DataFrame, columns, n_steps):
@@ -43,6 +45,17 @@ def divergent_paths(e, t, ok, threshold_m=DIVERGENCE_M, after_s=DIVERGENCE_AFTER
     with np.errstate(invalid="ignore"):
         big = np.any(~(horizontal[:, late] <= threshold_m), axis=1)  # NaN counts as divergent
     return big | ~ok
+
+
+def path_metrics(track_ids, e, t, ok) -> pd.DataFrame:
+    """Per path: ``status`` (ok | divergent), the filter's flag and the largest horizontal
+    error (m) from ``DIVERGENCE_AFTER_S`` on (NaN if any is not finite)."""
+    horizontal = np.hypot(e[..., 0], e[..., 1])[:, t >= DIVERGENCE_AFTER_S]
+    with np.errstate(invalid="ignore"):  # NaN propagates: no finite maximum
+        worst = horizontal.max(axis=1) if horizontal.size else np.full(len(ok), np.nan)
+    return pd.DataFrame({"track_id": np.asarray(track_ids), "status": np.where(
+        divergent_paths(e, t, ok), "divergent", "ok"), "filter_ok": ok,
+        "horizontal_err_max_m": worst})
 
 
 def nees(e, covariance: pd.DataFrame, track_ids):

@@ -4,8 +4,12 @@ Per scan: the position error norm. Per segment (first straight after the window 
 the turn, the second straight): the mean over runs and scans, and the median and 95th
 percentile over runs of each run's maximum. The selected memory m (fuzzy tracker): median,
 the per-run minimum in the turn, P(m = J) on the straight legs, the time to recover m = J
-after the turn. sigma_hat at given times. Track loss: share of runs whose error exceeds the
-gate at any scan from the first segment on.
+after the turn. sigma_hat at given times.
+
+Per run, ``status``: ``track_lost`` when the error exceeds the gate, or is not finite (no
+estimate), at any scan from the first segment on, or when the tracker flagged the run
+(``status`` other than ``ok`` in its estimates); else ``ok``. Track loss is the share of runs
+``track_lost``. A segment the scans do not reach (a shorter scenario) gives NaN statistics.
 """
 
 import numpy as np
@@ -15,14 +19,19 @@ SEGMENTS = {"straight1": (27.0, 42.0), "turn": (45.0, 90.0), "straight2": (93.0,
 TURN_END_S = 90.0
 SIGMA_TIMES_S = (60.0, 90.0, 120.0)
 GATE_M = 30.0
+STATUSES = ("ok", "track_lost")
 
 
 def per_scan_errors(estimates: pd.DataFrame, truth: pd.DataFrame) -> pd.DataFrame:
     df = estimates.merge(truth[["track_id", "step", "x_m", "y_m"]], on=["track_id", "step"],
                          suffixes=("", "_true"), validate="one_to_one")
     df["error_m"] = np.hypot(df["x_m"] - df["x_m_true"], df["y_m"] - df["y_m_true"])
+    late = df["t_s"] >= SEGMENTS["straight1"][0] - 1e-9
+    lost = (~(df["error_m"] <= GATE_M) & late) | (df["status"] != "ok")  # NaN: no estimate
+    lost_runs = lost.groupby(df["track_id"]).transform("any")
+    df["status"] = np.where(lost_runs, "track_lost", "ok")
     keep = ["track_id", "step", "t_s", "error_m"] + [c for c in ("m", "sigma_hat_m", "p_turn")
-                                                     if c in df]
+                                                     if c in df] + ["status"]
     return df[keep].sort_values(["track_id", "step"], kind="stable").reset_index(drop=True)
 
 
@@ -38,12 +47,12 @@ def summary_row(per_scan: pd.DataFrame, estimator: str, speed: float, memory=Non
     row = {"estimator": estimator, "speed_m_s": speed, "n_runs": err.shape[0]}
     for name, (a, b) in SEGMENTS.items():
         seg = err[:, (t >= a - 1e-9) & (t <= b + 1e-9)]
-        per_run_max = seg.max(axis=1)
-        row[f"{name}_mean_m"] = seg.mean()
+        per_run_max = seg.max(axis=1) if seg.size else np.full(err.shape[0], np.nan)
+        row[f"{name}_mean_m"] = seg.mean() if seg.size else np.nan
         row[f"{name}_max_median_m"] = np.median(per_run_max)
         row[f"{name}_max_p95_m"] = np.percentile(per_run_max, 95)
-    after = t >= SEGMENTS["straight1"][0] - 1e-9
-    row["track_loss"] = float(np.mean((err[:, after] > GATE_M).any(axis=1)))
+    status = per_scan.groupby("track_id")["status"].first()
+    row["track_loss"] = float(np.mean(status == "track_lost"))
     row.update(memory_stats(per_scan, memory))
     if "p_turn" in per_scan:
         p, _ = _matrix(per_scan, "p_turn")
@@ -72,7 +81,7 @@ def memory_stats(per_scan: pd.DataFrame, memory) -> dict:
     recover = np.where(first >= 0, t[after][np.maximum(first, 0)] - TURN_END_S, np.nan)
     out = {
         "m_median": np.nanmedian(m),
-        "m_min_turn_median": np.median(np.nanmin(m[:, turn], axis=1)),
+        "m_min_turn_median": np.median(np.nanmin(m[:, turn], axis=1)) if turn.any() else np.nan,
         "p_m_max_straight": float(np.mean(m[:, straight] == memory)),
         "recover_s_median": np.nanmedian(recover) if np.isfinite(recover).any() else np.nan,
     }

@@ -44,18 +44,18 @@ def build_segments(start_x_m, start_y_m, speed_m_s, legs, initial_course_deg=Non
         turn_to = _leg_value(leg, "turn_to_deg") is not None
         radius = _leg_value(leg, "turn_radius_m")
         if turn_to and radius is not None:
-            raise ConfigError(f"leg {i}: give turn_to_deg or turn_radius_m, not both")
+            raise ConfigError(f"legs[{i}]: give turn_to_deg or turn_radius_m, not both")
         if turn_to or radius is not None:
             if course is None:
-                raise ConfigError(f"leg {i}: a turn needs a preceding course")
+                raise ConfigError(f"legs[{i}]: a turn needs a preceding course")
             direction = _leg_value(leg, "direction")
             if direction not in ("left", "right"):
-                raise ConfigError(f"leg {i}: direction must be 'left' or 'right'")
+                raise ConfigError(f"legs[{i}].direction must be 'left' or 'right'")
             sign = 1.0 if direction == "right" else -1.0
             if turn_to:
                 rate_deg = _leg_value(leg, "rate_deg_s")
                 if rate_deg is None or rate_deg <= 0:
-                    raise ConfigError(f"leg {i}: rate_deg_s must be positive")
+                    raise ConfigError(f"legs[{i}].rate_deg_s must be positive")
                 target = np.deg2rad(_leg_value(leg, "turn_to_deg"))
                 angle = (sign * (target - course)) % (2 * np.pi)  # turn angle that way
                 rate = sign * np.deg2rad(rate_deg)
@@ -63,16 +63,16 @@ def build_segments(start_x_m, start_y_m, speed_m_s, legs, initial_course_deg=Non
             else:
                 duration = _leg_value(leg, "duration_s")
                 if radius <= 0 or duration is None or duration <= 0:
-                    raise ConfigError(f"leg {i}: turn_radius_m and duration_s must be positive")
+                    raise ConfigError(f"legs[{i}]: turn_radius_m and duration_s must be positive")
                 rate = sign * speed_m_s / radius
         else:
             duration = _leg_value(leg, "duration_s")
             if duration is None or duration <= 0:
-                raise ConfigError(f"leg {i}: duration_s must be positive, got {dict(leg)!r}")
+                raise ConfigError(f"legs[{i}].duration_s must be positive, got {duration}")
             if _leg_value(leg, "course_deg") is not None:
                 course = np.deg2rad(_leg_value(leg, "course_deg"))
             elif course is None:
-                raise ConfigError(f"leg {i}: the first leg needs course_deg")
+                raise ConfigError(f"legs[{i}]: the first leg needs course_deg")
             rate = 0.0
         seg = Segment(t, x, y, course, float(duration), rate)
         segments.append(seg)
@@ -80,7 +80,7 @@ def build_segments(start_x_m, start_y_m, speed_m_s, legs, initial_course_deg=Non
         x, y, t = float(x[0]), float(y[0]), t + duration
         course = course + rate * duration
     if not segments:
-        raise ConfigError("a path needs at least one leg")
+        raise ConfigError("legs: a path needs at least one leg")
     return segments
 
 

@@ -17,10 +17,10 @@ from tma.io.atomic import write_parquet_atomic  # noqa: E402
 from tma.metrics.bearing_doppler3d import (  # noqa: E402
     DIVERGENCE_AFTER_S,
     DIVERGENCE_M,
-    divergent_paths,
     errors,
     nees,
     nees_band,
+    path_metrics,
     per_step,
 )
 from tma.models.auv3d import STATE_NAMES  # noqa: E402
@@ -49,7 +49,10 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
     for e in entries:
         err, est, t, ok = errors(e.estimates, e.dataset.read_truth())
         K = t.size
-        divergent = divergent_paths(err, t, ok)
+        paths = path_metrics(np.unique(est["track_id"]), err, t, ok)
+        write_parquet_atomic(e.run_root / "path_metrics.parquet",
+                             pa.Table.from_pandas(paths, preserve_index=False))
+        divergent = (paths["status"] == "divergent").to_numpy()
         keep = ~divergent
         steps = per_step(err, est, t, keep, K)
         covariance = pq.read_table(e.run_root / "covariance.parquet").to_pandas()
@@ -100,8 +103,9 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
     intro = f"""Passive tracking of a manoeuvring AUV by 8 fixed hydrophones
 (`../shared/specs/bearing_doppler3d.md`): elevation sine, bearing cosine and Doppler frequency
 every second, with and without the Doppler readings. RMSE over the non-divergent test paths at
-t = 50 s and t = T (units: m, m, m, m/s, rad, m/s^2); a path diverges when its horizontal error
-exceeds {DIVERGENCE_M:g} m at any t >= {DIVERGENCE_AFTER_S:g} s (the CSV also gives the
+t = 50 s and t = T (units: m, m, m, m/s, rad, m/s^2); a path diverges (status `divergent` in
+the run's `path_metrics.parquet`) when its horizontal error exceeds {DIVERGENCE_M:g} m, or is
+not finite, at any t >= {DIVERGENCE_AFTER_S:g} s, or its filter flagged it (the CSV also gives the
 RMSE over all paths at T, `rmse_*_T_all`: for `prior_mean`, whose paths mostly count as
 divergent, that is the meaningful figure). Mean NEES over the stored
 covariance epochs (6 degrees of freedom: a consistent filter stays inside the band). CMNF is

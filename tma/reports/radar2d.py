@@ -25,7 +25,8 @@ radar (`../shared/specs/radar2d.md`); one row per tracker and boat speed over th
 runs. Segment columns: mean position error over runs and scans, and the median and 95th
 percentile of each run's maximum error (first straight {SEGMENTS['straight1']} s, turn
 {SEGMENTS['turn']} s, second straight {SEGMENTS['straight2']} s). Track loss: share of runs
-whose error exceeds {GATE_M:g} m at any scan from 27 s on. For `fuzzy_mm`: the selected memory
+whose error exceeds {GATE_M:g} m, or that have no estimate, at any scan from 27 s on (status
+`track_lost` in each run's `metrics.parquet`). For `fuzzy_mm`: the selected memory
 m (median; median over runs of the minimum in the turn; P(m = J) on the straight legs; median
 time to recover m = J after the turn) and sigma_hat at 60/90/120 s. For `imm`: the mean
 probability of the turn model during the turn."""

@@ -1,5 +1,10 @@
 """``ranges2d`` outputs: one row per estimator over repeated runs, errors against the
-``quadrature`` reference, and a plot of both samplers' draws over the posterior."""
+``quadrature`` reference, and a plot of both samplers' draws over the posterior.
+
+Each run's ``status`` is its estimator's verdict (``tma.estimators.ranges_base``: ok,
+not_converged, box_too_small, failed); the table counts runs per status (``n_<status>``) and
+computes its statistics over the runs with an estimate (errors: where the reference has one
+too)."""
 
 import json
 from pathlib import Path
@@ -15,6 +20,7 @@ import pyarrow.parquet as pq  # noqa: E402
 from scipy.stats import norm  # noqa: E402
 
 from tma.errors import ConfigError  # noqa: E402
+from tma.estimators.ranges_base import STATUSES  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
 from tma.io.ranges_log import read_ranges_log  # noqa: E402
 from tma.models.ranges2d import RangeModel  # noqa: E402
@@ -25,6 +31,7 @@ COLUMNS = [
     "err_abs_max_m", "within_stated_error", "re_x_mean", "re_x_sd", "re_y_mean", "re_y_sd",
     "corr_x_mean", "corr_y_mean", "samples_mean", "samples_sd", "samples_median",
     "evaluations_mean", "reached_accuracy", "truth_rms_m", "seconds_per_run",
+    *[f"n_{s}" for s in STATUSES],
 ]
 
 
@@ -45,29 +52,34 @@ def track_metrics(estimates: pd.DataFrame, reference: pd.DataFrame, truth, confi
         out["truth_err_m"] = np.hypot(estimates["x_m"].to_numpy() - t["x_m"].to_numpy(),
                                       estimates["y_m"].to_numpy() - t["y_m"].to_numpy())
     for col in ("re_x", "re_y", "corr_x", "corr_y", "samples_used", "n_evaluations",
-                "reached_accuracy", "x_m", "y_m"):
+                "reached_accuracy", "x_m", "y_m", "status"):
         out[col] = estimates[col].to_numpy()
     return out
 
 
 def summary_row(name, m: pd.DataFrame, seconds_per_run) -> dict:
+    counts = {f"n_{s}": int((m["status"] == s).sum()) for s in STATUSES}
+    all_runs = m
+    m = m[np.isfinite(m["x_m"]) & np.isfinite(m["y_m"])]  # runs with an estimate
+    err = m[np.isfinite(m["err_x_m"]) & np.isfinite(m["err_y_m"])]  # ... and a reference
     return {
-        "estimator": name, "n_runs": len(m),
+        "estimator": name, "n_runs": len(all_runs),
         "x_mean_m": m["x_m"].mean(), "y_mean_m": m["y_m"].mean(),
-        "err_x_rms_m": np.sqrt((m["err_x_m"] ** 2).mean()),
-        "err_y_rms_m": np.sqrt((m["err_y_m"] ** 2).mean()),
-        "err_abs_max_m": np.abs(m[["err_x_m", "err_y_m"]].to_numpy()).max(),
-        "within_stated_error": m["within_stated_error"].mean(),
+        "err_x_rms_m": np.sqrt((err["err_x_m"] ** 2).mean()),
+        "err_y_rms_m": np.sqrt((err["err_y_m"] ** 2).mean()),
+        "err_abs_max_m": err[["err_x_m", "err_y_m"]].abs().max().max(),
+        "within_stated_error": err["within_stated_error"].mean(),
         "re_x_mean": m["re_x"].mean(), "re_x_sd": m["re_x"].std(),
         "re_y_mean": m["re_y"].mean(), "re_y_sd": m["re_y"].std(),
         "corr_x_mean": m["corr_x"].mean(), "corr_y_mean": m["corr_y"].mean(),
         "samples_mean": m["samples_used"].mean(), "samples_sd": m["samples_used"].std(),
         "samples_median": m["samples_used"].median(),
         "evaluations_mean": m["n_evaluations"].mean(),
-        "reached_accuracy": m["reached_accuracy"].astype(float).mean(),
+        "reached_accuracy": float((all_runs["status"] == "ok").mean()),
         "truth_rms_m": (np.sqrt((m["truth_err_m"] ** 2).mean())
                         if "truth_err_m" in m else np.nan),
         "seconds_per_run": seconds_per_run,
+        **counts,
     }
 
 
@@ -116,6 +128,8 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
         "samples used (mean ± sd)": [f"{a:,.0f} ± {b:,.0f}" for a, b in
                                      table[["samples_mean", "samples_sd"]].to_numpy()],
         "s per run": table["seconds_per_run"].map("{:.3f}".format),
+        "runs by status": [", ".join(f"{row[f'n_{s}']} {s}" for s in STATUSES
+                                     if row[f"n_{s}"]) for _, row in table.iterrows()],
     })
     ds = entries[0].dataset
     intro = (f"Posterior mean of a ship's position from ranges to landmarks "
@@ -124,7 +138,10 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
              "confidence by the delta-method error of a ratio (or a fixed count); errors are "
              "against `quadrature` (tensor Gauss-Legendre). RE is per single draw; samples "
              "include the bisection evaluations of the adaptive density. Seconds per run are "
-             "wall time and vary between machines and runs.\n\n" + headline)
+             "wall time and vary between machines and runs. Statistics are over the runs "
+             "with an estimate; runs by status: ok, not_converged (stopped at max_samples "
+             "short of the target), box_too_small (posterior mass outside the estimator's "
+             "box: no estimate), failed (degenerate weights).\n\n" + headline)
     write_markdown(paths[1], "Range-only navigation: Bayesian mean by importance sampling",
                    intro, markdown_table(shown))
     _plot(paths[2], ds, reference.estimates, samples)

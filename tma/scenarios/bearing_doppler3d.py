@@ -14,11 +14,16 @@ import numpy as np
 import pyarrow as pa
 
 from tma.config import require
+from tma.errors import ConfigError
 from tma.io.hydrophone_log import HydrophoneLog, read_hydrophone_log, write_hydrophone_log
 from tma.models.auv3d import STATE_NAMES, AuvModel, euler_maruyama
 from tma.scenarios import shard_rng, shard_track_ids
 
 FAMILY = "bearing_doppler3d"
+# Sanity bounds on step counts: a shard's epochs, and its Euler-Maruyama normals per epoch,
+# are held in memory at once.
+MAX_EPOCHS = 100_000
+MAX_STEPS_PER_EPOCH = 100_000
 
 
 def _sensors():
@@ -64,14 +69,47 @@ class Config:
     def __post_init__(self):
         w = "scenario 'bearing_doppler3d'"
         require(self.family == FAMILY, w, f"family must be '{FAMILY}'")
-        require(self.n_tracks > 0 and self.shard_size > 0, w, "n_tracks, shard_size must be > 0")
-        for name in ("duration_s", "obs_period_s", "truth_step_s", "filter_step_s"):
+        require(self.n_tracks >= 1 and self.shard_size >= 1, w,
+                "n_tracks, shard_size must be >= 1")
+        require(self.seed >= 0, w, "seed must be >= 0")
+        for name in ("duration_s", "obs_period_s", "truth_step_s", "filter_step_s",
+                     "omega0_hz", "sound_speed_m_s", "sd_angle", "sd_doppler_hz"):
             require(getattr(self, name) > 0, w, f"{name} must be positive")
-        ratio = self.obs_period_s / self.truth_step_s
-        require(abs(ratio - round(ratio)) < 1e-9, w, "obs_period_s must be a multiple of "
-                "truth_step_s")
-        require(self.initial.speed_min_m_s > 0, w, "speeds must be positive")
-        require(all(len(s) == 3 for s in self.sensors_m), w, "sensors_m: [x, y, z] each")
+        # whole numbers of steps: the simulation and the filters round step counts silently
+        for num, den in (("duration_s", "obs_period_s"), ("obs_period_s", "truth_step_s"),
+                         ("obs_period_s", "filter_step_s")):
+            ratio = getattr(self, num) / getattr(self, den)
+            require(round(ratio) >= 1 and abs(ratio - round(ratio)) < 1e-9 * ratio, w,
+                    f"{num} must be a whole multiple of {den}")
+        require(self.duration_s <= MAX_EPOCHS * self.obs_period_s, w,
+                f"duration_s / obs_period_s must be <= {MAX_EPOCHS}")
+        require(self.obs_period_s <= MAX_STEPS_PER_EPOCH * self.truth_step_s, w,
+                f"obs_period_s / truth_step_s must be <= {MAX_STEPS_PER_EPOCH}")
+        require(self.lam >= 0, w, "lam must be >= 0 (the acceleration decays)")
+        # an Euler step of da = -lam a dt must not overshoot zero
+        require(self.lam * max(self.truth_step_s, self.filter_step_s) < 1, w,
+                "lam x max(truth_step_s, filter_step_s) must be < 1")
+        require(self.mu >= 0, w, "mu must be >= 0")
+        require(self.sd_angle <= 1, w, "sd_angle must be <= 1 (the std of a sine or cosine)")
+        # the Doppler reading is a frequency near omega0; the training bundle stores it in
+        # float32 (relative resolution 6e-8), which must resolve its noise
+        require(1e-5 * self.omega0_hz <= self.sd_doppler_hz <= self.omega0_hz, w,
+                "sd_doppler_hz must lie in [1e-5, 1] x omega0_hz")
+        # omega = omega0 / (1 + V/C) needs |V| < C
+        require(self.sound_speed_m_s > self.initial.speed_max_m_s, w,
+                "sound_speed_m_s must exceed initial.speed_max_m_s")
+        require(len(self.sensors_m) >= 1 and all(len(s) == 3 for s in self.sensors_m), w,
+                "sensors_m: a non-empty list of [x, y, z]")
+        i = self.initial
+        require(len(i.position_mean_m) == 3 and len(i.position_sd_m) == 3, w,
+                "initial.position_mean_m and initial.position_sd_m need 3 values (X, Y, Z)")
+        # the filters start from this distribution's covariance: every variance positive
+        require(min(i.position_sd_m) > 0 and i.heading_sd_rad > 0, w,
+                "initial.position_sd_m and initial.heading_sd_rad must be positive")
+        require(0 < i.speed_min_m_s < i.speed_max_m_s, w,
+                "need 0 < initial.speed_min_m_s < initial.speed_max_m_s")
+        require(i.accel_min_m_s2 < i.accel_max_m_s2, w,
+                "need initial.accel_min_m_s2 < initial.accel_max_m_s2")
 
 
 def label(cfg: Config) -> str:
@@ -112,15 +150,20 @@ def simulate_paths(record: dict, n: int, rng):
     without Doppler the frequency readings are dropped after drawing all noise."""
     t = epochs(record)
     model_doppler = auv_model({**record, "no_doppler": False})
-    x = initial_states(record["initial"], n, rng)
-    truth = np.empty((n, t.size, 6))
-    truth[:, 0] = x
-    for k in range(1, t.size):
-        x = euler_maruyama(x, record["obs_period_s"], record["truth_step_s"], record["lam"],
-                           record["nu"], record["mu"], rng)
-        truth[:, k] = x
-    clean = model_doppler.observe(truth.reshape(-1, 6)).reshape(n, t.size, -1)
-    obs = clean + model_doppler.obs_sd * rng.standard_normal(clean.shape)
+    with np.errstate(all="ignore"):  # checked below, with a message that says what to change
+        x = initial_states(record["initial"], n, rng)
+        truth = np.empty((n, t.size, 6))
+        truth[:, 0] = x
+        for k in range(1, t.size):
+            x = euler_maruyama(x, record["obs_period_s"], record["truth_step_s"],
+                               record["lam"], record["nu"], record["mu"], rng)
+            truth[:, k] = x
+        clean = model_doppler.observe(truth.reshape(-1, 6)).reshape(n, t.size, -1)
+        obs = clean + model_doppler.obs_sd * rng.standard_normal(clean.shape)
+    if not (np.isfinite(truth).all() and np.isfinite(obs).all()):
+        raise ConfigError("scenario 'bearing_doppler3d': the simulated paths overflow "
+                          "(non-finite states or readings): the scales of mu, nu, initial, "
+                          "sensors_m or omega0_hz are beyond float64")
     if record["no_doppler"]:
         obs = obs.reshape(n, t.size, -1, 3)[..., :2].reshape(n, t.size, -1)
     return truth, obs

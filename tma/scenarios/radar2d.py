@@ -13,11 +13,16 @@ import numpy as np
 import pyarrow as pa
 
 from tma.config import require
+from tma.errors import ConfigError
 from tma.io.radar_log import RadarLog, read_radar_log, write_radar_log
 from tma.models.path import LegPath
 from tma.scenarios import shard_rng, shard_track_ids
 
 FAMILY = "radar2d"
+# Sanity bounds: every run's scans are held in memory at once; a coastal radar's horizon is
+# tens of km, so a path of a million km is a typo, and one that overflows float64 is worse.
+MAX_SCANS = 100_000
+MAX_PATH_M = 1e9
 
 
 @dataclass
@@ -55,12 +60,23 @@ class Config:
     def __post_init__(self):
         w = "scenario 'radar2d'"
         require(self.family == FAMILY, w, f"family must be '{FAMILY}'")
-        require(self.n_tracks > 0 and self.shard_size > 0, w, "n_tracks, shard_size must be > 0")
-        require(self.speed_m_s > 0 and self.scan_period_s > 0, w,
-                "speed_m_s and scan_period_s must be positive")
+        require(self.n_tracks >= 1 and self.shard_size >= 1, w,
+                "n_tracks, shard_size must be >= 1")
+        require(self.seed >= 0, w, "seed must be >= 0")
+        for key in ("speed_m_s", "scan_period_s", "sigma_m", "range_sd_m", "bearing_sd_deg"):
+            require(getattr(self, key) > 0, w, f"{key} must be positive")
         require(self.noise in ("cartesian", "polar"), w, "noise must be cartesian or polar")
-        require(self.sigma_m > 0 and self.range_sd_m > 0 and self.bearing_sd_deg > 0, w,
-                "noise standard deviations must be positive")
+        require(len(self.radar_xy_m) == 2, w, "radar_xy_m needs two values (x, y)")
+        try:
+            with np.errstate(over="ignore", invalid="ignore"):  # checked just below
+                duration = vessel_path(self).duration_s
+        except ConfigError as exc:
+            raise ConfigError(f"{w}: {exc}") from None
+        require(self.speed_m_s * duration <= MAX_PATH_M, w,
+                f"speed_m_s x the legs' duration must be <= {MAX_PATH_M:g} m")
+        # the IMM starts from the two-point line of the first two plots, then filters
+        require(2 * self.scan_period_s <= duration <= MAX_SCANS * self.scan_period_s, w,
+                f"the legs must last 2 to {MAX_SCANS} x scan_period_s (3 scans or more)")
 
 
 def label(cfg: Config) -> str:

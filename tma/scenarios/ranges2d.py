@@ -19,6 +19,7 @@ from tma.io.ranges_log import RangesLog, read_ranges_log, write_ranges_log
 from tma.scenarios import shard_rng, shard_track_ids
 
 FAMILY = "ranges2d"
+MAX_PAIRS = 100_000  # population: a shard's ranges are held in memory at once
 
 
 def _landmarks():
@@ -47,8 +48,10 @@ class Config:
         w = "scenario 'ranges2d'"
         require(self.family == FAMILY, w, f"family must be '{FAMILY}'")
         require(self.mode in ("concrete", "population"), w, "mode must be concrete|population")
-        require(self.n_tracks > 0 and self.shard_size > 0, w, "n_tracks, shard_size must be > 0")
-        require(all(len(p) == 2 for p in self.landmarks_m) and self.landmarks_m, w,
+        require(self.n_tracks >= 1 and self.shard_size >= 1, w,
+                "n_tracks, shard_size must be >= 1")
+        require(self.seed >= 0, w, "seed must be >= 0")
+        require(len(self.landmarks_m) >= 1 and all(len(p) == 2 for p in self.landmarks_m), w,
                 "landmarks_m must be a non-empty list of [x, y]")
         require(self.sigma_m > 0, w, "sigma_m must be positive")
         require(len(self.prior_mean_m) == 2 and len(self.prior_sd_m) == 2, w,
@@ -56,11 +59,19 @@ class Config:
         require(min(self.prior_sd_m) > 0, w, "prior_sd_m must be positive")
         if self.mode == "concrete":
             require(len(self.ranges_m) == len(self.landmarks_m), w,
-                    "ranges_m needs one list of ranges per landmark")
-            require(len({len(r) for r in self.ranges_m}) == 1, w,
-                    "ranges_m: every landmark needs the same number of ranges (pairs)")
+                    f"ranges_m needs one list of ranges per landmark (landmarks_m has "
+                    f"{len(self.landmarks_m)}, ranges_m {len(self.ranges_m)})")
+            require(len({len(r) for r in self.ranges_m}) == 1 and len(self.ranges_m[0]) >= 1,
+                    w, "ranges_m: every landmark needs the same number (>= 1) of ranges")
+            require(all(r >= 0 for rs in self.ranges_m for r in rs), w,
+                    "ranges_m must be >= 0 (distances)")
+            pairs = len(self.ranges_m[0])
         else:
-            require(self.n_pairs > 0, w, "n_pairs must be positive")
+            require(1 <= self.n_pairs <= MAX_PAIRS, w, f"n_pairs must be in [1, {MAX_PAIRS}]")
+            pairs = self.n_pairs
+        require(pairs * len(self.landmarks_m) >= 2, w,
+                "a position (2 coordinates) needs at least 2 ranges: add landmarks or "
+                + ("ranges_m" if self.mode == "concrete" else "n_pairs"))
 
 
 def label(cfg: Config) -> str:
