@@ -27,10 +27,10 @@ import numpy as np
 from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
-from tma.estimators import build_estimator
-from tma.estimators.lm import initial_theta
-from tma.models.bearings2d import bearing_jacobian, bearing_residuals
-from tma.scenarios.bearings2d import Config, simulate_shard
+from tma.families import build_estimator
+from tma.families.bearings2d.estimators.lm import initial_theta
+from tma.families.bearings2d.model import bearing_jacobian, bearing_residuals
+from tma.families.bearings2d.scenario import Config, simulate_shard
 
 REPO = Path(__file__).resolve().parents[1]
 THETA = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")
@@ -94,11 +94,11 @@ def bench_stages():
 
 
 def bench_ranges(runs: int):
-    from tma.density.bisection import BisectionDensity
-    from tma.estimators.adaptive_is import scalar_log_kernel
-    from tma.models.ranges2d import RangeModel
-    from tma.scenarios.ranges2d import Config as RangesConfig
-    from tma.scenarios.ranges2d import simulate_shard as simulate_ranges
+    from tma.families.ranges2d.bisection import BisectionDensity
+    from tma.families.ranges2d.estimators.adaptive_is import scalar_log_kernel
+    from tma.families.ranges2d.model import RangeModel
+    from tma.families.ranges2d.scenario import Config as RangesConfig
+    from tma.families.ranges2d.scenario import simulate_shard as simulate_ranges
 
     log, _ = simulate_ranges(RangesConfig(n_tracks=runs, shard_size=runs), 0)
     model = RangeModel.from_ranges(log.landmarks_m, log.ranges_m[0], 30.0, [0, 0], [100, 100])
@@ -133,21 +133,21 @@ def bench_ranges(runs: int):
 
 
 def bench_filters3d(paths: int, single: int, duration: float):
-    from tma.estimators.cmnf import apply, model_prediction, train
-    from tma.io.hydrophone_log import HydrophoneLog
-    from tma.parallel import keep_freed_memory
-    from tma.scenarios.bearing_doppler3d import (
+    from tma.families.bearing_doppler3d.estimators.cmnf import apply, model_prediction, train
+    from tma.families.bearing_doppler3d.log import HydrophoneLog
+    from tma.families.bearing_doppler3d.scenario import (
         Config as AuvConfig,
     )
-    from tma.scenarios.bearing_doppler3d import (
+    from tma.families.bearing_doppler3d.scenario import (
         auv_model,
         epochs,
         model_record,
         simulate_paths,
     )
-    from tma.scenarios.bearing_doppler3d import (
+    from tma.families.bearing_doppler3d.scenario import (
         simulate_shard as simulate_auv,
     )
+    from tma.parallel import keep_freed_memory
 
     keep_freed_memory()
     log, _ = simulate_auv(AuvConfig(n_tracks=paths, shard_size=paths, duration_s=duration), 0)
@@ -185,9 +185,9 @@ def bench_cmnf_memory(paths: int):
     code = f"""
 import resource, time, numpy as np
 from tma.parallel import keep_freed_memory
-from tma.estimators.bundle import _bundle_shard, SHARD
-from tma.estimators.cmnf import train, model_prediction
-from tma.scenarios.bearing_doppler3d import Config, auv_model, epochs, model_record
+from tma.families.bearing_doppler3d.estimators.bundle import _bundle_shard, SHARD
+from tma.families.bearing_doppler3d.estimators.cmnf import train, model_prediction
+from tma.families.bearing_doppler3d.scenario import Config, auv_model, epochs, model_record
 keep_freed_memory()
 record = model_record(Config())
 start = time.perf_counter()

@@ -12,11 +12,10 @@ from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
 from tma.errors import ConfigError, TmaError
-from tma.estimators import build_estimator
+from tma.families import build_estimator, dataset_name, load_scenario
 from tma.io.dataset import Dataset, datasets_dir
 from tma.io.owned import plain_name
 from tma.parallel import keep_freed_memory
-from tma.scenarios import dataset_name, load_scenario
 
 CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
 log = logging.getLogger("tma")

@@ -3,7 +3,7 @@
 import hydra
 
 from pipeline._common import CONF_DIR, log, run_stage
-from tma.ingest import ingest
+from tma.families.bearings2d.ingest import ingest
 
 
 def ingest_stage(cfg):

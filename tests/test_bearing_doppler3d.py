@@ -13,18 +13,24 @@ from pipeline.estimate import estimate_stage
 from pipeline.simulate import simulate_stage
 from tests.conftest import compose_cfg
 from tma.errors import ConfigError, InputError
-from tma.estimators import build_estimator
-from tma.estimators.auv_base import drift_step, drift_times_rows, output_columns
-from tma.estimators.cmnf import CMNF, apply, model_prediction, train
-from tma.estimators.ekf import predict_covariance, sequential_update
-from tma.estimators.srekf import fold_noise, phi_times
-from tma.io.atomic import sha256_file
-from tma.io.hydrophone_log import SCHEMA, read_hydrophone_log, topic, write_hydrophone_log
-from tma.io.mcap_log import Channel, LogWriter
-from tma.metrics.bearing_doppler3d import divergent_paths, path_metrics
-from tma.models.auv3d import euler_maruyama
-from tma.scenarios import load_scenario
-from tma.scenarios.bearing_doppler3d import (
+from tma.families import build_estimator, load_scenario
+from tma.families.bearing_doppler3d.estimators.base import (
+    drift_step,
+    drift_times_rows,
+    output_columns,
+)
+from tma.families.bearing_doppler3d.estimators.cmnf import CMNF, apply, model_prediction, train
+from tma.families.bearing_doppler3d.estimators.ekf import predict_covariance, sequential_update
+from tma.families.bearing_doppler3d.estimators.srekf import fold_noise, phi_times
+from tma.families.bearing_doppler3d.log import (
+    SCHEMA,
+    read_hydrophone_log,
+    topic,
+    write_hydrophone_log,
+)
+from tma.families.bearing_doppler3d.metrics import divergent_paths, path_metrics
+from tma.families.bearing_doppler3d.model import euler_maruyama
+from tma.families.bearing_doppler3d.scenario import (
     Config,
     auv_model,
     epochs,
@@ -32,6 +38,8 @@ from tma.scenarios.bearing_doppler3d import (
     simulate_paths,
     simulate_shard,
 )
+from tma.io.atomic import sha256_file
+from tma.io.mcap_log import Channel, LogWriter
 
 SHORT = {"duration_s": 10.0}
 

@@ -13,8 +13,8 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from tests.test_estimator_configs import FUZZ, refused_or_built
-from tma.estimators.bearings_status import STATUSES
-from tma.scenarios.bearings2d import Config, simulate_shard
+from tma.families.bearings2d.scenario import Config, simulate_shard
+from tma.families.bearings2d.status import STATUSES
 
 LOG, _ = simulate_shard(Config(n_tracks=6, shard_size=6, sigma_deg=0.5, seed=12), 0)
 LOG.bearing_deg[2, :40] = np.nan  # a contact that appears late

@@ -14,7 +14,7 @@ import pandas as pd
 import pytest
 
 from tests.conftest import REPO, run_cli
-from tma.scenarios.bearings2d import Config, simulate_shard
+from tma.families.bearings2d.scenario import Config, simulate_shard
 
 PY = sys.executable
 

@@ -11,8 +11,7 @@ from omegaconf import OmegaConf
 from pipeline._common import CONF_DIR, estimator_nodes, scenario_nodes
 from tests.conftest import compose_cfg, run_cli
 from tma.errors import ConfigError
-from tma.estimators import ESTIMATORS, build_estimator, estimator_class
-from tma.scenarios import load_scenario
+from tma.families import build_estimator, estimator_class, estimator_names, load_scenario
 
 CONF = Path(CONF_DIR)
 
@@ -31,7 +30,7 @@ def test_every_scenario_composes_and_validates(name):
 @pytest.mark.parametrize("name", _options("estimator"))
 def test_every_estimator_composes_and_builds(name):
     cfg = compose_cfg([f"estimator={name}"])
-    assert cfg.estimator.name in ESTIMATORS
+    assert cfg.estimator.name in estimator_names()
     build_estimator(OmegaConf.to_container(cfg.estimator))
 
 
@@ -116,7 +115,7 @@ def test_non_finite_values_anywhere_are_refused_naming_the_dotted_key():
     for node, message in cases:
         with pytest.raises(ConfigError, match=message):
             load_scenario(node)
-    for name in ESTIMATORS:  # every estimator, including the bearings-only ones
+    for name in estimator_names():  # every estimator, including the bearings-only ones
         for f in fields(estimator_class(name).Config):
             if "float" in str(f.type) and "list" not in str(f.type):
                 with pytest.raises(ConfigError,

@@ -8,19 +8,22 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from tma.errors import InputError
-from tma.ingest import ingest
-from tma.io.bearings_log import (
+from tma.families.bearing_doppler3d import scenario as bearing_doppler3d
+from tma.families.bearing_doppler3d.log import read_hydrophone_log, write_hydrophone_log
+from tma.families.bearings2d import scenario as bearings2d
+from tma.families.bearings2d.ingest import ingest
+from tma.families.bearings2d.log import (
     BEARINGS_TOPIC,
     CHANNELS,
     OWNSHIP_TOPIC,
     read_bearings_log,
     write_bearings_log,
 )
-from tma.io.hydrophone_log import read_hydrophone_log, write_hydrophone_log
+from tma.families.radar2d import scenario as radar2d
+from tma.families.radar2d.log import read_radar_log, write_radar_log
+from tma.families.ranges2d import scenario as ranges2d
+from tma.families.ranges2d.log import read_ranges_log, write_ranges_log
 from tma.io.mcap_log import LogWriter
-from tma.io.radar_log import read_radar_log, write_radar_log
-from tma.io.ranges_log import read_ranges_log, write_ranges_log
-from tma.scenarios import bearing_doppler3d, bearings2d, radar2d, ranges2d
 
 FIELDS = ("t_s", "own_x_m", "own_y_m", "track_id", "bearing_deg")
 N_DAMAGES = 300

@@ -17,10 +17,12 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from tma.errors import ConfigError
-from tma.estimators import build_estimator
-from tma.estimators.ranges_base import STATUSES
-from tma.models.auv3d import STATE_NAMES
-from tma.scenarios import bearing_doppler3d, load_scenario, radar2d, ranges2d
+from tma.families import build_estimator, load_scenario
+from tma.families.bearing_doppler3d import scenario as bearing_doppler3d
+from tma.families.bearing_doppler3d.model import STATE_NAMES
+from tma.families.radar2d import scenario as radar2d
+from tma.families.ranges2d import scenario as ranges2d
+from tma.families.ranges2d.estimators.base import STATUSES
 
 FUZZ = settings(max_examples=150, deadline=None, database=None, derandomize=True,
                 suppress_health_check=[HealthCheck.too_slow])

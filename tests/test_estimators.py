@@ -5,10 +5,10 @@ import pytest
 from scipy.optimize import least_squares
 
 from tma.errors import ConfigError, InputError
-from tma.estimators import build_estimator
-from tma.estimators.lm import initial_theta
-from tma.models.bearings2d import bearing_cost, bearing_jacobian, bearing_residuals
-from tma.scenarios.bearings2d import Config, simulate_shard
+from tma.families import build_estimator
+from tma.families.bearings2d.estimators.lm import initial_theta
+from tma.families.bearings2d.model import bearing_cost, bearing_jacobian, bearing_residuals
+from tma.families.bearings2d.scenario import Config, simulate_shard
 
 
 def _log(n=300, sigma=0.5, seed=7):

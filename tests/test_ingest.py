@@ -8,9 +8,9 @@ from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
 from tests.conftest import compose_cfg, run_cli
 from tma.errors import ConfigError, InputError
-from tma.ingest import ingest
-from tma.io.bearings_log import write_bearings_log
-from tma.scenarios.bearings2d import Config, simulate_shard
+from tma.families.bearings2d.ingest import ingest
+from tma.families.bearings2d.log import write_bearings_log
+from tma.families.bearings2d.scenario import Config, simulate_shard
 
 T_OFFSET = 1.7e9  # e.g. unix time stamps
 

@@ -9,10 +9,10 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from tma.errors import InputError
+from tma.families.bearings2d.log import CHANNELS, read_bearings_log, write_bearings_log
+from tma.families.bearings2d.scenario import Config, simulate_shard
 from tma.io.atomic import atomic_path, write_parquet_atomic
-from tma.io.bearings_log import CHANNELS, read_bearings_log, write_bearings_log
 from tma.io.mcap_log import LogWriter
-from tma.scenarios.bearings2d import Config, simulate_shard
 
 
 def _small_log():

@@ -4,8 +4,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tma.metrics.bearings2d import summary_row, track_metrics
-from tma.metrics.stats import wilson_interval
+from tma.families.bearings2d.metrics import summary_row, track_metrics
+from tma.stats import wilson_interval
 
 
 def test_wilson_interval_known_values():

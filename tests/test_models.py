@@ -7,9 +7,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tma.angles import wrap_to_180, wrap_to_pi
-from tma.estimators import build_estimator
-from tma.io.bearings_log import BearingsLog
-from tma.models.bearings2d import (
+from tma.families import build_estimator
+from tma.families.bearings2d.log import BearingsLog
+from tma.families.bearings2d.model import (
     BearingTerms,
     bearing_cost,
     bearing_jacobian,

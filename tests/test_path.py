@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from tma.errors import ConfigError
-from tma.models.path import LegPath
-from tma.scenarios.bearings2d import Config, epochs, observer_path
+from tma.families.bearings2d.scenario import Config, epochs, observer_path
+from tma.path import LegPath
 
 
 def test_default_path_timing_and_courses():

@@ -9,13 +9,13 @@ from pipeline.estimate import estimate_stage
 from pipeline.simulate import simulate_stage
 from tests.conftest import compose_cfg
 from tma.errors import ConfigError, InputError
-from tma.estimators import build_estimator
-from tma.estimators.radar_base import alpha_beta_window
-from tma.fuzzy import memory_length_selector, sigmoid
-from tma.io.radar_log import RadarLog, read_radar_log, write_radar_log
-from tma.metrics.radar2d import per_scan_errors, summary_row
-from tma.models.turn import coordinated_turn
-from tma.scenarios.radar2d import Config, simulate_shard
+from tma.families import build_estimator
+from tma.families.radar2d.estimators.base import alpha_beta_window
+from tma.families.radar2d.fuzzy import memory_length_selector, sigmoid
+from tma.families.radar2d.log import RadarLog, read_radar_log, write_radar_log
+from tma.families.radar2d.metrics import per_scan_errors, summary_row
+from tma.families.radar2d.scenario import Config, simulate_shard
+from tma.families.radar2d.turn import coordinated_turn
 
 
 def _log(n=20, **kw):

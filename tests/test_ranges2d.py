@@ -9,17 +9,17 @@ from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
 from pipeline.simulate import simulate_stage
 from tests.conftest import compose_cfg
-from tma.density.bisection import BisectionDensity
 from tma.errors import ConfigError, InputError
-from tma.estimators import build_estimator
-from tma.estimators.adaptive_is import scalar_log_kernel
-from tma.estimators.quadrature import Config as QuadConfig
-from tma.estimators.quadrature import posterior_mean
-from tma.estimators.ratio import RatioMoments
-from tma.io.ranges_log import read_ranges_log, write_ranges_log
-from tma.models.ranges2d import RangeModel
-from tma.reports.ranges2d import summary_row, track_metrics
-from tma.scenarios.ranges2d import Config, simulate_shard
+from tma.families import build_estimator
+from tma.families.ranges2d.bisection import BisectionDensity
+from tma.families.ranges2d.estimators.adaptive_is import scalar_log_kernel
+from tma.families.ranges2d.estimators.quadrature import Config as QuadConfig
+from tma.families.ranges2d.estimators.quadrature import posterior_mean
+from tma.families.ranges2d.estimators.ratio import RatioMoments
+from tma.families.ranges2d.log import read_ranges_log, write_ranges_log
+from tma.families.ranges2d.model import RangeModel
+from tma.families.ranges2d.report import summary_row, track_metrics
+from tma.families.ranges2d.scenario import Config, simulate_shard
 
 BOX = ((-400.0, 400.0), (-400.0, 400.0))
 

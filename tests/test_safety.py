@@ -19,9 +19,9 @@ from pipeline.estimate import estimate_stage
 from pipeline.simulate import simulate_stage
 from tests.conftest import REPO, SMALL, compose_cfg, run_cli
 from tma.errors import ConfigError, InputError, IntegrityError
-from tma.ingest import ingest
+from tma.families.bearings2d.ingest import ingest
+from tma.families.bearings2d.scenario import Config, simulate_shard
 from tma.io.owned import MARKER
-from tma.scenarios.bearings2d import Config, simulate_shard
 
 
 def _tree(root: Path) -> dict:

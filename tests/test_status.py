@@ -7,12 +7,12 @@ import pandas as pd
 import pytest
 from scipy.stats import chi2
 
-from tma.estimators import build_estimator
-from tma.estimators.bearings_status import STATUSES, kinematics_now, runs_test_p
-from tma.metrics.bearings2d import NEES_95, summary_row, track_metrics
-from tma.reports.bearings2d import track_report
-from tma.scenarios.bearings2d import Config, LegConfig, ObserverConfig, PopulationConfig
-from tma.scenarios.bearings2d import simulate_shard as simulate
+from tma.families import build_estimator
+from tma.families.bearings2d.metrics import NEES_95, summary_row, track_metrics
+from tma.families.bearings2d.report import track_report
+from tma.families.bearings2d.scenario import Config, LegConfig, ObserverConfig, PopulationConfig
+from tma.families.bearings2d.scenario import simulate_shard as simulate
+from tma.families.bearings2d.status import STATUSES, kinematics_now, runs_test_p
 
 
 def _run(cfg: Config, estimator="lm", sigma_known=True, edit=None, **params):

@@ -1,27 +1,20 @@
 """The aggregate stage: finished runs -> per-track metrics (Parquet) -> tables and plots.
 
-Each family's report module provides ``aggregate_runs(entries, tables_dir, table_name)``
-where ``entries`` are ``RunEntry`` items; it writes per-track metrics into each run
-directory and returns the table files it wrote.
+Each family's report module (``tma.families.<name>.report``) provides
+``aggregate_runs(entries, tables_dir, table_name)`` where ``entries`` are ``RunEntry``
+items; it writes per-track metrics into each run directory and returns the table files it
+wrote.
 """
 
-import importlib
 from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
 
-from tma.errors import ConfigError
+from tma.families import family as family_of
 from tma.io.dataset import Dataset
 from tma.io.owned import remove_stale_temporaries
 from tma.runs import open_run, prepared_config, run_path
-
-REPORT_MODULES = {
-    "bearings2d": "tma.reports.bearings2d",
-    "ranges2d": "tma.reports.ranges2d",
-    "radar2d": "tma.reports.radar2d",
-    "bearing_doppler3d": "tma.reports.bearing_doppler3d",
-}
 
 
 @dataclass
@@ -48,9 +41,7 @@ def aggregate(data_dir, tables_dir, jobs, table=None) -> list[Path]:
             RunEntry(dataset, est_cfg["name"], root, manifest, estimates.to_pandas()))
     written = []
     for family, entries in by_family.items():
-        if family not in REPORT_MODULES:
-            raise ConfigError(f"no report for family '{family}'")
-        module = importlib.import_module(REPORT_MODULES[family])
+        module = family_of(family).report
         name = table
         if name is None:
             first = entries[0]

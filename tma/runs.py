@@ -28,13 +28,12 @@ import pyarrow.parquet as pq
 from tma import __version__
 from tma.config import to_plain
 from tma.errors import ConfigError, InputError, IntegrityError, TmaError
-from tma.estimators import build_estimator, estimator_class
+from tma.families import build_estimator, estimator_class, scenario_module
 from tma.io.atomic import sha256_json, write_json_atomic, write_parquet_atomic
 from tma.io.dataset import Dataset, file_record, read_sealed_manifest, sealed
 from tma.io.owned import adopt_broken, locked, recover, staging_dir, swap_in
 from tma.io.shards import finished_record, mark_finished
 from tma.parallel import run_tasks
-from tma.scenarios import scenario_module
 
 log = logging.getLogger(__name__)
 RUN_FORMAT = "tma-run"

@@ -18,12 +18,13 @@ import pyarrow.parquet as pq
 from tma import __version__
 from tma.config import to_plain
 from tma.errors import TmaError
+from tma.families import dataset_name, load_scenario
 from tma.io.atomic import sha256_json, write_parquet_atomic
 from tma.io.dataset import Dataset, datasets_dir, file_record, shard_relpath, write_manifest
 from tma.io.owned import locked, recover, staging_dir, swap_in
 from tma.io.shards import finished_record, mark_finished, sidecar
 from tma.parallel import run_tasks
-from tma.scenarios import dataset_name, load_scenario, n_shards
+from tma.sharding import n_shards
 
 log = logging.getLogger(__name__)
 PARTS = "parts"

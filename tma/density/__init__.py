@@ -1,1 +1,0 @@
-"""Reusable densities for importance sampling."""

@@ -1,0 +1,102 @@
+"""Scenario families, one package each: ``tma/families/<name>/`` holds a family's scenario,
+model, log format, metrics, report and ``estimators/`` (one file each), and exports one
+``FAMILY`` object. The core finds families only here: a new family is one package plus one
+entry in ``NAMES``.
+
+A family's scenario module provides ``Config`` (with ``n_tracks``, ``shard_size``, ``seed``),
+``label(cfg)`` (a short tag in dataset names), ``simulate_shard(cfg, index) -> (log, truth
+table or None)``, ``write_log(path, log, metadata) -> n_messages`` and ``read_log(path)``;
+optionally ``simulation_key``/``simulate_raw``/``from_raw`` when datasets of different
+configs share their random draws. Its report module provides ``aggregate_runs(entries,
+tables_dir, table_name)``.
+"""
+
+import functools
+import importlib
+from dataclasses import dataclass, field
+
+from tma.config import to_plain, validate
+from tma.errors import ConfigError
+from tma.io.atomic import sha256_json
+
+NAMES = ("bearings2d", "ranges2d", "radar2d", "bearing_doppler3d")
+
+
+@dataclass(frozen=True)
+class Family:
+    """What the core knows of a family: its name, where its scenario and report live, and
+    its estimators (``name -> "module:Class"``); modules are imported when first used."""
+
+    name: str
+    estimators: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def scenario(self):
+        return importlib.import_module(f"tma.families.{self.name}.scenario")
+
+    @property
+    def report(self):
+        return importlib.import_module(f"tma.families.{self.name}.report")
+
+    def estimator_class(self, name: str):
+        module, cls = self.estimators[name].split(":")
+        return getattr(importlib.import_module(module), cls)
+
+
+def family(name: str) -> Family:
+    """The family called ``name``; a clear error for unknown names."""
+    if name not in NAMES:
+        raise ConfigError(f"unknown scenario family '{name}' (known: {', '.join(sorted(NAMES))})")
+    return importlib.import_module(f"tma.families.{name}").FAMILY
+
+
+@functools.cache
+def _estimator_families() -> dict[str, Family]:
+    owners = {}
+    for name in NAMES:
+        for estimator in family(name).estimators:
+            if estimator in owners:
+                raise RuntimeError(f"estimator '{estimator}' is declared by two families")
+            owners[estimator] = family(name)
+    return owners
+
+
+def estimator_names() -> list[str]:
+    """Every registered estimator, sorted."""
+    return sorted(_estimator_families())
+
+
+def estimator_class(name: str):
+    """The estimator class called ``name`` (whatever its family); a clear error if unknown."""
+    owners = _estimator_families()
+    if name not in owners:
+        raise ConfigError(f"unknown estimator '{name}' (known: {', '.join(sorted(owners))})")
+    return owners[name].estimator_class(name)
+
+
+def build_estimator(node):
+    """Validate an estimator config node (must hold ``name``) and build the estimator."""
+    name = node.get("name") if node is not None else None
+    if name is None:
+        raise ConfigError("estimator: missing 'name'")
+    cls = estimator_class(name)
+    return cls(validate(cls.Config, node, f"estimator '{name}'"))
+
+
+def scenario_module(name: str):
+    """The scenario module of family ``name``."""
+    return family(name).scenario
+
+
+def load_scenario(node):
+    """Validate a scenario config node; return ``(scenario module, config instance)``."""
+    name = node.get("family") if node is not None else None
+    if name is None:
+        raise ConfigError("scenario: missing 'family'")
+    module = scenario_module(name)
+    return module, validate(module.Config, node, f"scenario '{name}'")
+
+
+def dataset_name(module, cfg) -> str:
+    """Directory name of the dataset a scenario config produces: family, label, config hash."""
+    return f"{module.FAMILY}-{module.label(cfg)}-{sha256_json(to_plain(cfg))[:10]}"

@@ -1,0 +1,131 @@
+"""Shared pieces of the ``bearing_doppler3d`` filters.
+
+Filters keep paths on the last axis (state (6, n), covariance (6, 6, n)) so that each state
+row is a contiguous vector over paths. Both Kalman filters propagate the covariance of the
+Euler-discretised linearised SDE over each step dt: with Phi = I + A dt (A the drift
+Jacobian at the mean), P <- Phi P Phi^T + b b^T dt, b = (0, 0, 0, 0, 0, mu): the Euler step of
+dP = (A P + P A^T + b b^T) dt plus its own O(dt^2) term A P A^T dt^2, which keeps P positive
+definite and is exactly what the square-root filter propagates. Observations are processed as
+scalars in sequence against one linearisation point per epoch (the batch EKF update, since R
+is diagonal); a missing reading (NaN) is skipped.
+
+Outputs per path and epoch: the estimate and its standard deviations; the covariance's upper
+triangle every ``covariance_every`` epochs goes to the run's ``covariance.parquet`` (for
+NEES); ``filter_ok`` is False for a path whose estimate or covariance became non-finite or
+whose covariance has a negative variance (it is kept, the others go on).
+"""
+
+import numpy as np
+
+from tma.estimator import Estimator
+from tma.families.bearing_doppler3d.log import HydrophoneLog
+from tma.families.bearing_doppler3d.model import PHI, STATE_NAMES, A, V, X, Y
+from tma.families.bearing_doppler3d.scenario import auv_model
+
+IU = np.triu_indices(6)
+
+
+def initial_moments(initial: dict):
+    """Mean (6,) and covariance (6, 6) of the initial distribution, exactly."""
+    mean = np.array([*initial["position_mean_m"],
+                     0.5 * (initial["speed_min_m_s"] + initial["speed_max_m_s"]),
+                     initial["heading_mean_rad"],
+                     0.5 * (initial["accel_min_m_s2"] + initial["accel_max_m_s2"])])
+    f = np.float64  # numpy scalars: an absurd scale gives inf (flagged), not OverflowError
+    var = np.array([*np.square(initial["position_sd_m"]),
+                    f(initial["speed_max_m_s"] - initial["speed_min_m_s"]) ** 2 / 12,
+                    f(initial["heading_sd_rad"]) ** 2,
+                    f(initial["accel_max_m_s2"] - initial["accel_min_m_s2"]) ** 2 / 12])
+    return mean, np.diag(var)
+
+
+def drift_times_rows(M, x, lam):
+    """A @ M for the drift Jacobian A at states x (6, n); M (6, k, n) (or (6, n))."""
+    out = np.zeros_like(M)
+    c, s, v, a = np.cos(x[PHI]), np.sin(x[PHI]), x[V], x[A]
+    out[X] = c * M[V] - (v * s) * M[PHI]
+    out[Y] = s * M[V] + (v * c) * M[PHI]
+    out[PHI] = (-a / v**2) * M[V] + M[A] / v
+    out[A] = -lam * M[A]
+    return out
+
+
+def drift_step(x, dt, lam, nu):
+    """One Euler step of the mean, x (6, n)."""
+    out = x.copy()
+    out[X] += x[V] * np.cos(x[PHI]) * dt
+    out[Y] += x[V] * np.sin(x[PHI]) * dt
+    out[PHI] += x[A] / x[V] * dt
+    out[A] += (-lam * x[A] + nu) * dt
+    return out
+
+
+class AuvEstimator(Estimator):
+    family = "bearing_doppler3d"
+    def estimate(self, log: HydrophoneLog) -> dict:
+        record = log.model
+        model = auv_model(record)
+        if log.obs.shape[2] != model.n_obs:
+            raise ValueError(f"the log holds {log.obs.shape[2]} readings per epoch, the model "
+                             f"{model.n_obs}")
+        # a wrecked path overflows on its own (paths never mix); it is flagged, not raised
+        with np.errstate(all="ignore"):
+            est, cov, ok = self.run(model, record, log.t_s, log.obs)  # (n,K,6), (n,K,6,6), (n,)
+            return output_columns(est, cov, ok, log.t_s, self.config.covariance_every,
+                                  log.track_id)
+
+    def run(self, model, record, t, obs):
+        raise NotImplementedError
+
+
+class KalmanFilterBase(AuvEstimator):
+    """The continuous-discrete Kalman filter driver shared by ``ekf`` and ``srekf``: Euler
+    sub-steps of ``filter_step_s`` between observations, one update per epoch. Subclasses say
+    how they hold the covariance (``initial_factor``, ``predict_factor``, ``update``,
+    ``covariance``)."""
+
+    def run(self, model, record, t, obs):
+        n, K, _ = obs.shape
+        dt = record["filter_step_s"]
+        mean0, cov0 = initial_moments(record["initial"])
+        x = np.repeat(mean0[:, None], n, axis=1)
+        factor = self.initial_factor(cov0, n, record)
+        xs, Ps = np.empty((K, 6, n)), np.empty((K, 6, 6, n))
+        for k in range(K):
+            if k:
+                for _ in range(int(round((t[k] - t[k - 1]) / dt))):
+                    factor = self.predict_factor(factor, x, dt, record)
+                    x = drift_step(x, dt, record["lam"], record["nu"])
+            x, factor = self.update(x, factor, obs[:, k], model)
+            xs[k], Ps[k] = x, self.covariance(factor)
+        est, cov = to_paths_first(xs, Ps)
+        ok = np.isfinite(cov).all(axis=(1, 2, 3)) & np.isfinite(est).all(axis=(1, 2))
+        return est, cov, ok
+
+
+def output_columns(est, cov, ok, t, covariance_every, track_id):
+    """Per-epoch estimates and standard deviations, plus ``extras['covariance']``: the upper
+    triangle of the covariance every ``covariance_every`` epochs and at the last (for NEES)."""
+    n, K, _ = est.shape
+    variance = np.einsum("nkii->nki", cov)
+    # a negative variance (a covariance that lost definiteness) has no std: flagged too
+    ok = (ok & np.isfinite(est).all(axis=(1, 2)) & np.isfinite(cov).all(axis=(1, 2, 3))
+          & (variance >= 0).all(axis=(1, 2)))
+    out = {"t_s": np.broadcast_to(t, (n, K)).copy(), "filter_ok": ok}
+    for i, name in enumerate(STATE_NAMES):
+        out[name] = est[..., i]
+    sd = np.sqrt(variance)
+    for i, name in enumerate(STATE_NAMES):
+        out[f"sd_{name}"] = sd[..., i]
+    steps = np.unique(np.r_[np.arange(0, K, covariance_every), K - 1])
+    covariance = {"track_id": np.repeat(track_id, steps.size),
+                  "step": np.tile(steps, n)}
+    for i, j in zip(*IU, strict=True):
+        covariance[f"P_{i}{j}"] = cov[:, steps, i, j].ravel()
+    out["extras"] = {"covariance": covariance}
+    return out
+
+
+def to_paths_first(x_hist, P_hist):
+    """(K, 6, n), (K, 6, 6, n) -> (n, K, 6), (n, K, 6, 6)."""
+    return np.moveaxis(x_hist, -1, 0), np.moveaxis(P_hist, -1, 0)

@@ -1,0 +1,149 @@
+"""``cmnf``: the conditionally minimax nonlinear filter, trained on a simulated bundle.
+
+Offline, on ``training_paths`` paths of the dataset's model: basic prediction
+xi = the model's own Euler prediction of the previous estimate over one observation step,
+basic correction zeta = y - h(x_tilde). At each epoch, with sample moments over the bundle,
+F = Cov(x, xi) Cov(xi)^+, f = E x - F E xi, x_tilde = F xi + f; H = Cov(x - x_tilde, zeta)
+Cov(zeta)^+, h = -H E zeta, x_hat = x_tilde + H zeta + h, and the filter's own error
+covariance K_hat = Cov(x - x_tilde) - Cov(x - x_tilde, zeta) H^T. Pseudo-inverses by truncated
+SVD of the standardised covariance (relative threshold ``pinv_rtol``). The gains are an
+artefact (hashed, reused by later runs with the same model and training config) that the run
+records; online, the filter applies them to each test path. A missing reading takes its
+training mean (it then carries no correction).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tma.config import require
+from tma.families.bearing_doppler3d.estimators.base import AuvEstimator
+from tma.families.bearing_doppler3d.estimators.bundle import (
+    MAX_PATHS,
+    bundle_observations,
+    training_bundle,
+)
+from tma.families.bearing_doppler3d.scenario import auv_model, epochs
+from tma.io.artefacts import load_arrays, load_or_build
+
+
+@dataclass
+class Config:
+    name: str = "cmnf"
+    training_paths: int = 10000
+    training_seed: int = 7
+    pinv_rtol: float = 1e-12
+    covariance_every: int = 10
+    artefact: dict[str, str] | None = None  # filled in by the estimate stage
+
+    def __post_init__(self):
+        w = "estimator 'cmnf'"
+        require(100 <= self.training_paths <= MAX_PATHS, w,
+                f"training_paths must be in [100, {MAX_PATHS}]")
+        require(self.training_seed >= 0, w, "training_seed must be >= 0")
+        require(0 < self.pinv_rtol < 1, w, "pinv_rtol must lie in (0, 1) (relative threshold)")
+        require(self.covariance_every >= 1, w, "covariance_every must be >= 1")
+        require(self.artefact is None or {"path", "sha256"} <= set(self.artefact), w,
+                "artefact must be null or {path, sha256} (set by the estimate stage)")
+
+
+def regression_gain(cov_xy, cov_yy, rtol):
+    """cov_xy cov_yy^+ with the pseudo-inverse taken on the standardised (correlation) matrix;
+    NaN if a covariance is not finite (an overflowed bundle: the SVD would not converge)."""
+    if not (np.isfinite(cov_xy).all() and np.isfinite(cov_yy).all()):
+        return np.full(cov_xy.shape, np.nan)
+    d = np.sqrt(np.diag(cov_yy))
+    d = np.where(d > 0, d, 1.0)
+    return (cov_xy / d) @ np.linalg.pinv(cov_yy / np.outer(d, d), rcond=rtol, hermitian=True) / d
+
+
+def _cov(a, b):
+    return (a - a.mean(0)).T @ (b - b.mean(0)) / (a.shape[0] - 1)
+
+
+def train(truth, obs, predict, observe, rtol):
+    """Gains per epoch from a bundle: truth (M, K, d), obs (M, K, m); ``predict(x_hat, k)``
+    is the basic prediction to epoch k, ``observe(x)`` the observation function."""
+    M, K, d = truth.shape
+    m = obs.shape[2]
+    gains = {"F": np.zeros((K, d, d)), "f": np.zeros((K, d)), "H": np.zeros((K, d, m)),
+             "h": np.zeros((K, d)), "K_hat": np.zeros((K, d, d)), "zeta_mean": np.zeros((K, m))}
+    x_hat = None
+    for k in range(K):
+        x = truth[:, k]
+        if k == 0:
+            x_tilde = np.broadcast_to(x.mean(0), x.shape).copy()  # xi is constant: F = 0
+            gains["f"][0] = x.mean(0)
+        else:
+            xi = predict(x_hat, k)
+            F = regression_gain(_cov(x, xi), _cov(xi, xi), rtol)
+            f = x.mean(0) - F @ xi.mean(0)
+            x_tilde = xi @ F.T + f
+            gains["F"][k], gains["f"][k] = F, f
+        zeta = obs[:, k].astype(float) - observe(x_tilde)  # the bundle stores float32
+        err = x - x_tilde
+        H = regression_gain(_cov(err, zeta), _cov(zeta, zeta), rtol)
+        h = -H @ zeta.mean(0)
+        x_hat = x_tilde + zeta @ H.T + h
+        gains["H"][k], gains["h"][k], gains["zeta_mean"][k] = H, h, zeta.mean(0)
+        gains["K_hat"][k] = _cov(err, err) - _cov(err, zeta) @ H.T
+    return gains
+
+
+def apply(gains, obs, predict, observe):
+    """Run the trained filter on paths with observations obs (n, K, m); NaN readings take
+    their training mean. Returns the estimates (n, K, d)."""
+    n, K, _ = obs.shape
+    est = np.empty((n, K, gains["f"].shape[1]))
+    x_hat = None
+    for k in range(K):
+        if k == 0:
+            x_tilde = np.broadcast_to(gains["f"][0], (n, gains["f"].shape[1])).copy()
+        else:
+            x_tilde = predict(x_hat, k) @ gains["F"][k].T + gains["f"][k]
+        zeta = obs[:, k] - observe(x_tilde)
+        zeta = np.where(np.isfinite(zeta), zeta, gains["zeta_mean"][k])
+        x_hat = x_tilde + zeta @ gains["H"][k].T + gains["h"][k]
+        est[:, k] = x_hat
+    return est
+
+
+def model_prediction(model, record, t):
+    """The basic prediction of the AUV model: Euler integration over [t_(k-1), t_k]."""
+    return lambda x_hat, k: model.predict_mean(x_hat, t[k] - t[k - 1], record["filter_step_s"])
+
+
+class CMNF(AuvEstimator):
+    name = "cmnf"
+    Config = Config
+
+    @classmethod
+    def prepare(cls, config: dict, dataset, data_dir, n_jobs=1, progress=False) -> dict:
+        """Train (or reuse) the gains for the dataset's model; returns the config with the
+        artefact's path and hash (so they enter the run's key)."""
+        from tma.families import scenario_module
+
+        record = scenario_module(dataset.family).model_record_of(dataset)
+        bundle = training_bundle(data_dir, record, config["training_paths"],
+                                 config["training_seed"], n_jobs, progress)
+        spec = {"model": record, "bundle": bundle["sha256"], "pinv_rtol": config["pinv_rtol"]}
+
+        def build():
+            arrays = load_arrays(bundle)
+            obs = bundle_observations(arrays, record["no_doppler"])
+            model = auv_model(record)
+            t = epochs(record)
+            # a bundle that overflowed gives non-finite gains: the paths are flagged online
+            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+                return train(arrays["truth"], obs, model_prediction(model, record, t),
+                             model.observe, config["pinv_rtol"])
+
+        path, sha = load_or_build(data_dir, "cmnf", spec, build)
+        return {**config, "artefact": {"path": str(path), "sha256": sha}}
+
+    def run(self, model, record, t, obs):
+        gains = load_arrays(self.config.artefact)
+        est = apply(gains, obs, model_prediction(model, record, t), model.observe)
+        n, K, _ = obs.shape
+        cov = np.broadcast_to(gains["K_hat"][None], (n, K, 6, 6))
+        return est, cov, np.isfinite(est).all(axis=(1, 2))

@@ -1,0 +1,55 @@
+"""``prior_mean``: the unconditional mean of the state at each epoch (the mean of a large
+simulated bundle, shared with ``cmnf``), with the bundle's covariance as its own error
+covariance. It ignores the observations: the baseline every filter must beat."""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tma.config import require
+from tma.families.bearing_doppler3d.estimators.base import AuvEstimator
+from tma.families.bearing_doppler3d.estimators.bundle import MAX_PATHS, training_bundle
+from tma.io.artefacts import load_arrays
+
+
+@dataclass
+class Config:
+    name: str = "prior_mean"
+    bundle_paths: int = 10000
+    bundle_seed: int = 7  # the same bundle as cmnf's by default
+    covariance_every: int = 10
+    artefact: dict[str, str] | None = None  # filled in by the estimate stage
+
+    def __post_init__(self):
+        w = "estimator 'prior_mean'"
+        require(100 <= self.bundle_paths <= MAX_PATHS, w,
+                f"bundle_paths must be in [100, {MAX_PATHS}]")
+        require(self.bundle_seed >= 0, w, "bundle_seed must be >= 0")
+        require(self.covariance_every >= 1, w, "covariance_every must be >= 1")
+        require(self.artefact is None or {"path", "sha256"} <= set(self.artefact), w,
+                "artefact must be null or {path, sha256} (set by the estimate stage)")
+
+
+class PriorMean(AuvEstimator):
+    name = "prior_mean"
+    Config = Config
+
+    @classmethod
+    def prepare(cls, config: dict, dataset, data_dir, n_jobs=1, progress=False) -> dict:
+        from tma.families import scenario_module
+
+        record = scenario_module(dataset.family).model_record_of(dataset)
+        bundle = training_bundle(data_dir, record, config["bundle_paths"], config["bundle_seed"],
+                                 n_jobs, progress)
+        return {**config, "artefact": bundle}
+
+    def run(self, model, record, t, obs):
+        truth = load_arrays(self.config.artefact)["truth"]
+        if truth.shape[1] != t.size:
+            raise ValueError("the bundle's epochs differ from the log's")
+        mean = truth.mean(axis=0)  # (K, 6)
+        centred = truth - mean
+        cov = np.einsum("mki,mkj->kij", centred, centred) / (truth.shape[0] - 1)
+        n = obs.shape[0]
+        return (np.broadcast_to(mean, (n, *mean.shape)).copy(),
+                np.broadcast_to(cov, (n, *cov.shape)), np.ones(n, dtype=bool))

@@ -1,0 +1,67 @@
+"""``nbearings``: the "N bearings" pseudo-linear least-squares TMA (direct, not iterative).
+
+phi0 = the track's first measured bearing is taken as the target's bearing at t0; unknowns
+(r0, vx, vy). Each later bearing phi_i gives one linear row (nautical form):
+
+    r0 sin(phi_i - phi0) - vx dt_i cos(phi_i) + vy dt_i sin(phi_i)
+        = -(dx_i cos(phi_i) - dy_i sin(phi_i))
+
+with dt_i = t_i - t0 and (dx_i, dy_i) the own-ship displacement since t0. Ordinary least
+squares per track (batched normal equations, column-scaled); then the target position at t0
+is own(t0) + r0 (sin phi0, cos phi0), moved back to the dataset's t = 0 with (vx, vy). Biased
+by the noise of phi0: that is the point of the comparison with ``lm``.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tma.config import require
+from tma.families.bearings2d.estimators.base import BearingsConfig, BearingsEstimator
+from tma.linalg import jacobi_scaled_eigh, solve_shifted
+
+
+@dataclass
+class Config(BearingsConfig):
+    name: str = "nbearings"
+    rcond: float = 1e-12  # scaled normal matrix with eigenvalues below rcond*max is singular
+
+    def __post_init__(self):
+        super().__post_init__()
+        require(0 < self.rcond < 1, "estimator 'nbearings'", "rcond must lie in (0, 1)")
+
+
+class NBearings(BearingsEstimator):
+    name = "nbearings"
+    Config = Config
+
+    def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
+        n = measured_rad.shape[0]
+        rows = np.arange(n)
+        phi0 = measured_rad[rows, first][:, None]
+        t0 = t[first][:, None]
+        dt = t - t0
+        dx, dy = own_x - own_x[first][:, None], own_y - own_y[first][:, None]
+        use = np.arange(t.size) > first[:, None]
+        if valid is not None:
+            use &= valid
+        sin_phi, cos_phi = np.sin(measured_rad), np.cos(measured_rad)
+        design = np.stack([np.sin(measured_rad - phi0), -dt * cos_phi, dt * sin_phi], axis=-1)
+        design *= use[..., None]
+        rhs = np.where(use, -(dx * cos_phi - dy * sin_phi), 0.0)
+        normal = np.einsum("nki,nkj->nij", design, design)
+        w, V, d = jacobi_scaled_eigh(normal)
+        singular = w[:, 0] <= self.config.rcond * w[:, -1]
+        x = solve_shifted(w, V, d, np.einsum("nki,nk->ni", design, rhs), np.zeros(n))
+        x[singular] = np.nan
+        r0, vx, vy = x[:, 0], x[:, 1], x[:, 2]
+        t0 = t0[:, 0]
+        x0 = own_x[first] + r0 * np.sin(phi0[:, 0]) - vx * t0
+        y0 = own_y[first] + r0 * np.cos(phi0[:, 0]) - vy * t0
+        return {
+            "theta": np.column_stack([x0, y0, vx, vy]),
+            "n_f_evals": np.full(n, np.nan),
+            "n_iter": np.full(n, np.nan),
+            "converged": ~singular,
+            "stop_reason": np.where(singular, -1, 0).astype(np.int64),
+        }

@@ -1,0 +1,10 @@
+"""``radar2d``: vessel tracking by a coastal radar, fuzzy multi-model alpha-beta vs IMM
+(``../shared/specs/radar2d.md``)."""
+
+from tma.families import Family
+
+FAMILY = Family("radar2d", estimators={
+    "alphabeta": "tma.families.radar2d.estimators.alphabeta:AlphaBeta",
+    "fuzzy_mm": "tma.families.radar2d.estimators.fuzzy_mm:FuzzyMultiModel",
+    "imm": "tma.families.radar2d.estimators.imm:IMM",
+})

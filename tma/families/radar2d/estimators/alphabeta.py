@@ -1,0 +1,42 @@
+"""``alphabeta``: one alpha-beta filter with memory J (growing-memory gains up to J scans,
+fixed at alpha_J, beta_J afterwards), batched over the Monte Carlo runs."""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tma.config import require
+from tma.families.radar2d.estimators.base import (
+    RadarEstimator,
+    alpha_beta_step,
+    initial_state,
+    state_columns,
+)
+
+
+@dataclass
+class Config:
+    name: str = "alphabeta"
+    memory: int = 10  # J
+    scan_period_s: float | None = None  # null = the log's; if set, must agree with the log
+
+    def __post_init__(self):
+        w = "estimator 'alphabeta'"
+        require(self.memory >= 2, w, "memory must be >= 2")
+        require(self.scan_period_s is None or self.scan_period_s > 0, w,
+                "scan_period_s must be null or positive")
+
+
+class AlphaBeta(RadarEstimator):
+    name = "alphabeta"
+    Config = Config
+
+    def track(self, log, tau):
+        n, n_scans = log.n_tracks, log.t_s.size
+        pos, vel, k = initial_state(n)
+        est_pos, est_vel = np.empty((n, n_scans, 2)), np.empty((n, n_scans, 2))
+        for s in range(n_scans):
+            pos, vel, k = alpha_beta_step(pos, vel, k, log.plots_m[:, s], tau,
+                                          self.config.memory)
+            est_pos[:, s], est_vel[:, s] = pos, vel
+        return state_columns(est_pos, est_vel)

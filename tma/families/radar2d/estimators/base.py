@@ -1,0 +1,101 @@
+"""Shared pieces of the ``radar2d`` trackers: scan-period checks and the alpha-beta recursion.
+
+State per run: position (x, y) and velocity (vx, vy), m and m/s, x east, y north. Trackers
+return per-scan arrays (n_runs, n_scans); a scan without a plot (NaN) is skipped: the filter
+predicts through it and updates nothing. Each run gets a ``status``: ``ok``, or ``divergent``
+when its estimate is non-finite at any scan from the run's first plot on (a wrecked filter,
+or a tracker that cannot start from the plots it got).
+"""
+
+import numpy as np
+
+from tma.errors import InputError
+from tma.estimator import Estimator
+from tma.families.radar2d.log import RadarLog
+
+
+def scan_period(log: RadarLog, configured: float | None) -> float:
+    """The log's (uniform) scan period; a configured period must agree with it."""
+    dt = np.diff(log.t_s)
+    tau = float(np.median(dt))
+    if np.any(np.abs(dt - tau) > 1e-6 * tau):
+        raise InputError(f"scan times are not uniform (intervals {dt.min():g}..{dt.max():g} s): "
+                         "mark a missed scan by a null plot instead of dropping it")
+    if configured is not None and abs(configured - tau) > 1e-6 * tau:
+        raise InputError(f"scan_period_s = {configured:g} s in the config contradicts the log's "
+                         f"scan period of {tau:g} s")
+    return tau
+
+
+def growing_gains(k):
+    """Growing-memory alpha-beta gains after k measurements (k >= 2)."""
+    k = np.asarray(k, float)
+    return 2 * (2 * k - 1) / (k * (k + 1)), 6 / (k * (k + 1))
+
+
+def alpha_beta_step(pos, vel, k, z, tau, k_max=None):
+    """One scan: predict over ``tau``, then update with plots ``z`` (n, 2) where finite.
+
+    ``k`` counts processed plots (0 = not initialised). The first plot initialises
+    (position = z, velocity = 0); later ones use the growing-memory gains with
+    k = min(k + 1, k_max) (fixed gains once k reaches ``k_max``: a memory of k_max scans).
+    Returns new ``(pos, vel, k)``; the inputs are not modified.
+    """
+    pos = pos + vel * tau
+    has = np.all(np.isfinite(z), axis=1)
+    k_new = np.where(has, k + 1, k)
+    if k_max is not None:
+        k_new = np.minimum(k_new, k_max)
+    init = has & (k == 0)
+    upd = has & (k > 0)
+    alpha, beta = growing_gains(np.maximum(k_new, 2))
+    r = np.where(upd[:, None], z - pos, 0.0)
+    pos = np.where(init[:, None], z, pos + alpha[:, None] * r)
+    vel = np.where(init[:, None], 0.0, vel + (beta / tau)[:, None] * r)
+    return pos, vel, k_new
+
+
+def initial_state(n):
+    """Not yet initialised: position unknown (NaN) until the first plot, k = 0."""
+    return np.full((n, 2), np.nan), np.zeros((n, 2)), np.zeros(n, dtype=np.int64)
+
+
+def alpha_beta_window(plots, tau):
+    """Growing-memory alpha-beta over a window of scans (n, w, 2) from a fresh start: the
+    least-squares straight line through the window's plots, evaluated at its last scan."""
+    pos, vel, k = initial_state(plots.shape[0])
+    for s in range(plots.shape[1]):
+        pos, vel, k = alpha_beta_step(pos, vel, k, plots[:, s, :], tau)
+    return pos, vel
+
+
+def run_status(plots, out) -> np.ndarray:
+    """``ok`` or ``divergent`` per run (see the module docstring)."""
+    has = np.isfinite(plots).all(axis=2)  # (n, n_scans)
+    started = np.cumsum(has, axis=1) > 0
+    finite = np.ones_like(has)
+    for key in ("x_m", "y_m", "vx_m_s", "vy_m_s"):
+        finite &= np.isfinite(out[key])
+    bad = (started & ~finite).any(axis=1) | ~has.any(axis=1)
+    return np.where(bad, "divergent", "ok")
+
+
+class RadarEstimator(Estimator):
+    family = "radar2d"
+
+    def estimate(self, log: RadarLog) -> dict:
+        tau = scan_period(log, self.config.scan_period_s)
+        # extreme (valid) noise settings can overflow a run's covariance: flagged, not raised
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+            out = self.track(log, tau)
+        out["t_s"] = np.broadcast_to(log.t_s, out["x_m"].shape).copy()
+        out["status"] = run_status(log.plots_m, out)
+        return out
+
+    def track(self, log: RadarLog, tau: float) -> dict:
+        raise NotImplementedError
+
+
+def state_columns(pos, vel) -> dict:
+    """Per-scan estimates (n, n_scans, 2) -> named columns."""
+    return {"x_m": pos[..., 0], "y_m": pos[..., 1], "vx_m_s": vel[..., 0], "vy_m_s": vel[..., 1]}

@@ -1,0 +1,132 @@
+"""Scenario ``radar2d``: a small fast boat turning sharply in front of a coastal radar.
+
+See ``../shared/specs/radar2d.md``. The vessel starts at the origin heading +x (east) at
+``speed_m_s`` and follows ``legs`` (straight, then a left turn of radius 300 m, then
+straight). Scans every ``scan_period_s``; each Monte Carlo run is one track with its own
+measurement noise: isotropic Cartesian (``sigma_m`` per axis) or ``polar`` (range and
+bearing noise at a radar at ``radar_xy_m``, converted to Cartesian plots).
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pyarrow as pa
+
+from tma.config import require
+from tma.errors import ConfigError
+from tma.families.radar2d.log import RadarLog, read_radar_log, write_radar_log
+from tma.path import LegPath
+from tma.sharding import shard_rng, shard_track_ids
+
+FAMILY = "radar2d"
+# Sanity bounds: every run's scans are held in memory at once; a coastal radar's horizon is
+# tens of km, so a path of a million km is a typo, and one that overflows float64 is worse.
+MAX_SCANS = 100_000
+MAX_PATH_M = 1e9
+
+
+@dataclass
+class LegConfig:
+    """``{duration_s}`` straight on, or ``{turn_radius_m, duration_s, direction}``."""
+
+    duration_s: float | None = None
+    course_deg: float | None = None
+    turn_radius_m: float | None = None
+    direction: str | None = None
+
+
+def _default_legs():
+    return [LegConfig(duration_s=45.0),
+            LegConfig(turn_radius_m=300.0, duration_s=45.0, direction="left"),
+            LegConfig(duration_s=30.0)]
+
+
+@dataclass
+class Config:
+    family: str = FAMILY
+    n_tracks: int = 1000  # Monte Carlo runs
+    speed_m_s: float = 10.0
+    initial_course_deg: float = 90.0  # heading +x (clockwise from north)
+    legs: list[LegConfig] = field(default_factory=_default_legs)
+    scan_period_s: float = 3.0
+    noise: str = "cartesian"  # cartesian | polar
+    sigma_m: float = 10.0  # cartesian: std per axis
+    radar_xy_m: list[float] = field(default_factory=lambda: [0.0, -4000.0])  # polar
+    range_sd_m: float = 6.0  # polar
+    bearing_sd_deg: float = 0.18  # polar
+    seed: int = 20260103
+    shard_size: int = 500
+
+    def __post_init__(self):
+        w = "scenario 'radar2d'"
+        require(self.family == FAMILY, w, f"family must be '{FAMILY}'")
+        require(self.n_tracks >= 1 and self.shard_size >= 1, w,
+                "n_tracks, shard_size must be >= 1")
+        require(self.seed >= 0, w, "seed must be >= 0")
+        for key in ("speed_m_s", "scan_period_s", "sigma_m", "range_sd_m", "bearing_sd_deg"):
+            require(getattr(self, key) > 0, w, f"{key} must be positive")
+        require(self.noise in ("cartesian", "polar"), w, "noise must be cartesian or polar")
+        require(len(self.radar_xy_m) == 2, w, "radar_xy_m needs two values (x, y)")
+        try:
+            with np.errstate(over="ignore", invalid="ignore"):  # checked just below
+                duration = vessel_path(self).duration_s
+        except ConfigError as exc:
+            raise ConfigError(f"{w}: {exc}") from None
+        require(self.speed_m_s * duration <= MAX_PATH_M, w,
+                f"speed_m_s x the legs' duration must be <= {MAX_PATH_M:g} m")
+        # the IMM starts from the two-point line of the first two plots, then filters
+        require(2 * self.scan_period_s <= duration <= MAX_SCANS * self.scan_period_s, w,
+                f"the legs must last 2 to {MAX_SCANS} x scan_period_s (3 scans or more)")
+
+
+def label(cfg: Config) -> str:
+    return f"v{cfg.speed_m_s:g}-{cfg.noise}-n{cfg.n_tracks}"
+
+
+def vessel_path(cfg: Config) -> LegPath:
+    return LegPath(0.0, 0.0, cfg.speed_m_s, cfg.legs, cfg.initial_course_deg)
+
+
+def scan_times(cfg: Config, path: LegPath) -> np.ndarray:
+    n = int(np.floor(path.duration_s / cfg.scan_period_s + 1e-9)) + 1
+    return np.arange(n) * cfg.scan_period_s
+
+
+def sensor_metadata(cfg: Config) -> dict:
+    return {"noise": cfg.noise, "sigma_m": cfg.sigma_m, "radar_x_m": cfg.radar_xy_m[0],
+            "radar_y_m": cfg.radar_xy_m[1], "range_sd_m": cfg.range_sd_m,
+            "bearing_sd_deg": cfg.bearing_sd_deg}
+
+
+def simulate_shard(cfg: Config, shard_index: int):
+    track_id = shard_track_ids(cfg, shard_index)
+    n = track_id.size
+    rng = shard_rng(cfg, shard_index)
+    path = vessel_path(cfg)
+    t = scan_times(cfg, path)
+    x, y = path.position(t)
+    noise = rng.standard_normal((n, t.size, 2))
+    if cfg.noise == "cartesian":
+        plots = np.stack([x, y], axis=-1) + cfg.sigma_m * noise
+    else:
+        rx, ry = cfg.radar_xy_m
+        rng_m = np.hypot(x - rx, y - ry) + cfg.range_sd_m * noise[..., 0]
+        bearing = np.arctan2(x - rx, y - ry) + np.deg2rad(cfg.bearing_sd_deg) * noise[..., 1]
+        plots = np.stack([rx + rng_m * np.sin(bearing), ry + rng_m * np.cos(bearing)], axis=-1)
+    log = RadarLog(t, track_id, plots, sensor_metadata(cfg))
+    course = path.course(t)
+    truth = pa.table({
+        "track_id": np.repeat(track_id, t.size), "step": np.tile(np.arange(t.size), n),
+        "t_s": np.tile(t, n), "x_m": np.tile(x, n), "y_m": np.tile(y, n),
+        "vx_m_s": np.tile(cfg.speed_m_s * np.sin(course), n),
+        "vy_m_s": np.tile(cfg.speed_m_s * np.cos(course), n),
+    })
+    return log, truth
+
+
+def write_log(path, log: RadarLog, metadata=None) -> int:
+    return write_radar_log(path, log, metadata)
+
+
+def read_log(path) -> RadarLog:
+    return read_radar_log(path)

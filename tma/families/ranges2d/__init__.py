@@ -1,0 +1,10 @@
+"""``ranges2d``: range-only navigation, the Bayesian mean by importance sampling
+(``../shared/specs/ranges2d.md``)."""
+
+from tma.families import Family
+
+FAMILY = Family("ranges2d", estimators={
+    "quadrature": "tma.families.ranges2d.estimators.quadrature:Quadrature",
+    "prior_is": "tma.families.ranges2d.estimators.prior_is:PriorIS",
+    "adaptive_is": "tma.families.ranges2d.estimators.adaptive_is:AdaptiveIS",
+})

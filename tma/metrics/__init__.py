@@ -1,1 +1,0 @@
-"""Per-track metrics and summary statistics."""

@@ -1,1 +1,0 @@
-"""Motion and measurement models shared by scenarios, estimators and metrics."""
