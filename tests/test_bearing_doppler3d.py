@@ -2,6 +2,7 @@
 model, CMNF's own covariance on held-out paths, divergence, bad input, the pipeline."""
 
 import json
+import shutil
 from types import SimpleNamespace
 
 import numpy as np
@@ -346,7 +347,13 @@ def test_wrong_family_and_pipeline(tmp_path):
     cmnf = CMNF.prepare({"name": "cmnf", "training_paths": 400, "training_seed": 7,
                          "pinv_rtol": 1e-12, "covariance_every": 10, "artefact": None},
                         _dataset(tmp_path), tmp_path / "data")
-    assert cmnf["artefact"]["sha256"] == sha256_file(cmnf["artefact"]["path"])
+    assert cmnf["artefact"]["sha256"] == sha256_file(
+        tmp_path / "data" / "artefacts" / cmnf["artefact"]["key"] / "arrays.npz")
+    assert "path" not in cmnf["artefact"]  # the run key must not depend on a path's spelling
+    # aggregate trains nothing: without the artefacts it still reads the finished runs
+    shutil.rmtree(tmp_path / "data" / "artefacts")
+    aggregate_stage(cfg)
+    assert not (tmp_path / "data" / "artefacts").exists()
 
 
 def _dataset(tmp_path):

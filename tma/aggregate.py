@@ -14,7 +14,7 @@ import pandas as pd
 from tma.families import family as family_of
 from tma.io.dataset import Dataset
 from tma.io.owned import remove_stale_temporaries
-from tma.runs import open_run, prepared_config, run_path
+from tma.runs import full_config, open_run, run_path
 
 
 @dataclass
@@ -33,7 +33,7 @@ def aggregate(data_dir, tables_dir, jobs, table=None) -> list[Path]:
         remove_stale_temporaries(tables_dir, only_dead=True)
     for dataset, est_cfg in jobs:
         dataset.verify()
-        est_cfg = prepared_config(data_dir, dataset, est_cfg)  # artefacts exist: reused
+        est_cfg = full_config(dataset, est_cfg)  # no prepare: aggregate trains nothing
         root = run_path(data_dir, dataset, est_cfg)
         manifest, estimates = open_run(root)
         remove_stale_temporaries(root, only_dead=True)

@@ -93,6 +93,7 @@ class ShardTask:
     estimator_config: dict
     out_path: str
     key: str
+    data_dir: str
 
 
 def estimate_shard_group(tasks: list[ShardTask]) -> list[dict]:
@@ -117,11 +118,15 @@ def estimate_shard(task: ShardTask, log) -> dict:
     """Run one estimator over one dataset shard's log and write its output."""
     out = Path(task.out_path)
     estimator = build_estimator(task.estimator_config)
+    estimator.data_dir = Path(task.data_dir)
     start = perf_counter()
     columns = estimator.estimate(log)
     seconds = perf_counter() - start
     # Optional small side tables (e.g. sample points for plots): written beside the shard.
-    extras = columns.pop("extras", {}) if isinstance(columns.get("extras"), dict) else {}
+    extras = columns.pop("extras", {})
+    if not set(extras) <= set(estimator.side_tables):  # a shard may hold none of them
+        raise RuntimeError(f"estimator '{estimator.name}' returned side tables "
+                           f"{sorted(extras)}, declared {sorted(estimator.side_tables)}")
     for name, table in extras.items():
         write_parquet_atomic(extra_path(out, name), pa.table(table))
     write_parquet_atomic(out, columns_to_table(log.track_id, columns))
@@ -130,30 +135,23 @@ def estimate_shard(task: ShardTask, log) -> dict:
                          extras=sorted(extras))
 
 
-def prepared_config(data_dir, dataset: Dataset, estimator_config: dict, n_jobs=1,
-                    progress=False) -> dict:
-    """The full estimator config (every default filled in, so the run key changes with
-    them) after its optional ``prepare`` step (e.g. training an artefact that the run then
-    records by path and hash)."""
+def full_config(dataset: Dataset, estimator_config: dict) -> dict:
+    """The estimator config with every default filled in (the run key hashes it, so it
+    changes with them), checked against the dataset's family."""
     check_compatible(dataset, estimator_config)
-    # fail on bad parameters before any work starts
-    estimator_config = to_plain(build_estimator(estimator_config).config)
-    cls = estimator_class(estimator_config["name"])
-    if hasattr(cls, "prepare"):
-        estimator_config = cls.prepare(estimator_config, dataset, data_dir, n_jobs, progress)
-    return estimator_config
+    return to_plain(build_estimator(estimator_config).config)
 
 
-def plan_run(data_dir, dataset: Dataset, estimator_config: dict, stage: Path):
-    """Shard tasks of one run (``estimator_config`` as returned by ``prepared_config``),
+def plan_run(data_dir, dataset: Dataset, estimator_config: dict, key: str, stage: Path):
+    """Shard tasks of one run of key ``key`` (``estimator_config`` after ``prepare``),
     writing into ``stage``."""
-    key = run_key(dataset, estimator_config)
     tasks = []
     for shard in dataset.shard_paths:
         out = stage / "shards" / (Path(shard).stem + ".parquet")
         shard_key = sha256_json({"run": key, "shard": shard,
                                  "sha256": dataset.manifest["shards"][shard]["sha256"]})
-        tasks.append(ShardTask(str(dataset.root), shard, estimator_config, str(out), shard_key))
+        tasks.append(ShardTask(str(dataset.root), shard, estimator_config, str(out), shard_key,
+                               str(data_dir)))
     return tasks
 
 
@@ -213,7 +211,7 @@ def estimate_runs(data_dir, jobs, *, n_jobs=2, progress=True, force=False):
     planned = []
     for dataset, est_cfg in jobs:
         dataset.verify()
-        est_cfg = prepared_config(data_dir, dataset, est_cfg, n_jobs, progress)
+        est_cfg = full_config(dataset, est_cfg)
         planned.append((run_path(data_dir, dataset, est_cfg), dataset, est_cfg))
     with locked([p[0] for p in planned]):  # one process per run; a second one waits
         return _estimate_locked(data_dir, planned, n_jobs=n_jobs, progress=progress,
@@ -230,7 +228,12 @@ def _estimate_locked(data_dir, planned, *, n_jobs, progress, force):
         if not force:
             adopt_broken(root, stage)  # its verified shards are reused, the rest recomputed
         stage = staging_dir(root, fresh=force)
-        run_tasks_ = plan_run(data_dir, dataset, est_cfg, stage)
+        # the key hashes the config before prepare, so training (an artefact the prepared
+        # config records by content hash) happens only when the run must be computed
+        key = run_key(dataset, est_cfg)
+        est_cfg = estimator_class(est_cfg["name"]).prepare(est_cfg, dataset, data_dir, n_jobs,
+                                                           progress)
+        run_tasks_ = plan_run(data_dir, dataset, est_cfg, key, stage)
         todo.append((root, stage, dataset, est_cfg, run_tasks_))
         tasks += run_tasks_
     groups = {}  # every estimator on the same dataset shard shares one read of the log

@@ -3,7 +3,9 @@
 ``data/artefacts/<kind>-<key12>/`` holds ``arrays.npz`` and ``manifest.json`` (kind, the full
 spec it was built from, package version, the npz's sha256). The key hashes the spec and the
 package version, so a later run with the same spec reuses the artefact (after checking its
-hash) and a different spec builds its own.
+hash) and a different spec builds its own. An artefact is referenced by the record
+``{"kind", "key", "sha256"}`` (``key`` the directory name): no path, so a run that uses it
+does not depend on how ``paths.data_dir`` is spelled.
 """
 
 import json
@@ -24,12 +26,14 @@ def artefact_dir(data_dir, kind: str, spec: dict) -> Path:
     return Path(data_dir) / "artefacts" / f"{kind}-{key[:12]}"
 
 
-def load_or_build(data_dir, kind: str, spec: dict, build) -> tuple[Path, str]:
-    """Path and sha256 of the artefact for ``spec``; ``build()`` -> dict of arrays if absent."""
+def load_or_build(data_dir, kind: str, spec: dict, build) -> dict:
+    """The record ``{"kind", "key", "sha256"}`` of the artefact for ``spec``; ``build()`` ->
+    dict of arrays when it is absent or damaged."""
     root = artefact_dir(data_dir, kind, spec)
     with locked([root]):  # a second process building the same artefact waits, then reuses it
         remove_stale_temporaries(root.parent, only_dead=True)
-        return _load_or_build(root, kind, spec, build)
+        path, sha = _load_or_build(root, kind, spec, build)
+    return {"kind": kind, "key": path.parent.name, "sha256": sha}
 
 
 def _load_or_build(root: Path, kind: str, spec: dict, build) -> tuple[Path, str]:
@@ -50,9 +54,9 @@ def _load_or_build(root: Path, kind: str, spec: dict, build) -> tuple[Path, str]
     return root / ARRAYS, sha
 
 
-def load_arrays(record: dict) -> dict:
-    """Arrays of an artefact given ``{"path", "sha256"}`` (hash-checked)."""
-    path = Path(record["path"])
+def load_arrays(record: dict, data_dir) -> dict:
+    """Arrays of the artefact ``record`` under ``data_dir`` (hash-checked)."""
+    path = Path(data_dir) / "artefacts" / record["key"] / ARRAYS
     if sha256_file(path) != record["sha256"]:
         raise IntegrityError(f"{path}: artefact does not match its recorded sha256")
     with np.load(path) as data:

@@ -10,6 +10,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 import pyarrow as pa  # noqa: E402
 
+from tma.families import estimator_class  # noqa: E402
 from tma.families.radar2d.metrics import (  # noqa: E402
     GATE_M,
     SEGMENTS,
@@ -43,8 +44,9 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
         write_parquet_atomic(e.run_root / "metrics.parquet",
                              pa.Table.from_pandas(per_scan, preserve_index=False))
         speed = e.dataset.manifest["config"]["speed_m_s"]
-        rows.append(summary_row(per_scan, e.estimator, speed, e.manifest["config"].get("memory")
-                                if e.estimator == "fuzzy_mm" else None))
+        selects_memory = "m" in estimator_class(e.estimator).outputs
+        rows.append(summary_row(per_scan, e.estimator, speed,
+                                e.manifest["config"]["memory"] if selects_memory else None))
         g = per_scan.groupby("t_s")
         curve = pd.DataFrame({"t_s": g["error_m"].mean().index, "error_mean_m":
                               g["error_m"].mean().to_numpy()})

@@ -20,6 +20,7 @@ import pyarrow.parquet as pq  # noqa: E402
 from scipy.stats import norm  # noqa: E402
 
 from tma.errors import ConfigError  # noqa: E402
+from tma.families import estimator_class  # noqa: E402
 from tma.families.ranges2d.estimators.base import STATUSES  # noqa: E402
 from tma.families.ranges2d.log import read_ranges_log  # noqa: E402
 from tma.families.ranges2d.model import RangeModel  # noqa: E402
@@ -89,7 +90,7 @@ def _seconds_per_run(run_root: Path) -> float:
 
 
 def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
-    reference = next((e for e in entries if e.estimator == "quadrature"), None)
+    reference = next((e for e in entries if estimator_class(e.estimator).reference), None)
     if reference is None:
         raise ConfigError("the ranges2d table measures errors against 'quadrature': "
                           "include estimator=quadrature")

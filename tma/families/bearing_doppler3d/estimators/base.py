@@ -61,6 +61,7 @@ def drift_step(x, dt, lam, nu):
 
 
 class AuvEstimator(Estimator):
+    side_tables = ("covariance",)  # full covariances every covariance_every epochs
     family = "bearing_doppler3d"
     def estimate(self, log: HydrophoneLog) -> dict:
         record = log.model
@@ -70,11 +71,11 @@ class AuvEstimator(Estimator):
                              f"{model.n_obs}")
         # a wrecked path overflows on its own (paths never mix); it is flagged, not raised
         with np.errstate(all="ignore"):
-            est, cov, ok = self.run(model, record, log.t_s, log.obs)  # (n,K,6), (n,K,6,6), (n,)
+            est, cov, ok = self.solve(model, record, log.t_s, log.obs)  # (n,K,6), (n,K,6,6), (n,)
             return output_columns(est, cov, ok, log.t_s, self.config.covariance_every,
                                   log.track_id)
 
-    def run(self, model, record, t, obs):
+    def solve(self, model, record, t, obs):
         raise NotImplementedError
 
 
@@ -84,7 +85,7 @@ class KalmanFilterBase(AuvEstimator):
     how they hold the covariance (``initial_factor``, ``predict_factor``, ``update``,
     ``covariance``)."""
 
-    def run(self, model, record, t, obs):
+    def solve(self, model, record, t, obs):
         n, K, _ = obs.shape
         dt = record["filter_step_s"]
         mean0, cov0 = initial_moments(record["initial"])

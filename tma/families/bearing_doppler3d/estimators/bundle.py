@@ -29,7 +29,7 @@ def bundle_spec(model_record: dict, n_paths: int, seed: int) -> dict:
 
 
 def training_bundle(data_dir, model_record, n_paths, seed, n_jobs=1, progress=False) -> dict:
-    """``{"path", "sha256"}`` of the bundle artefact (simulated on first use)."""
+    """The record of the bundle artefact (simulated on first use)."""
     spec = bundle_spec(model_record, n_paths, seed)
 
     def build():
@@ -40,8 +40,7 @@ def training_bundle(data_dir, model_record, n_paths, seed, n_jobs=1, progress=Fa
         return {"truth": np.concatenate([p[0] for p in parts]),
                 "obs": np.concatenate([p[1] for p in parts])}
 
-    path, sha = load_or_build(data_dir, "bundle", spec, build)
-    return {"path": str(path), "sha256": sha}
+    return load_or_build(data_dir, "bundle", spec, build)
 
 
 def bundle_observations(arrays: dict, no_doppler: bool) -> np.ndarray:

@@ -43,8 +43,8 @@ class Config:
         require(self.training_seed >= 0, w, "training_seed must be >= 0")
         require(0 < self.pinv_rtol < 1, w, "pinv_rtol must lie in (0, 1) (relative threshold)")
         require(self.covariance_every >= 1, w, "covariance_every must be >= 1")
-        require(self.artefact is None or {"path", "sha256"} <= set(self.artefact), w,
-                "artefact must be null or {path, sha256} (set by the estimate stage)")
+        require(self.artefact is None or {"kind", "key", "sha256"} <= set(self.artefact), w,
+                "artefact must be null or {kind, key, sha256} (set by the estimate stage)")
 
 
 def regression_gain(cov_xy, cov_yy, rtol):
@@ -120,7 +120,7 @@ class CMNF(AuvEstimator):
     @classmethod
     def prepare(cls, config: dict, dataset, data_dir, n_jobs=1, progress=False) -> dict:
         """Train (or reuse) the gains for the dataset's model; returns the config with the
-        artefact's path and hash (so they enter the run's key)."""
+        artefact's record (kind, key, sha256), which the run manifest keeps."""
         from tma.families import scenario_module
 
         record = scenario_module(dataset.family).model_record_of(dataset)
@@ -129,7 +129,7 @@ class CMNF(AuvEstimator):
         spec = {"model": record, "bundle": bundle["sha256"], "pinv_rtol": config["pinv_rtol"]}
 
         def build():
-            arrays = load_arrays(bundle)
+            arrays = load_arrays(bundle, data_dir)
             obs = bundle_observations(arrays, record["no_doppler"])
             model = auv_model(record)
             t = epochs(record)
@@ -138,11 +138,10 @@ class CMNF(AuvEstimator):
                 return train(arrays["truth"], obs, model_prediction(model, record, t),
                              model.observe, config["pinv_rtol"])
 
-        path, sha = load_or_build(data_dir, "cmnf", spec, build)
-        return {**config, "artefact": {"path": str(path), "sha256": sha}}
+        return {**config, "artefact": load_or_build(data_dir, "cmnf", spec, build)}
 
-    def run(self, model, record, t, obs):
-        gains = load_arrays(self.config.artefact)
+    def solve(self, model, record, t, obs):
+        gains = load_arrays(self.config.artefact, self.data_dir)
         est = apply(gains, obs, model_prediction(model, record, t), model.observe)
         n, K, _ = obs.shape
         cov = np.broadcast_to(gains["K_hat"][None], (n, K, 6, 6))

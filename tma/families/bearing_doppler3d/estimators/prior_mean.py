@@ -26,8 +26,8 @@ class Config:
                 f"bundle_paths must be in [100, {MAX_PATHS}]")
         require(self.bundle_seed >= 0, w, "bundle_seed must be >= 0")
         require(self.covariance_every >= 1, w, "covariance_every must be >= 1")
-        require(self.artefact is None or {"path", "sha256"} <= set(self.artefact), w,
-                "artefact must be null or {path, sha256} (set by the estimate stage)")
+        require(self.artefact is None or {"kind", "key", "sha256"} <= set(self.artefact), w,
+                "artefact must be null or {kind, key, sha256} (set by the estimate stage)")
 
 
 class PriorMean(AuvEstimator):
@@ -43,8 +43,8 @@ class PriorMean(AuvEstimator):
                                  n_jobs, progress)
         return {**config, "artefact": bundle}
 
-    def run(self, model, record, t, obs):
-        truth = load_arrays(self.config.artefact)["truth"]
+    def solve(self, model, record, t, obs):
+        truth = load_arrays(self.config.artefact, self.data_dir)["truth"]
         if truth.shape[1] != t.size:
             raise ValueError("the bundle's epochs differ from the log's")
         mean = truth.mean(axis=0)  # (K, 6)

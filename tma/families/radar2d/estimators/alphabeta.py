@@ -31,7 +31,7 @@ class AlphaBeta(RadarEstimator):
     name = "alphabeta"
     Config = Config
 
-    def track(self, log, tau):
+    def solve(self, log, tau):
         n, n_scans = log.n_tracks, log.t_s.size
         pos, vel, k = initial_state(n)
         est_pos, est_vel = np.empty((n, n_scans, 2)), np.empty((n, n_scans, 2))

@@ -87,12 +87,12 @@ class RadarEstimator(Estimator):
         tau = scan_period(log, self.config.scan_period_s)
         # extreme (valid) noise settings can overflow a run's covariance: flagged, not raised
         with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
-            out = self.track(log, tau)
+            out = self.solve(log, tau)
         out["t_s"] = np.broadcast_to(log.t_s, out["x_m"].shape).copy()
         out["status"] = run_status(log.plots_m, out)
         return out
 
-    def track(self, log: RadarLog, tau: float) -> dict:
+    def solve(self, log: RadarLog, tau: float) -> dict:
         raise NotImplementedError
 
 

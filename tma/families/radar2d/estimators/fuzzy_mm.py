@@ -61,10 +61,11 @@ def bank_estimates(plots, tau, J):
 
 
 class FuzzyMultiModel(RadarEstimator):
+    outputs = ("m", "sigma_hat_m")  # selected memory length, noise estimate (m)
     name = "fuzzy_mm"
     Config = Config
 
-    def track(self, log, tau):
+    def solve(self, log, tau):
         cfg, J = self.config, self.config.memory
         z = log.plots_m
         n, n_scans, _ = z.shape

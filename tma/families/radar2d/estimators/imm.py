@@ -57,10 +57,11 @@ def measurement_covariance(sensor: dict, plots):
 
 
 class IMM(RadarEstimator):
+    outputs = ("p_cv", "p_turn")  # model probabilities
     name = "imm"
     Config = Config
 
-    def track(self, log, tau):
+    def solve(self, log, tau):
         cfg = self.config
         z = log.plots_m
         n, n_scans, _ = z.shape

@@ -89,10 +89,11 @@ def scalar_log_kernel(model):
 
 
 class AdaptiveIS(RangesEstimator):
+    side_tables = ("samples",)  # its first draws of one track, for the plot
     name = "adaptive_is"
     Config = Config
 
-    def estimate_track(self, model, rng, keep=0):
+    def solve(self, model, rng, keep=0):
         cfg = self.config
         box = ((cfg.box_m[0], cfg.box_m[1]), (cfg.box_m[2], cfg.box_m[3]))
         outside = mass_outside(model, box, cfg.check_samples, rng)

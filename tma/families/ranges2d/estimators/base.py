@@ -39,7 +39,7 @@ class RangesEstimator(Estimator):
             # absurd but valid scales (a prior sd of 1e300 m) overflow: the track is flagged
             try:
                 with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-                    row = self.estimate_track(model, rng, keep)
+                    row = self.solve(model, rng, keep)
             except (OverflowError, ZeroDivisionError) as exc:  # Python float arithmetic
                 row = no_estimate_columns("failed", f"{self.name}: track {track}: {exc}")
             if row.get("kept") is not None:
@@ -53,7 +53,7 @@ class RangesEstimator(Estimator):
                                              "x_m": kept[:, 0], "y_m": kept[:, 1]}}
         return columns
 
-    def estimate_track(self, model: RangeModel, rng, keep: int = 0) -> dict:
+    def solve(self, model: RangeModel, rng, keep: int = 0) -> dict:
         raise NotImplementedError
 
 

@@ -29,10 +29,11 @@ def budget(cfg) -> SamplingBudget:
 
 
 class PriorIS(RangesEstimator):
+    side_tables = ("samples",)  # its first draws of one track, for the plot
     name = "prior_is"
     Config = Config
 
-    def estimate_track(self, model, rng, keep=0):
+    def solve(self, model, rng, keep=0):
         def draw(k, rng):
             points = model.prior_mean_m + model.prior_sd_m * rng.standard_normal((k, 2))
             return points, model.log_likelihood(points[:, 0], points[:, 1])

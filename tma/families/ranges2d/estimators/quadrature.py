@@ -82,6 +82,7 @@ def posterior_mean(model: RangeModel, cfg: Config):
 
 
 class Quadrature(RangesEstimator):
+    reference = True  # the exact posterior mean the samplers are measured against
     name = "quadrature"
     Config = Config
 
@@ -89,7 +90,7 @@ class Quadrature(RangesEstimator):
         super().__init__(config)
         self._cache = {}  # repeated tracks with identical ranges are integrated once
 
-    def estimate_track(self, model, rng, keep=0):
+    def solve(self, model, rng, keep=0):
         key = (model.counts.tobytes(), model.mean_range_m.tobytes(), model.sigma_m,
                model.prior_mean_m.tobytes(), model.prior_sd_m.tobytes())
         if key not in self._cache:
