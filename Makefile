@@ -4,8 +4,9 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
-# Every family's default experiment; `make table EXPERIMENT=<name>` builds one.
-EXPERIMENTS := bearings2d_table ranges2d_table radar2d_table bearing_doppler3d_table
+# Every family's default experiment (conf/experiment/*_table.yaml); `make table EXPERIMENT=<name>`
+# builds one.
+EXPERIMENTS := $(sort $(basename $(notdir $(wildcard conf/experiment/*_table.yaml))))
 EXPERIMENT ?= $(EXPERIMENTS)
 ARGS ?=
 

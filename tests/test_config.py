@@ -10,8 +10,15 @@ from omegaconf import OmegaConf
 
 from pipeline._common import CONF_DIR, estimator_nodes, scenario_nodes
 from tests.conftest import compose_cfg, run_cli
+from tma.config import to_plain
 from tma.errors import ConfigError
-from tma.families import build_estimator, estimator_class, estimator_names, load_scenario
+from tma.families import (
+    NAMES,
+    build_estimator,
+    estimator_class,
+    estimator_names,
+    load_scenario,
+)
 
 CONF = Path(CONF_DIR)
 
@@ -20,18 +27,23 @@ def _options(group):
     return sorted(p.stem for p in (CONF / group).glob("*.yaml"))
 
 
-@pytest.mark.parametrize("name", _options("scenario"))
-def test_every_scenario_composes_and_validates(name):
+@pytest.mark.parametrize("name", NAMES)
+def test_every_scenario_composes_from_its_dataclass_alone(name):
     cfg = compose_cfg([f"scenario={name}"])
     module, scenario = load_scenario(OmegaConf.to_container(cfg.scenario))
-    assert module.FAMILY == scenario.family
+    assert module.FAMILY == scenario.family == name
+    # one source of truth: the composed defaults are the dataclass's, no YAML copy exists
+    assert OmegaConf.to_container(cfg.scenario) == to_plain(module.Config())
+    assert not (CONF / "scenario").exists()
 
 
-@pytest.mark.parametrize("name", _options("estimator"))
-def test_every_estimator_composes_and_builds(name):
+@pytest.mark.parametrize("name", estimator_names())
+def test_every_estimator_composes_from_its_dataclass_alone(name):
     cfg = compose_cfg([f"estimator={name}"])
-    assert cfg.estimator.name in estimator_names()
-    build_estimator(OmegaConf.to_container(cfg.estimator))
+    assert cfg.estimator.name == name
+    built = build_estimator(OmegaConf.to_container(cfg.estimator))
+    assert OmegaConf.to_container(cfg.estimator) == to_plain(built.config)
+    assert not (CONF / "estimator").exists()
 
 
 @pytest.mark.parametrize("name", _options("parallel"))

@@ -97,6 +97,28 @@ def load_scenario(node):
     return module, validate(module.Config, node, f"scenario '{name}'")
 
 
+def register_configs():
+    """Register every scenario and estimator ``Config`` dataclass's defaults with Hydra's
+    ConfigStore as ``scenario/<family>`` and ``estimator/<name>``: the dataclass is the one
+    source of every default (no YAML copy). The nodes are plain (untyped), so a bad value
+    reaches ``tma.config.validate`` and fails in one line naming the key."""
+    from hydra.core.config_store import ConfigStore
+
+    store = ConfigStore.instance()
+    for name in NAMES:
+        fam = family(name)
+        store.store(group="scenario", name=name, node=_defaults(fam.scenario.Config))
+        for estimator in fam.estimators:
+            store.store(group="estimator", name=estimator,
+                        node=_defaults(fam.estimator_class(estimator).Config))
+
+
+def _defaults(schema) -> dict:
+    from omegaconf import OmegaConf
+
+    return OmegaConf.to_container(OmegaConf.structured(schema))
+
+
 def dataset_name(module, cfg) -> str:
     """Directory name of the dataset a scenario config produces: family, label, config hash."""
     return f"{module.FAMILY}-{module.label(cfg)}-{sha256_json(to_plain(cfg))[:10]}"

@@ -21,7 +21,7 @@ which is never an ``ok`` track.
 """
 
 import numpy as np
-from scipy.stats import chi2, norm
+from scipy.special import chdtrc, ndtr  # chi-square and normal tails (light to import)
 
 from tma.angles import bearing_from_north, course_from_velocity
 from tma.linalg import jacobi_scaled_eigh
@@ -62,7 +62,7 @@ def runs_test_p(residuals, valid):
     with np.errstate(divide="ignore", invalid="ignore"):
         mean = 1 + 2 * n1 * n2 / n
         var = 2 * n1 * n2 * (2 * n1 * n2 - n) / (n * n * (n - 1))
-        p = 2 * norm.sf(np.abs(runs - mean) / np.sqrt(var))
+        p = 2 * ndtr(-np.abs(runs - mean) / np.sqrt(var))
     one_sign = (n1 == 0) | (n2 == 0)
     return np.where(one_sign, np.minimum(1.0, 2 * 0.5**n), p)
 
@@ -83,7 +83,7 @@ def assess(theta, cost_rad2, jtj, n_bearings, converged, t_now_s, own_x_now_m, o
     else:
         sigma2 = np.full(n, np.deg2rad(sigma_deg) ** 2)
         with np.errstate(divide="ignore", invalid="ignore"):
-            fit_p = (chi2.sf(cost_rad2 / sigma2, dof) if sigma_deg > 0 else np.full(n, np.nan))
+            fit_p = (chdtrc(dof, cost_rad2 / sigma2) if sigma_deg > 0 else np.full(n, np.nan))
 
     finite = np.isfinite(theta).all(axis=1) & np.isfinite(jtj).all(axis=(1, 2))
     w, V, d = jacobi_scaled_eigh(np.where(finite[:, None, None], jtj, np.eye(4)))
