@@ -8,7 +8,8 @@ from tma.families.bearings2d.ingest import ingest
 
 def ingest_stage(cfg):
     root = ingest(cfg.input, data_dir=cfg.paths.data_dir, name=cfg.name, fmt=cfg.format,
-                  sigma_deg=cfg.sigma_deg, min_bearings=cfg.min_bearings, force=cfg.force)
+                  sigma_deg=cfg.sigma_deg, min_bearings=cfg.min_bearings,
+                  bearing_units=cfg.bearing_units, force=cfg.force)
     log.info("dataset %s", root)
     print(f"dataset {root.name}: run  python -m pipeline.estimate dataset={root.name} "
           f"estimator=lm  then  python -m pipeline.aggregate dataset={root.name} estimator=lm")

@@ -33,22 +33,33 @@ def validate(schema, node, where: str):
         raise ConfigError(f"{where}: {exc}") from None
 
 
-def check_finite(node, where: str, key: str = "", allow_inf: bool = False):
-    """Raise ConfigError naming the dotted key of the first NaN or infinite float in ``node``
-    (a merged DictConfig/ListConfig or a value); fields whose metadata has ``nonfinite``
-    may be infinite (never NaN)."""
+MAX_INT = 2**53  # larger integers are not exact as JSON numbers (and no count is that big)
+
+
+def check_finite(node, where: str, key: str = "", allow_inf: bool = False,
+                 numbers: bool = False):
+    """Raise ConfigError naming the dotted key of the first NaN or infinite float, or integer
+    beyond +-2^53, in ``node`` (a merged DictConfig/ListConfig or a value); fields whose
+    metadata has ``nonfinite`` may be infinite (never NaN); elements of a field declared
+    ``list[float]`` must be numbers (``numbers``)."""
     if isinstance(node, DictConfig):
         cls = OmegaConf.get_type(node)
-        inf_ok = ({f.name for f in fields(cls) if f.metadata.get("nonfinite")}
-                  if is_dataclass(cls) else set())
+        declared = fields(cls) if is_dataclass(cls) else ()
+        inf_ok = {f.name for f in declared if f.metadata.get("nonfinite")}
+        number_lists = {f.name for f in declared if f.type == list[float]}
         for k in node:
-            check_finite(node[k], where, f"{key}.{k}" if key else str(k), k in inf_ok)
+            check_finite(node[k], where, f"{key}.{k}" if key else str(k), k in inf_ok,
+                         k in number_lists)
     elif isinstance(node, ListConfig):
         for i, value in enumerate(node):
+            if numbers and (isinstance(value, bool) or not isinstance(value, int | float)):
+                raise ConfigError(f"{where}: {key}[{i}] must be a number, got {value}")
             check_finite(value, where, f"{key}[{i}]", allow_inf)
     elif isinstance(node, float) and not (math.isfinite(node)
                                           or (allow_inf and math.isinf(node))):
         raise ConfigError(f"{where}: {key} must be finite, got {node}")
+    elif isinstance(node, int) and not isinstance(node, bool) and abs(node) > MAX_INT:
+        raise ConfigError(f"{where}: {key} = {node} is too large (at most 2^53)")
 
 
 def to_plain(obj):

@@ -111,7 +111,12 @@ def estimate_shard_group(tasks: list[ShardTask]) -> list[dict]:
 
 
 def _finished_record(task: ShardTask):
-    return finished_record(task.out_path, task.key)
+    """The sidecar record of a finished shard output, if it is whole (else: recompute)."""
+    record = finished_record(task.out_path, task.key)
+    whole = (record is not None and isinstance(record.get("extras"), list)
+             and all(isinstance(record.get(k), int) for k in ("rows", "epochs"))
+             and isinstance(record.get("seconds"), int | float))
+    return record if whole else None
 
 
 def estimate_shard(task: ShardTask, log) -> dict:

@@ -17,7 +17,7 @@ import pyarrow.parquet as pq
 
 from tma import __version__
 from tma.config import to_plain
-from tma.errors import TmaError
+from tma.errors import ConfigError, TmaError
 from tma.families import dataset_name, load_scenario
 from tma.io.atomic import sha256_json, write_parquet_atomic
 from tma.io.dataset import Dataset, datasets_dir, file_record, shard_relpath, write_manifest
@@ -28,6 +28,7 @@ from tma.sharding import n_shards
 
 log = logging.getLogger(__name__)
 PARTS = "parts"
+MAX_SHARDS = 100_000  # each shard is a task and a file; beyond this, shards are too small
 
 
 @dataclass(frozen=True)
@@ -86,12 +87,13 @@ def _write_shard(task: ShardTask, raw=None) -> dict:
                          truth_rows=0 if truth is None else truth.num_rows)
 
 
-def _is_good(root: Path) -> bool:
-    """True if the dataset at ``root`` exists and verifies; a damaged one is logged."""
+def _is_good(root: Path, config: dict) -> bool:
+    """True if the dataset at ``root`` exists, verifies and was simulated from ``config``;
+    a damaged or foreign one is logged."""
     if not root.exists():
         return False
     try:
-        Dataset.open(root).verify()
+        Dataset.open(root).verify().check_simulated_from(config)
         return True
     except TmaError as exc:
         log.warning("%s; simulating it again", exc)
@@ -111,9 +113,12 @@ def _simulate_locked(configs, roots, *, n_jobs, force, progress):
     for (module, cfg), root in zip(configs, roots, strict=True):
         recover(root)
         plain = to_plain(cfg)
-        if any(p[0] == root for p in plans) or (not force and _is_good(root)):
+        if any(p[0] == root for p in plans) or (not force and _is_good(root, plain)):
             plans.append((root, None, module, plain, None))
             continue
+        if n_shards(cfg) > MAX_SHARDS:
+            raise ConfigError(f"scenario '{module.FAMILY}': n_tracks / shard_size gives "
+                              f"{n_shards(cfg)} shards (at most {MAX_SHARDS}): raise shard_size")
         stage = staging_dir(root, fresh=force)
         shard_tasks = [ShardTask(str(stage), plain, i) for i in range(n_shards(cfg))]
         plans.append((root, stage, module, plain, shard_tasks))

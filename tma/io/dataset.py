@@ -111,7 +111,17 @@ class Dataset:
                 manifest["content_hash"]):
             raise IntegrityError(f"{path}: content_hash does not match the file records; "
                                  f"{_RECREATE}")
+        if manifest["name"] != root.name:  # a dataset copied or moved under another name
+            raise IntegrityError(f"{path}: this is dataset '{manifest['name']}', not "
+                                 f"'{root.name}'; {_RECREATE}")
         return cls(root, manifest)
+
+    def check_simulated_from(self, config: dict) -> "Dataset":
+        """IntegrityError unless this dataset was simulated from scenario ``config``."""
+        if self.manifest["source"] != "simulate" or self.manifest["config"] != config:
+            raise IntegrityError(f"{self.root}: not the dataset simulated from this scenario "
+                                 f"config (source '{self.manifest['source']}'); {_RECREATE}")
+        return self
 
     def verify(self) -> "Dataset":
         """Check every listed file: present, of its recorded size and sha256."""

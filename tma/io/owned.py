@@ -39,8 +39,11 @@ def plain_name(name, what: str) -> str:
 
 
 def is_owned(path) -> bool:
-    """True if ``path`` is a directory tma created: it has the marker or a tma manifest."""
+    """True if ``path`` is a directory tma created: it has the marker or a tma manifest, and
+    it is not a symbolic link (tma never writes or deletes through a link)."""
     path = Path(path)
+    if path.is_symlink():
+        return False
     if (path / MARKER).is_file():
         return True
     try:
@@ -60,12 +63,18 @@ def remove_owned(path):
     shutil.rmtree(path)
 
 
-def remove_stale_temporaries(directory, only_dead=False):
-    """Delete atomic-write temporaries (``.<name>.tmp-<pid>``) below ``directory`` left by
-    killed processes. ``only_dead``: keep those whose process still runs (shared folders)."""
-    for path in Path(directory).rglob(".*.tmp-*"):
+def remove_stale_temporaries(directory, only_dead=False, names=None):
+    """Delete atomic-write temporaries (``.<name>.tmp-<pid>``) left by killed processes: below
+    ``directory`` (a directory tma owns), or, given ``names``, only those of these file names
+    directly in ``directory`` (a folder shared with the user, such as the tables folder).
+    ``only_dead``: keep those whose process still runs."""
+    directory = Path(directory)
+    found = (directory.rglob(".*.tmp-*") if names is None else
+             [p for name in names for p in directory.glob(f".{name}.tmp-*")])
+    for path in found:
         match = _TEMPORARY.fullmatch(path.name)
-        if match and path.is_file() and not (only_dead and _alive(int(match.group(1)))):
+        if (match and path.is_file() and not path.is_symlink()
+                and not (only_dead and _alive(int(match.group(1))))):
             path.unlink(missing_ok=True)
 
 
@@ -122,6 +131,9 @@ def recover(target) -> None:
     the target is missing, and delete older versions that were already replaced."""
     target = Path(target)
     olds = sorted(p for p in target.parent.glob(f".{target.name}.old-*") if is_owned(p))
+    if target.is_symlink():
+        raise InputError(f"{target} is a symbolic link: tma does not write through links; "
+                         "choose another name")
     if olds and not target.exists():
         os.replace(olds.pop(), target)
     for old in olds:

@@ -133,3 +133,38 @@ def test_cli_ingest_of_a_truncated_mcap(tmp_path):
     assert "error:" in proc.stderr and "cut.mcap" in proc.stderr
     assert "Traceback" not in proc.stderr
     assert not (tmp_path / "d" / "datasets").exists()
+
+
+def test_a_log_in_radians_is_refused_unless_its_units_are_stated(tmp_path):
+    log, truth, df = _recording(sigma=0.2)
+    df.assign(bearing_deg=np.deg2rad(df.bearing_deg)).to_csv(tmp_path / "rad.csv", index=False)
+    with pytest.raises(InputError, match="look like radians. Set bearing_units=rad"):
+        ingest(tmp_path / "rad.csv", data_dir=tmp_path / "data")
+    assert not (tmp_path / "data").exists()
+    ingest(tmp_path / "rad.csv", data_dir=tmp_path / "data", bearing_units="rad", name="rec")
+    report = _estimate_and_report(tmp_path, "rec")
+    assert (report.status == "ok").all()
+    np.testing.assert_allclose(report.sqrt_ka_deg, 0.2, rtol=0.15)
+
+
+@pytest.mark.parametrize("options, message", [
+    ({"min_bearings": 0}, "min_bearings must be"), ({"min_bearings": 1.5}, "min_bearings"),
+    ({"min_bearings": True}, "min_bearings"), ({"sigma_deg": "abc"}, "sigma_deg must be"),
+    ({"sigma_deg": 0.0}, "sigma_deg must be"), ({"bearing_units": "grad"}, "bearing_units"),
+])
+def test_bad_ingest_options_are_refused(tmp_path, options, message):
+    _, _, df = _recording()
+    df.to_csv(tmp_path / "rec.csv", index=False)
+    with pytest.raises(ConfigError, match=message):
+        ingest(tmp_path / "rec.csv", data_dir=tmp_path / "data", **options)
+
+
+def test_columns_of_booleans_or_absurd_integers_are_refused(tmp_path):
+    _, _, df = _recording()
+    df.assign(bearing_deg=True).to_csv(tmp_path / "bool.csv", index=False)
+    with pytest.raises(InputError, match="column bearing_deg holds true/false"):
+        ingest(tmp_path / "bool.csv", data_dir=tmp_path / "data")
+    df.astype({"track_id": object}).assign(track_id="9" * 400).to_csv(tmp_path / "id.csv",
+                                                                       index=False)
+    with pytest.raises(InputError, match="track_id"):
+        ingest(tmp_path / "id.csv", data_dir=tmp_path / "data")

@@ -139,11 +139,34 @@ def test_data_that_do_not_fit_the_model_are_poor_fit(edit):
     assert np.mean(est.status != "ok") >= 0.99, est.status.value_counts()
     _assert_blank_sd_says_why(est)
     dof = est["n_bearings"] - 4
-    expected = chi2.sf(est["cost_rad2"] / np.deg2rad(0.5) ** 2, dof)
-    np.testing.assert_allclose(est["fit_p_value"], expected)
+    upper = chi2.sf(est["cost_rad2"] / np.deg2rad(0.5) ** 2, dof)  # two-sided test
+    np.testing.assert_allclose(est["fit_p_value"], np.minimum(1, 2 * np.minimum(upper, 1 - upper)))
     # sigma unknown: no track of these is reported ok
     est, _ = _run(cfg, edit=edit, sigma_known=False)
     assert np.mean(est.status != "ok") >= 0.99, est.status.value_counts()
+
+
+def _all_in_radians(log):
+    log.bearing_deg[:] = np.deg2rad(log.bearing_deg)
+
+
+def test_every_bearing_in_radians_is_poor_fit_against_the_declared_noise():
+    """Radians read as degrees shrink the residuals 57-fold: F / sigma^2 far below n - 4."""
+    est, _ = _run(Config(n_tracks=100, shard_size=100, seed=6), edit=_all_in_radians)
+    # (a target crossing north jumps 6 "deg": a few such tracks land inside the band; ingest
+    # refuses a log whose bearings all lie within +-2 pi before it gets here)
+    assert np.mean(est.status == "poor_fit") >= 0.9, est.status.value_counts()
+    assert np.mean(est.status != "ok") >= 0.97, est.status.value_counts()
+
+
+def test_a_declared_noiseless_sensor_with_residuals_is_poor_fit():
+    cfg = Config(n_tracks=50, shard_size=50, seed=6, sigma_deg=0.5)
+    log, _ = simulate(cfg, 0)
+    log.sigma_deg = 0.0  # the log claims no noise; its bearings have 0.5 deg
+    est = build_estimator({"name": "lm"}).estimate(log)
+    assert (est["status"] == "poor_fit").all()
+    log, _ = simulate(Config(n_tracks=50, shard_size=50, seed=6, sigma_deg=0.0), 0)
+    assert (build_estimator({"name": "lm"}).estimate(log)["status"] == "ok").all()
 
 
 def test_a_good_fit_is_rarely_poor_fit_when_sigma_is_unknown():

@@ -52,8 +52,14 @@ def read_bearings_csv(path) -> list[BearingsLog]:
     if "track_id" not in df.columns:
         df["track_id"] = 0
     for col in (*CSV_COLUMNS, "track_id"):
-        values = pd.to_numeric(df[col], errors="coerce")
-        bad = values.isna() | ~np.isfinite(values.astype(float))
+        if pd.api.types.is_bool_dtype(df[col]):
+            raise InputError(f"{path}: column {col} holds true/false, not numbers")
+        try:
+            values = pd.to_numeric(df[col], errors="coerce").astype(float)
+        except (OverflowError, ValueError, TypeError) as exc:
+            raise InputError(f"{path}: column {col} has values that are not numbers of a "
+                             f"usable size ({exc})") from None
+        bad = values.isna() | ~np.isfinite(values)
         if bad.any():
             lines = ", ".join(str(i + 2) for i in np.flatnonzero(bad)[:5])
             raise InputError(f"{path}: column {col} has missing, NaN or non-numeric values "
@@ -76,9 +82,6 @@ def read_bearings_csv(path) -> list[BearingsLog]:
         line = int(np.argmax(np.abs(b) > 360)) + 2
         raise InputError(f"{path}: bearing_deg {b[line - 2]:g} on line {line} is outside "
                          "[-360, 360]; bearings must be in degrees")
-    if b.size >= 10 and np.all(np.abs(b) <= 2 * np.pi) and np.ptp(b) > 0:
-        log.warning("%s: every bearing lies within +-2*pi: are they radians? "
-                    "bearing_deg must be degrees", path)
 
     df["line"] = np.arange(len(df)) + 2
     for track, rows in df.groupby("track_id", sort=True):
@@ -107,9 +110,41 @@ def _log_from_rows(rows: pd.DataFrame) -> BearingsLog:
                        track_id=track_id, bearing_deg=bearing)
 
 
+def _check_radians(logs, path, bearing_units):
+    """Convert bearings given in radians; refuse a log of unstated units whose bearings all
+    lie within +-2 pi (radians read as degrees fit a far, slow target with a tiny residual:
+    no statistic can tell it afterwards)."""
+    if bearing_units == "rad":
+        for lg in logs:
+            lg.bearing_deg = np.rad2deg(lg.bearing_deg)
+        return
+    b = np.concatenate([lg.bearing_deg[np.isfinite(lg.bearing_deg)] for lg in logs])
+    if bearing_units is None and b.size >= 10 and np.all(np.abs(b) <= 2 * np.pi):
+        raise InputError(f"{path}: every bearing lies within +-2 pi ({b.min():.3g} to "
+                         f"{b.max():.3g}): they look like radians. Set bearing_units=rad to "
+                         "convert them, or bearing_units=deg if they really are degrees")
+
+
+def _check_options(sigma_deg, min_bearings, bearing_units, force):
+    if sigma_deg is not None and (isinstance(sigma_deg, bool)
+                                  or not isinstance(sigma_deg, int | float)
+                                  or not 0 < sigma_deg < 90):
+        raise ConfigError(f"sigma_deg must be null or a number in (0, 90) degrees, "
+                          f"got '{sigma_deg}'")
+    if isinstance(min_bearings, bool) or not isinstance(min_bearings, int) or min_bearings < 5:
+        raise ConfigError(f"min_bearings must be a whole number >= 5 (4 unknowns and one "
+                          f"degree of freedom for the noise), got '{min_bearings}'")
+    if bearing_units not in (None, "deg", "rad"):
+        raise ConfigError(f"bearing_units must be null, deg or rad, got '{bearing_units}'")
+    if not isinstance(force, bool):
+        raise ConfigError(f"force must be true or false, got '{force}'")
+
+
 def ingest(input_path, *, data_dir, name=None, fmt="auto", sigma_deg=None, min_bearings=5,
-           force=False) -> Path:
-    """Validate an external log and write it as a dataset; returns the dataset directory."""
+           bearing_units=None, force=False) -> Path:
+    """Validate an external log and write it as a dataset; returns the dataset directory.
+    ``bearing_units``: ``deg``, ``rad``, or None (degrees, refusing a log that looks like
+    radians)."""
     if not input_path:
         raise ConfigError("ingest needs input=<path to a .csv or .mcap bearing log>")
     path = Path(str(input_path))
@@ -121,12 +156,14 @@ def ingest(input_path, *, data_dir, name=None, fmt="auto", sigma_deg=None, min_b
                               "set format=csv or format=mcap")
     if fmt not in ("csv", "mcap"):
         raise ConfigError(f"format must be auto, csv or mcap, got '{fmt}'")
-    if sigma_deg is not None and not 0 < sigma_deg < 90:
-        raise ConfigError(f"sigma_deg must be in (0, 90) degrees, got {sigma_deg}")
+    _check_options(sigma_deg, min_bearings, bearing_units, force)
     if not path.is_file():
         raise InputError(f"{path}: no such file")
 
     logs = read_bearings_csv(path) if fmt == "csv" else [read_bearings_log(path)]
+    if any(lg.n_tracks == 0 for lg in logs):
+        raise InputError(f"{path}: the log holds no bearing")
+    _check_radians(logs, path, bearing_units)
     origin = min(float(lg.t_s[0]) for lg in logs)
     all_ids = np.concatenate([lg.track_id for lg in logs])
     if np.unique(all_ids).size != all_ids.size:

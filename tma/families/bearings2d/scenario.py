@@ -82,10 +82,24 @@ class Config:
         require(self.shard_size > 0, where, "shard_size must be positive")
         require(0 <= self.sigma_deg < 90, where,
                 f"sigma_deg must be in [0, 90), got {self.sigma_deg}")
+        require(self.seed >= 0, where, f"seed must be >= 0, got {self.seed}")
         require(self.sample_period_s > 0, where, "sample_period_s must be positive")
         p = self.population
-        require(0 < p.distance_min_m <= p.distance_max_m, where, "bad population distance range")
-        require(0 <= p.speed_min_m_s <= p.speed_max_m_s, where, "bad population speed range")
+        require(0 < p.distance_min_m <= p.distance_max_m < 1e9, where,
+                "population distances must satisfy 0 < distance_min_m <= distance_max_m < 1e9")
+        require(0 <= p.speed_min_m_s <= p.speed_max_m_s < 1e4, where,
+                "population speeds must satisfy 0 <= speed_min_m_s <= speed_max_m_s < 1e4")
+        require(p.course_min_deg <= p.course_max_deg, where,
+                "population.course_min_deg must not exceed course_max_deg")
+        require(0 < self.observer.speed_m_s < 1e4, where, "observer.speed_m_s must be in (0, 1e4)")
+        for i, leg in enumerate(self.observer.legs):
+            for name in ("duration_s", "rate_deg_s"):
+                value = getattr(leg, name)
+                require(value is None or 0 < value < 1e7, where,
+                        f"observer.legs[{i}].{name} must be in (0, 1e7), got {value}")
+        duration = sum(leg.duration_s or 0.0 for leg in self.observer.legs)
+        require(duration / self.sample_period_s < 1e7, where,
+                "the observer path holds more than 1e7 bearing epochs")
 
 
 def label(cfg: Config) -> str:

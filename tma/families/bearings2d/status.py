@@ -8,9 +8,11 @@ last bearing ("now") by their Jacobians (delta method). ``status``, first rule t
 - ``unobservable``: J^T J is numerically singular (scaled by its diagonal, smallest over
   - ``not_converged``: the estimator stopped for any reason other than its F tolerance;
 - ``poor_fit``: the residuals do not look like the declared noise: with sigma known
-  (> 0), F / sigma^2 exceeds the chi-square(n - 4) quantile at level ``fit_alpha`` (outliers,
-  a manoeuvring target, bearings in radians); with sigma unknown, the Wald-Wolfowitz runs
-  test on the residual signs rejects randomness at ``fit_alpha`` (systematic misfit);
+  (> 0), F / sigma^2 fails a two-sided chi-square(n - 4) test at level ``fit_alpha``: too
+  large (outliers, a manoeuvring target, some bearings in radians) or far too small (every
+  bearing in radians, an overstated sigma); with sigma declared 0 (noiseless), a residual RMS
+  above ``NOISELESS_RMS_DEG``; with sigma unknown, the Wald-Wolfowitz runs test on the
+  residual signs rejects randomness at ``fit_alpha`` (systematic misfit);
 - ``unobservable``: J^T J is numerically singular (scaled by its diagonal, smallest over
   largest eigenvalue <= ``singular_rcond``), or range_sd / range > ``max_range_rel_sd``
   (range is not determined: no own-ship manoeuvre, a target too far away);
@@ -27,6 +29,7 @@ from tma.angles import bearing_from_north, course_from_velocity
 from tma.linalg import jacobi_scaled_eigh
 
 STATUSES = ("ok", "not_converged", "poor_fit", "unobservable")
+NOISELESS_RMS_DEG = 1e-4  # far above round-off, far below any real bearing sensor
 
 
 def kinematics_now(theta, t_s, own_x_m, own_y_m):
@@ -82,8 +85,12 @@ def assess(theta, cost_rad2, jtj, n_bearings, converged, t_now_s, own_x_now_m, o
         fit_p = runs_p
     else:
         sigma2 = np.full(n, np.deg2rad(sigma_deg) ** 2)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            fit_p = (chdtrc(dof, cost_rad2 / sigma2) if sigma_deg > 0 else np.full(n, np.nan))
+        if sigma_deg > 0:
+            upper = chdtrc(dof, cost_rad2 / sigma2)
+            fit_p = np.minimum(1.0, 2 * np.minimum(upper, 1 - upper))  # two-sided
+        else:  # declared noiseless: anything beyond round-off is a misfit
+            rms_deg = np.rad2deg(np.sqrt(cost_rad2 / np.maximum(n_bearings, 1)))
+            fit_p = np.where(rms_deg > NOISELESS_RMS_DEG, 0.0, 1.0)
 
     finite = np.isfinite(theta).all(axis=1) & np.isfinite(jtj).all(axis=(1, 2))
     w, V, d = jacobi_scaled_eigh(np.where(finite[:, None, None], jtj, np.eye(4)))
