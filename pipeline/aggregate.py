@@ -1,16 +1,36 @@
-"""Per-track metrics and tables from finished runs: ``python -m pipeline.aggregate``."""
+"""Per-track metrics and tables from finished runs: ``python -m pipeline.aggregate``.
+
+In a multirun (``-m``) each job writes its own table (a ``table=`` name, or the default
+name of several runs, gets the job number: ``<table>-<N>``), and when the sweep ends
+``pipeline._common.SweepTable`` writes one table of all its jobs: ``<table>`` (default
+``<family>-sweep``)."""
 
 import hydra
 
-from pipeline._common import CONF_DIR, checked_estimator_nodes, log, open_datasets, run_stage
+from pipeline._common import (
+    CONF_DIR,
+    checked_estimator_nodes,
+    log,
+    open_datasets,
+    record_sweep_job,
+    run_stage,
+    sweep_job,
+)
 from tma.aggregate import aggregate
 
 
 def aggregate_stage(cfg):
     estimators = checked_estimator_nodes(cfg)  # a bad estimator config fails before any I/O
     jobs = [(ds, est) for ds in open_datasets(cfg) for est in estimators]
-    for path in aggregate(cfg.paths.data_dir, cfg.paths.tables_dir, jobs, table=cfg.table):
+    table, suffix = cfg.table, "custom"
+    number = sweep_job(cfg)
+    if number is not None:  # a job of a multirun: its table is one of several
+        table = f"{cfg.table}-{number}" if cfg.table else None
+        suffix = f"custom-{number}"
+    for path in aggregate(cfg.paths.data_dir, cfg.paths.tables_dir, jobs, table=table,
+                          default_suffix=suffix):
         log.info("wrote %s", path)
+    record_sweep_job(cfg, jobs)
 
 
 @hydra.main(config_path=CONF_DIR, config_name="config", version_base="1.3")

@@ -74,6 +74,21 @@ CASES = {
                                   "max_range_rel_sd must be positive"),
     "unknown dataset": ("estimate", ["dataset=nothing_here"], "no dataset at"),
     "input missing": ("ingest", ["input={root}/absent.csv"], "absent.csv: no such file"),
+    # found by an adversarial review
+    "unknown top-level key": ("simulate", ["+foo=1"], "unknown option(s) foo"),
+    "data dir null": ("estimate", ["paths.data_dir=null"], "paths.data_dir must be a directory"),
+    "grid not a mapping": ("estimate", ["grid=5"], "grid must be null or"),
+    "unresolvable interpolation": ("estimate", ["estimator.max_iter=${{oc.env:TMA_NOPE}}"],
+                                   "Environment variable 'TMA_NOPE' not found"),
+    "negative seed": ("simulate", ["scenario.seed=-1"], "seed must be >= 0"),
+    "huge n_tracks": ("simulate", ["scenario.n_tracks=1000000000000000000000000000000"],
+                      "too large"),
+    "nested number list": ("simulate", ["scenario=radar2d", "scenario.radar_xy_m=[[1],0]"],
+                           "radar_xy_m[0] must be a number"),
+    "ingest min_bearings": ("ingest", ["input={root}/good.csv", "min_bearings=abc"],
+                            "min_bearings must be"),
+    "ingest sigma not a number": ("ingest", ["input={root}/good.csv", "sigma_deg=abc"],
+                                  "sigma_deg must be"),
 }
 
 
@@ -147,3 +162,13 @@ def test_disk_full_is_one_line_and_keeps_the_good_dataset(workspace, tmp_path):
     _assert_one_line(proc, "No space left on device (errno 28)")
     assert (tmp_path / "before").read_text() == (tmp_path / "after").read_text()
     assert sorted(lines[2:]) == sorted([".", "..", ".t.lock", "t"])  # no partial left behind
+
+
+@needs_unshare
+def test_a_disk_too_full_for_hydras_own_files_is_one_line(workspace, tmp_path):
+    proc = _in_small_disk(textwrap.dedent(f"""
+        head -c $(( $(df -k --output=avail $DISK | tail -1) * 1024 - 24 * 1024 )) /dev/zero \
+            > $DISK/filler
+        {PY} -m pipeline.ingest input={workspace}/good.csv paths.data_dir=$DISK/data
+        """), tmp_path)
+    _assert_one_line(proc, "No space left on device (errno 28)")

@@ -19,7 +19,7 @@ EXPECTED_COLUMNS = (
     "n_ok,n_not_converged,n_poor_fit,n_unobservable,consistent,consistent_lo,consistent_hi"
 )
 GRID = ["experiment=bearings2d_table", "scenario.n_tracks=60", "scenario.shard_size=25",
-        "grid.scenario.sigma_deg=[0.0,0.5]", "progress=false"]
+        "scenario.sigma_deg=[0.0,0.5]", "progress=false"]
 
 
 def _all_stages(overrides):

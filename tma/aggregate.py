@@ -3,18 +3,27 @@
 Each family's report module (``tma.families.<name>.report``) provides
 ``aggregate_runs(entries, tables_dir, table_name)`` where ``entries`` are ``RunEntry``
 items; it writes per-track metrics into each run directory and returns the table files it
-wrote.
+wrote. ``metrics_dataset`` reads the metrics of every run back as one Parquet dataset.
 """
 
+import functools
+import json
+import operator
 from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.dataset as pds
+import pyarrow.fs as pafs
+import pyarrow.parquet as pq
 
+from tma.errors import InputError
 from tma.families import family as family_of
-from tma.io.dataset import Dataset
+from tma.io.dataset import Dataset, datasets_dir
 from tma.io.owned import remove_stale_temporaries
-from tma.runs import full_config, open_run, run_path
+from tma.runs import MANIFEST, full_config, open_run, run_path, runs_dir
 
 
 @dataclass
@@ -26,11 +35,11 @@ class RunEntry:
     estimates: pd.DataFrame
 
 
-def aggregate(data_dir, tables_dir, jobs, table=None) -> list[Path]:
-    """Aggregate the runs of ``jobs`` (``(Dataset, estimator config)`` pairs)."""
+def aggregate(data_dir, tables_dir, jobs, table=None, default_suffix="custom") -> list[Path]:
+    """Aggregate the runs of ``jobs`` (``(Dataset, estimator config)`` pairs) into one table
+    per family: ``table`` (``<table>-<family>`` when several families), else
+    ``<dataset>-<estimator>`` for a single run, else ``<family>-<default_suffix>``."""
     by_family: dict[str, list[RunEntry]] = {}
-    if Path(tables_dir).is_dir():  # what a killed aggregate left; another one may be running
-        remove_stale_temporaries(tables_dir, only_dead=True)
     for dataset, est_cfg in jobs:
         dataset.verify()
         est_cfg = full_config(dataset, est_cfg)  # no prepare: aggregate trains nothing
@@ -42,10 +51,108 @@ def aggregate(data_dir, tables_dir, jobs, table=None) -> list[Path]:
     written = []
     for family, entries in by_family.items():
         module = family_of(family).report
-        name = table
-        if name is None:
-            first = entries[0]
-            name = (f"{first.dataset.name}-{first.estimator}" if len(entries) == 1
-                    else f"{family}-custom")
+        if table is not None:
+            name = table if len(by_family) == 1 else f"{table}-{family}"
+        elif len(entries) == 1:
+            name = f"{entries[0].dataset.name}-{entries[0].estimator}"
+        else:
+            name = f"{family}-{default_suffix}"
         written += module.aggregate_runs(entries, Path(tables_dir), name)
+    for path in written:  # what a killed aggregate left of these files, and nothing else
+        remove_stale_temporaries(path.parent, only_dead=True, names=[path.name])
     return written
+
+
+# -- every run's metrics as one dataset -------------------------------------------------------
+
+KEY_COLUMNS = ("family", "dataset", "estimator", "run")
+
+
+def _flat(node, prefix: str) -> dict:
+    """Scalar leaves of a nested config as ``{prefix.dotted.key: value}`` (lists left out)."""
+    out = {}
+    for key, value in node.items():
+        if isinstance(value, dict):
+            out.update(_flat(value, f"{prefix}.{key}"))
+        elif value is None or isinstance(value, bool | int | float | str):
+            out[f"{prefix}.{key}"] = value
+    return out
+
+
+def _read_json(path: Path) -> dict:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def _constant_type(values: list) -> pa.DataType:
+    present = [v for v in values if v is not None]
+    try:
+        return pa.array(present).type
+    except (pa.ArrowInvalid, pa.ArrowTypeError):  # mixed types: compare as text
+        return pa.string()
+
+
+def metrics_dataset(data_dir="data", name="metrics", family=None) -> pds.Dataset:
+    """Every run's ``<name>.parquet`` (``metrics``, written by aggregate) under
+    ``<data_dir>/runs/`` as one ``pyarrow.dataset``, nothing loaded yet. Besides the file's
+    own columns each row carries its run's ``family``, ``dataset``, ``estimator`` and ``run``
+    (directory name) and its config values ``scenario.<key>`` (from the dataset manifest)
+    and ``estimator.<key>`` (from the run manifest; nested keys dotted, lists left out),
+    constant per file, so filters on them skip whole files::
+
+        ds = metrics_dataset("data", family="bearings2d")
+        ds.to_table(filter=pc.field("scenario.sigma_deg") == 0.5).to_pandas()
+
+    Runs of several families share one schema (their columns' union, null where absent);
+    a column whose types disagree between files fails: give ``family``.
+    """
+    constants, paths = [], []
+    root = runs_dir(data_dir)
+    for path in sorted(root.glob(f"*/*/{name}.parquet")):
+        run_root = path.parent
+        if run_root.name.startswith(".") or run_root.parent.name.startswith("."):
+            continue  # staging directories
+        manifest = _read_json(run_root / MANIFEST)
+        dataset = manifest.get("dataset", {})
+        if family is not None and dataset.get("family") != family:
+            continue
+        scenario = _read_json(datasets_dir(data_dir) / run_root.parent.name / MANIFEST)
+        constants.append({"family": dataset.get("family"), "dataset": run_root.parent.name,
+                          "estimator": manifest.get("estimator"), "run": run_root.name,
+                          **_flat(scenario.get("config") or {}, "scenario"),
+                          **_flat(manifest.get("config") or {}, "estimator")})
+        constants[-1].pop("scenario.family", None)  # the same as family
+        constants[-1].pop("estimator.name", None)  # the same as estimator
+        paths.append(path)
+    if not paths:
+        raise InputError(f"no {name}.parquet in any run under {root}"
+                         + (f" of family '{family}'" if family else "")
+                         + ": run `python -m pipeline.aggregate` first")
+    try:
+        schema = pa.unify_schemas([pq.read_schema(p).remove_metadata() for p in paths],
+                                  promote_options="permissive")
+    except (pa.ArrowInvalid, pa.ArrowTypeError) as exc:
+        raise InputError(f"the {name}.parquet files of several families disagree ({exc}); "
+                         "give family=") from None
+    keys = list(dict.fromkeys(k for c in constants for k in c))
+    types = {k: _constant_type([c.get(k) for c in constants]) for k in keys}
+    keys = [k for k in keys if types[k] != pa.null() and k not in schema.names]
+    for k in keys:
+        schema = schema.append(pa.field(k, types[k]))
+    fmt, local = pds.ParquetFileFormat(), pafs.LocalFileSystem()
+    fragments = []
+    for path, const in zip(paths, constants, strict=True):
+        terms = []
+        for k in keys:
+            value = const.get(k)
+            if value is None:
+                terms.append(pc.field(k).is_null())
+            else:
+                value = str(value) if types[k] == pa.string() else value
+                terms.append(pc.field(k) == pa.scalar(value, types[k]))
+        fragments.append(fmt.make_fragment(str(path), filesystem=local,
+                                           partition_expression=functools.reduce(
+                                               operator.and_, terms)))
+    return pds.FileSystemDataset(fragments, schema, fmt, local)
