@@ -133,20 +133,11 @@ def bench_ranges(runs: int):
 
 
 def bench_filters3d(paths: int, single: int, duration: float):
-    from tma.families.bearing_doppler3d.estimators.cmnf import apply, model_prediction, train
+    from tma.families.bearing_doppler3d.estimators.cmnf import apply, model_functions, train
     from tma.families.bearing_doppler3d.log import HydrophoneLog
-    from tma.families.bearing_doppler3d.scenario import (
-        Config as AuvConfig,
-    )
-    from tma.families.bearing_doppler3d.scenario import (
-        auv_model,
-        epochs,
-        model_record,
-        simulate_paths,
-    )
-    from tma.families.bearing_doppler3d.scenario import (
-        simulate_shard as simulate_auv,
-    )
+    from tma.families.bearing_doppler3d.model import AuvModel, model_record
+    from tma.families.bearing_doppler3d.scenario import Config as AuvConfig
+    from tma.families.bearing_doppler3d.scenario import simulate_shard as simulate_auv
     from tma.parallel import keep_freed_memory
 
     keep_freed_memory()
@@ -154,17 +145,17 @@ def bench_filters3d(paths: int, single: int, duration: float):
     n_obs = log.t_s.size
     print(f"(d) bearing_doppler3d filters, {paths} paths x {n_obs} epochs, one thread "
           "(microseconds per path per observation)")
-    record = model_record(AuvConfig(duration_s=duration))
-    model, t = auv_model(record), epochs(record)
+    model = AuvModel.from_record(model_record(AuvConfig(duration_s=duration)))
+    functions = model_functions(model, model.epochs())
     with threadpool_limits(limits=1):
         start = time.perf_counter()
-        truth, obs = simulate_paths(record, 2000, np.random.default_rng(1))
-        gains = train(truth, obs, model_prediction(model, record, t), model.observe, 1e-12)
+        truth, obs = model.simulate(2000, np.random.default_rng(1))
+        gains = train(truth, model.select_readings(obs), *functions, 1e-12)
         t_train = time.perf_counter() - start
         for name in ("ekf", "srekf", "cmnf"):
             if name == "cmnf":
                 def run(lg):
-                    return apply(gains, lg.obs, model_prediction(model, record, t), model.observe)
+                    return apply(gains, lg.obs, *functions)
             else:
                 est = build_estimator({"name": name})
                 run = est.estimate
@@ -186,8 +177,9 @@ def bench_cmnf_memory(paths: int):
 import resource, time, numpy as np
 from tma.parallel import keep_freed_memory
 from tma.families.bearing_doppler3d.estimators.bundle import _bundle_shard, SHARD
-from tma.families.bearing_doppler3d.estimators.cmnf import train, model_prediction
-from tma.families.bearing_doppler3d.scenario import Config, auv_model, epochs, model_record
+from tma.families.bearing_doppler3d.estimators.cmnf import train, model_functions
+from tma.families.bearing_doppler3d.model import AuvModel, model_record
+from tma.families.bearing_doppler3d.scenario import Config
 keep_freed_memory()
 record = model_record(Config())
 start = time.perf_counter()
@@ -196,10 +188,9 @@ parts = [_bundle_shard((record, 7, i, min(SHARD, {paths} - i * SHARD)))
 truth = np.concatenate([p[0] for p in parts]); obs = np.concatenate([p[1] for p in parts])
 del parts
 sim = time.perf_counter() - start
-model = auv_model(record)
+model = AuvModel.from_record(record)
 start = time.perf_counter()
-train(truth, obs, model_prediction(model, record, epochs(record)),
-      model.observe, 1e-12)
+train(truth, model.select_readings(obs), *model_functions(model, model.epochs()), 1e-12)
 print(f"{{sim:.0f}} {{time.perf_counter() - start:.0f}} "
       f"{{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f}}")
 """

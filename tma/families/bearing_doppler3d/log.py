@@ -39,7 +39,7 @@ class HydrophoneLog:
     t_s: np.ndarray  # (n_epochs,)
     track_id: np.ndarray  # (n,)
     obs: np.ndarray  # (n, n_epochs, n_obs)
-    model: dict  # JSON-able model description (see tma.families.bearing_doppler3d.scenario)
+    model: dict  # the model record (``model.model_record``; ``AuvModel.from_record`` reads it)
 
     @property
     def n_tracks(self) -> int:

@@ -1,4 +1,6 @@
-"""Manoeuvring underwater vehicle observed by fixed hydrophones (bearing + Doppler).
+"""Manoeuvring underwater vehicle observed by fixed hydrophones (bearing + Doppler): the
+family's model, written once. The scenario simulates with it and every estimator receives it
+(``AuvModel.from_record(log.model)``), Stone Soup style.
 
 State ``(X, Y, Z, v, phi, a)``: position (m; X east, Y north, Z up), speed (m/s), heading
 (rad, from +X counter-clockwise: this family keeps the paper's convention), normal
@@ -7,29 +9,150 @@ dphi = a / v dt, da = (-lambda a + nu) dt + mu dW.
 
 Per sensor S: xi = (Z - Z_S) / R (sine of elevation), eta = (X - X_S) / r (cosine of the
 horizontal bearing), omega = omega0 / (1 + V / C) with V = d . velocity / R the range rate
-(d = P - S, R = |d|, r = |d_xy|). Observation vector: (xi, eta, omega) per sensor, sensor by
-sensor; without Doppler (xi, eta). Arrays put paths on the leading axis: states (n, 6).
+(d = P - S, R = |d|, r = |d_xy|). Readings: (xi, eta, omega) per sensor, sensor by sensor;
+without Doppler (xi, eta).
+
+Layout, as in FilterPy: states are columns. x (6, n) holds n paths, so ``x[PHI]`` is every
+path's heading; covariances are (6, 6, n), readings h (m, n), observation Jacobians
+(m, 6, n). Arrays with paths first (datasets (n, K, 6), the CMNF's samples (n, 6)) are passed
+transposed (``x.T``, a view).
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
+from scipy.signal import lfilter
+
+from tma.config import to_plain
+from tma.errors import ConfigError
 
 X, Y, Z, V, PHI, A = range(6)
 STATE_NAMES = ("X_m", "Y_m", "Z_m", "v_m_s", "phi_rad", "a_m_s2")
+# Keys of a scenario config the filters do not know (everything else is the model record).
+SCENARIO_ONLY = ("family", "n_tracks", "seed", "shard_size")
+
+
+def model_record(scenario_config) -> dict:
+    """What the filters may know of a scenario config (the ``Config`` or its plain dict, e.g.
+    a dataset manifest's ``config``): everything but the seed and the number of paths. Logs
+    carry it as their metadata record ``tma.model``."""
+    return {k: v for k, v in to_plain(scenario_config).items() if k not in SCENARIO_ONLY}
+
+
+@dataclass(frozen=True)
+class InitialDistribution:
+    """x_0: independent Gaussian position, uniform speed, Gaussian heading, uniform a."""
+
+    position_mean_m: list[float]
+    position_sd_m: list[float]
+    speed_min_m_s: float
+    speed_max_m_s: float
+    heading_mean_rad: float
+    heading_sd_rad: float
+    accel_min_m_s2: float
+    accel_max_m_s2: float
+
+    def sample(self, n: int, rng) -> np.ndarray:
+        """n draws, states as columns (6, n)."""
+        x = np.empty((n, 6))
+        x[:, :3] = np.asarray(self.position_mean_m) + np.asarray(
+            self.position_sd_m) * rng.standard_normal((n, 3))
+        x[:, V] = rng.uniform(self.speed_min_m_s, self.speed_max_m_s, n)
+        x[:, PHI] = self.heading_mean_rad + self.heading_sd_rad * rng.standard_normal(n)
+        x[:, A] = rng.uniform(self.accel_min_m_s2, self.accel_max_m_s2, n)
+        return x.T
+
+    def moments(self):
+        """Mean (6,) and covariance (6, 6), exactly."""
+        mean = np.array([*self.position_mean_m,
+                         0.5 * (self.speed_min_m_s + self.speed_max_m_s),
+                         self.heading_mean_rad,
+                         0.5 * (self.accel_min_m_s2 + self.accel_max_m_s2)])
+        f = np.float64  # numpy scalars: an absurd scale gives inf (flagged), not OverflowError
+        var = np.array([*np.square(self.position_sd_m),
+                        f(self.speed_max_m_s - self.speed_min_m_s) ** 2 / 12,
+                        f(self.heading_sd_rad) ** 2,
+                        f(self.accel_max_m_s2 - self.accel_min_m_s2) ** 2 / 12])
+        return mean, np.diag(var)
 
 
 @dataclass(frozen=True)
 class AuvModel:
+    """Dynamics, measurement, their Jacobians, the initial distribution and the readings of
+    one observation model (with or without Doppler); built from a model record."""
+
     lam: float  # 1/s
     nu: float  # m/s^3
-    mu: float  # m/s^2 / sqrt(s)
+    mu: float  # m/s^2 / sqrt(s): the diffusion b = (0, 0, 0, 0, 0, mu)
     sensors_m: np.ndarray  # (n_sensors, 3)
     omega0_hz: float
     sound_speed_m_s: float
     sd_angle: float  # std of xi and eta
     sd_doppler_hz: float
-    doppler: bool = True
+    initial: InitialDistribution
+    duration_s: float  # observations at 0, obs_period_s, ..., duration_s
+    obs_period_s: float
+    truth_step_s: float  # Euler-Maruyama step of the simulation
+    filter_step_s: float  # Euler step of the filters' prediction
+    doppler: bool = True  # False: bearings only (xi, eta per sensor)
+
+    @classmethod
+    def from_record(cls, record: dict) -> "AuvModel":
+        """The model a log's (or a dataset's) model record describes."""
+        initial = record["initial"]
+        return cls(
+            lam=record["lam"], nu=record["nu"], mu=record["mu"],
+            sensors_m=np.asarray(record["sensors_m"]), omega0_hz=record["omega0_hz"],
+            sound_speed_m_s=record["sound_speed_m_s"], sd_angle=record["sd_angle"],
+            sd_doppler_hz=record["sd_doppler_hz"],
+            initial=InitialDistribution(**{f.name: initial[f.name]
+                                           for f in fields(InitialDistribution)}),
+            duration_s=record["duration_s"], obs_period_s=record["obs_period_s"],
+            truth_step_s=record["truth_step_s"], filter_step_s=record["filter_step_s"],
+            doppler=not record["no_doppler"])
+
+    def epochs(self) -> np.ndarray:
+        """The observation times (K,)."""
+        n = int(round(self.duration_s / self.obs_period_s)) + 1
+        return np.arange(n) * self.obs_period_s
+
+    # ------------------------------------------------------------------------- dynamics
+
+    def drift(self, x):
+        """a(x) at states x (6, ...)."""
+        out = np.zeros_like(x)
+        out[X] = x[V] * np.cos(x[PHI])
+        out[Y] = x[V] * np.sin(x[PHI])
+        out[PHI] = x[A] / x[V]
+        out[A] = -self.lam * x[A] + self.nu
+        return out
+
+    def drift_jacobian(self, x, dt=1.0):
+        """F dt, F = da/dx the drift Jacobian at states x (6, ...), as its non-zero entries
+        ``{(row, column): values}``; Phi = I + F dt is the Euler transition of the
+        linearised SDE (``transition_times``). dt = 1 gives F itself. Each entry is computed
+        with dt folded in (dt / v, not (1 / v) dt), as the filters always have: another order
+        changes the last bits of every estimate."""
+        c, s, v, a = np.cos(x[PHI]), np.sin(x[PHI]), x[V], x[A]
+        return {(X, V): c * dt, (X, PHI): -(v * s * dt),
+                (Y, V): s * dt, (Y, PHI): v * c * dt,
+                (PHI, V): -a / (v * v) * dt, (PHI, A): dt / v,
+                (A, A): -self.lam * dt}
+
+    def euler_step(self, x, dt):
+        """x + a(x) dt: one Euler step of the mean (the filters' prediction)."""
+        return x + self.drift(x) * dt
+
+    def n_filter_steps(self, duration_s) -> int:
+        return int(round(duration_s / self.filter_step_s))
+
+    def predict_mean(self, x, duration_s):
+        """Euler steps of ``filter_step_s`` over ``duration_s``: dx = a(x) dt."""
+        for _ in range(self.n_filter_steps(duration_s)):
+            x = self.euler_step(x, self.filter_step_s)
+        return x
+
+    # ---------------------------------------------------------------------- measurement
 
     @property
     def n_obs(self) -> int:
@@ -37,43 +160,29 @@ class AuvModel:
 
     @property
     def obs_sd(self) -> np.ndarray:
+        """Standard deviations of the readings (m,) (R is diagonal)."""
         per = [self.sd_angle, self.sd_angle] + ([self.sd_doppler_hz] if self.doppler else [])
         return np.tile(per, self.sensors_m.shape[0])
 
-    def drift(self, x):
-        """a(x), (n, 6)."""
-        out = np.zeros_like(x)
-        out[:, X] = x[:, V] * np.cos(x[:, PHI])
-        out[:, Y] = x[:, V] * np.sin(x[:, PHI])
-        out[:, PHI] = x[:, A] / x[:, V]
-        out[:, A] = -self.lam * x[:, A] + self.nu
-        return out
-
-    def drift_jacobian(self, x):
-        """d a / d x, (n, 6, 6)."""
-        jac = np.zeros((x.shape[0], 6, 6))
-        c, s = np.cos(x[:, PHI]), np.sin(x[:, PHI])
-        jac[:, X, V], jac[:, X, PHI] = c, -x[:, V] * s
-        jac[:, Y, V], jac[:, Y, PHI] = s, x[:, V] * c
-        jac[:, PHI, V], jac[:, PHI, A] = -x[:, A] / x[:, V] ** 2, 1.0 / x[:, V]
-        jac[:, A, A] = -self.lam
-        return jac
-
-    def predict_mean(self, x, duration_s, step_s):
-        """Euler integration of dx = a(x) dt (the filters' own prediction of the mean)."""
-        for _ in range(int(round(duration_s / step_s))):
-            x = x + self.drift(x) * step_s
-        return x
+    def select_readings(self, full):
+        """This model's readings out of full ones (..., 3 n_sensors), (xi, eta, omega) per
+        sensor: without Doppler each sensor's omega is dropped."""
+        if self.doppler:
+            return full
+        lead = full.shape[:-1]
+        return full.reshape(*lead, -1, 3)[..., :2].reshape(*lead, -1)
 
     def observe(self, x):
-        """h(x), (n, n_obs)."""
-        return self._observe(x, jacobian=False)[0]
+        """h(x) (m, n) at states x (6, n)."""
+        return self._observe(x.T, jacobian=False)[0].T
 
     def observe_with_jacobian(self, x):
-        """h(x) (n, n_obs) and dh/dx (n, n_obs, 6)."""
-        return self._observe(x, jacobian=True)
+        """h(x) (m, n) and H = dh/dx (m, 6, n) at states x (6, n)."""
+        h, jac = self._observe(x.T, jacobian=True)
+        return h.T, jac.transpose(1, 2, 0)
 
     def _observe(self, x, jacobian):
+        """h (n, m) and dh/dx (n, m, 6) at states x (n, 6): computed with paths first."""
         n, k = x.shape[0], self.sensors_m.shape[0]
         d = x[:, None, :3] - self.sensors_m[None]  # (n, k, 3)
         R = np.linalg.norm(d, axis=-1)
@@ -110,6 +219,77 @@ class AuvModel:
             jac[..., 2, PHI] = g * np.einsum("nki,nki->nk", d, turn) / R
         return h, jac.reshape(n, k * per, 6)
 
+    # ----------------------------------------------------------------------- simulation
+
+    def euler_maruyama(self, x0, duration_s, rng):
+        """Advance true states x0 (6, n) by ``duration_s`` with Euler-Maruyama steps of
+        ``truth_step_s``.
+
+        The recurrences a_(k+1) = (1 - lam dt) a_k + nu dt + mu sqrt(dt) xi_k,
+        phi_(k+1) = phi_k + a_k / v dt, X_(k+1) = X_k + v cos(phi_k) dt, Y likewise, are
+        evaluated for all steps at once, vectorised over paths: a by a linear filter, and
+        exp(i phi_k) = exp(i phi_0) prod_(j<k) exp(i (phi_(j+1) - phi_j)) by a cumulative
+        product (cheaper than a cosine and a sine per step; equal to them to ~1e-14). The
+        driving normals are drawn in single precision (half the cost, ample resolution for
+        noise).
+        """
+        dt_s = self.truth_step_s
+        n_steps = int(round(duration_s / dt_s))
+        x = x0.copy()
+        n = x.shape[1]
+        v = x[V]
+        forcing = rng.standard_normal((n, n_steps), dtype=np.float32) * np.float64(
+            self.mu * np.sqrt(dt_s))
+        if self.nu:
+            forcing += self.nu * dt_s
+        rho = 1.0 - self.lam * dt_s
+        a_next = lfilter([1.0], [1.0, -rho], forcing, axis=1, zi=(rho * x[A])[:, None])[0]
+        dphi = np.empty((n, n_steps))  # phi_(k+1) - phi_k = a_k dt / v
+        dphi[:, 0] = x[A]
+        dphi[:, 1:] = a_next[:, :-1]
+        dphi *= (dt_s / v)[:, None]
+        turns = _unit_rotations(dphi[:, :-1])
+        rel = 1.0 + np.cumprod(turns, axis=1).sum(axis=1)  # sum_k exp(i (phi_k - phi_0))
+        heading = rel * np.exp(1j * x[PHI])
+        x[X] += v * dt_s * heading.real
+        x[Y] += v * dt_s * heading.imag
+        x[PHI] += dphi.sum(axis=1)
+        x[A] = a_next[:, -1]
+        return x
+
+    def simulate(self, n: int, rng):
+        """n paths from the initial distribution: truth at the epochs (n, K, 6) and the full
+        readings (n, K, 3 n_sensors). Doppler is read whatever ``doppler`` says, so that both
+        variants share truth and noise; ``select_readings`` keeps this model's own."""
+        t = self.epochs()
+        full = replace(self, doppler=True)
+        with np.errstate(all="ignore"):  # checked below, with a message that says what to change
+            x = self.initial.sample(n, rng)
+            truth = np.empty((n, t.size, 6))
+            truth[:, 0] = x.T
+            for k in range(1, t.size):
+                x = self.euler_maruyama(x, self.obs_period_s, rng)
+                truth[:, k] = x.T
+            clean = full.observe(truth.reshape(-1, 6).T).T.reshape(n, t.size, -1)
+            obs = clean + full.obs_sd * rng.standard_normal(clean.shape)
+        if not (np.isfinite(truth).all() and np.isfinite(obs).all()):
+            raise ConfigError("scenario 'bearing_doppler3d': the simulated paths overflow "
+                              "(non-finite states or readings): the scales of mu, nu, initial, "
+                              "sensors_m or omega0_hz are beyond float64")
+        return truth, obs
+
+
+def transition_times(F, M, at=range(6)):
+    """M <- Phi M in place, Phi = I + F dt with F dt given by ``AuvModel.drift_jacobian``;
+    M (6, ...) holds state i in row ``at[i]``. Each row is updated before the rows it reads:
+    X and Y read v and phi, phi reads v and a. For M Phi^T, pass M transposed (a view)."""
+    x_, y_, v_, phi_, a_ = at[X], at[Y], at[V], at[PHI], at[A]
+    M[x_] += F[X, V] * M[v_] + F[X, PHI] * M[phi_]
+    M[y_] += F[Y, V] * M[v_] + F[Y, PHI] * M[phi_]
+    M[phi_] += F[PHI, V] * M[v_] + F[PHI, A] * M[a_]
+    M[a_] *= 1.0 + F[A, A]
+    return M
+
 
 def _unit_rotations(delta):
     """exp(i delta) for small angles by its series (exact to rounding for |delta| < 1e-2)."""
@@ -120,38 +300,3 @@ def _unit_rotations(delta):
     out.real = 1.0 - d2 * (0.5 - d2 * (1.0 / 24.0 - d2 / 720.0))
     out.imag = delta * (1.0 - d2 * (1.0 / 6.0 - d2 * (1.0 / 120.0 - d2 / 5040.0)))
     return out
-
-
-def euler_maruyama(x0, duration_s, dt_s, lam, nu, mu, rng):
-    """Advance states (n, 6) by ``duration_s`` with Euler-Maruyama steps ``dt_s``.
-
-    The recurrences a_(k+1) = (1 - lam dt) a_k + nu dt + mu sqrt(dt) xi_k,
-    phi_(k+1) = phi_k + a_k / v dt, X_(k+1) = X_k + v cos(phi_k) dt, Y likewise, are evaluated
-    for all steps at once, vectorised over paths: a by a linear filter, and
-    exp(i phi_k) = exp(i phi_0) prod_(j<k) exp(i (phi_(j+1) - phi_j)) by a cumulative product
-    (cheaper than a cosine and a sine per step; equal to them to ~1e-14). The driving normals
-    are drawn in single precision (half the cost, ample resolution for noise).
-    """
-    from scipy.signal import lfilter
-
-    n_steps = int(round(duration_s / dt_s))
-    x = x0.copy()
-    n = x.shape[0]
-    v = x[:, V]
-    forcing = rng.standard_normal((n, n_steps), dtype=np.float32) * np.float64(mu * np.sqrt(dt_s))
-    if nu:
-        forcing += nu * dt_s
-    rho = 1.0 - lam * dt_s
-    a_next = lfilter([1.0], [1.0, -rho], forcing, axis=1, zi=(rho * x[:, A])[:, None])[0]
-    dphi = np.empty((n, n_steps))  # phi_(k+1) - phi_k = a_k dt / v
-    dphi[:, 0] = x[:, A]
-    dphi[:, 1:] = a_next[:, :-1]
-    dphi *= (dt_s / v)[:, None]
-    turns = _unit_rotations(dphi[:, :-1])
-    rel = 1.0 + np.cumprod(turns, axis=1).sum(axis=1)  # sum_k exp(i (phi_k - phi_0))
-    heading = rel * np.exp(1j * x[:, PHI])
-    x[:, X] += v * dt_s * heading.real
-    x[:, Y] += v * dt_s * heading.imag
-    x[:, PHI] += dphi.sum(axis=1)
-    x[:, A] = a_next[:, -1]
-    return x

@@ -1,26 +1,26 @@
 """Scenario ``bearing_doppler3d``: an AUV tracked by 8 fixed hydrophones (bearing + Doppler).
 
-See ``../shared/specs/bearing_doppler3d.md`` and ``tma.families.bearing_doppler3d.model``. Truth by
-Euler-Maruyama (``truth_step_s``), observations every ``obs_period_s`` from t = 0 to
-``duration_s``; ``no_doppler`` drops the frequency readings (bearings alone). Each shard draws
-the initial states, the driving noise and the observation noise (Doppler noise is drawn even
-without Doppler, so both variants share truth and angle noise) from
-``SeedSequence(seed, spawn_key=(shard,))``.
+See ``../shared/specs/bearing_doppler3d.md``. This module holds the config (defaults and
+validation), the shards and the logs; the model it simulates (``AuvModel.simulate``: truth by
+Euler-Maruyama at ``truth_step_s``, readings every ``obs_period_s`` from t = 0 to
+``duration_s``) is ``tma.families.bearing_doppler3d.model``. ``no_doppler`` drops the
+frequency readings (bearings alone). Each shard draws the initial states, the driving noise
+and the observation noise (Doppler noise is drawn even without Doppler, so both variants share
+truth and angle noise) from ``SeedSequence(seed, spawn_key=(shard,))``.
 """
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 
 import numpy as np
 import pyarrow as pa
 
 from tma.config import require
-from tma.errors import ConfigError
 from tma.families.bearing_doppler3d.log import (
     HydrophoneLog,
     read_hydrophone_log,
     write_hydrophone_log,
 )
-from tma.families.bearing_doppler3d.model import STATE_NAMES, AuvModel, euler_maruyama
+from tma.families.bearing_doppler3d.model import STATE_NAMES, AuvModel, model_record
 from tma.sharding import shard_rng, shard_track_ids
 
 FAMILY = "bearing_doppler3d"
@@ -37,7 +37,8 @@ def _sensors():
 
 @dataclass
 class InitialConfig:
-    """Initial distribution: Gaussian position, uniform speed, Gaussian heading, uniform a."""
+    """Initial distribution (``model.InitialDistribution``): Gaussian position, uniform speed,
+    Gaussian heading, uniform a."""
 
     position_mean_m: list[float] = field(default_factory=lambda: [0.0, 20000.0, -1000.0])
     position_sd_m: list[float] = field(default_factory=lambda: [1000.0, 1000.0, 100.0])
@@ -120,59 +121,6 @@ def label(cfg: Config) -> str:
     return f"{'bearings' if cfg.no_doppler else 'doppler'}-n{cfg.n_tracks}"
 
 
-def model_record(cfg: Config) -> dict:
-    """What the filters may know: everything but the seed and the number of paths."""
-    record = asdict(cfg)
-    for key in ("family", "n_tracks", "seed", "shard_size"):
-        record.pop(key)
-    return record
-
-
-def auv_model(record: dict) -> AuvModel:
-    return AuvModel(record["lam"], record["nu"], record["mu"], np.asarray(record["sensors_m"]),
-                    record["omega0_hz"], record["sound_speed_m_s"], record["sd_angle"],
-                    record["sd_doppler_hz"], not record["no_doppler"])
-
-
-def initial_states(initial: dict, n: int, rng) -> np.ndarray:
-    x = np.empty((n, 6))
-    x[:, :3] = np.asarray(initial["position_mean_m"]) + np.asarray(
-        initial["position_sd_m"]) * rng.standard_normal((n, 3))
-    x[:, 3] = rng.uniform(initial["speed_min_m_s"], initial["speed_max_m_s"], n)
-    x[:, 4] = initial["heading_mean_rad"] + initial["heading_sd_rad"] * rng.standard_normal(n)
-    x[:, 5] = rng.uniform(initial["accel_min_m_s2"], initial["accel_max_m_s2"], n)
-    return x
-
-
-def epochs(record: dict) -> np.ndarray:
-    n = int(round(record["duration_s"] / record["obs_period_s"])) + 1
-    return np.arange(n) * record["obs_period_s"]
-
-
-def simulate_paths(record: dict, n: int, rng):
-    """Truth at the observation epochs (n, n_epochs, 6) and observations (n, n_epochs, n_obs);
-    without Doppler the frequency readings are dropped after drawing all noise."""
-    t = epochs(record)
-    model_doppler = auv_model({**record, "no_doppler": False})
-    with np.errstate(all="ignore"):  # checked below, with a message that says what to change
-        x = initial_states(record["initial"], n, rng)
-        truth = np.empty((n, t.size, 6))
-        truth[:, 0] = x
-        for k in range(1, t.size):
-            x = euler_maruyama(x, record["obs_period_s"], record["truth_step_s"],
-                               record["lam"], record["nu"], record["mu"], rng)
-            truth[:, k] = x
-        clean = model_doppler.observe(truth.reshape(-1, 6)).reshape(n, t.size, -1)
-        obs = clean + model_doppler.obs_sd * rng.standard_normal(clean.shape)
-    if not (np.isfinite(truth).all() and np.isfinite(obs).all()):
-        raise ConfigError("scenario 'bearing_doppler3d': the simulated paths overflow "
-                          "(non-finite states or readings): the scales of mu, nu, initial, "
-                          "sensors_m or omega0_hz are beyond float64")
-    if record["no_doppler"]:
-        obs = obs.reshape(n, t.size, -1, 3)[..., :2].reshape(n, t.size, -1)
-    return truth, obs
-
-
 def simulation_key(cfg: Config, shard_index: int) -> dict:
     """What a shard's random draws depend on: datasets differing only in ``no_doppler`` share
     truth and noise, so the simulate stage computes such shards once (``simulate_raw``)."""
@@ -181,22 +129,20 @@ def simulation_key(cfg: Config, shard_index: int) -> dict:
 
 
 def simulate_raw(cfg: Config, shard_index: int):
-    """Truth and the full (Doppler) observations of a shard."""
+    """Truth and the full (Doppler included) readings of a shard."""
     n = shard_track_ids(cfg, shard_index).size
-    record = {**model_record(cfg), "no_doppler": False}
-    return simulate_paths(record, n, shard_rng(cfg, shard_index))
+    return AuvModel.from_record(model_record(cfg)).simulate(n, shard_rng(cfg, shard_index))
 
 
 def from_raw(cfg: Config, shard_index: int, raw):
     """The shard's log and truth table from ``simulate_raw``'s output."""
     truth, obs = raw
-    n, K, _ = truth.shape
-    if cfg.no_doppler:
-        obs = obs.reshape(n, K, -1, 3)[..., :2].reshape(n, K, -1)
-    track_id = shard_track_ids(cfg, shard_index)
+    n = truth.shape[0]
     record = model_record(cfg)
-    t = epochs(record)
-    log = HydrophoneLog(t, track_id, obs, record)
+    model = AuvModel.from_record(record)
+    track_id = shard_track_ids(cfg, shard_index)
+    t = model.epochs()
+    log = HydrophoneLog(t, track_id, model.select_readings(obs), record)
     table = {"track_id": np.repeat(track_id, t.size), "step": np.tile(np.arange(t.size), n),
              "t_s": np.tile(t, n)}
     for i, name in enumerate(STATE_NAMES):
@@ -215,9 +161,3 @@ def write_log(path, log: HydrophoneLog, metadata=None) -> int:
 def read_log(path) -> HydrophoneLog:
     return read_hydrophone_log(path)
 
-
-def model_record_of(dataset) -> dict:
-    """The model record of a dataset of this family (from its manifest's config)."""
-    return model_record(Config(**{k: v for k, v in dataset.manifest["config"].items()
-                                  if k != "initial"},
-                               initial=InitialConfig(**dataset.manifest["config"]["initial"])))

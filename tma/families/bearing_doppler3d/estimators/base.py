@@ -1,10 +1,13 @@
-"""Shared pieces of the ``bearing_doppler3d`` filters.
+"""Shared pieces of the ``bearing_doppler3d`` estimators.
+
+Every estimator receives the family's model (``AuvModel``, built from the log's model
+record) and never simulates itself: the maths of the model lives in ``model.py`` alone.
 
 Filters keep paths on the last axis (state (6, n), covariance (6, 6, n)) so that each state
 row is a contiguous vector over paths. Both Kalman filters propagate the covariance of the
-Euler-discretised linearised SDE over each step dt: with Phi = I + A dt (A the drift
+Euler-discretised linearised SDE over each step dt: with Phi = I + F dt (F the drift
 Jacobian at the mean), P <- Phi P Phi^T + b b^T dt, b = (0, 0, 0, 0, 0, mu): the Euler step of
-dP = (A P + P A^T + b b^T) dt plus its own O(dt^2) term A P A^T dt^2, which keeps P positive
+dP = (F P + P F^T + b b^T) dt plus its own O(dt^2) term F P F^T dt^2, which keeps P positive
 definite and is exactly what the square-root filter propagates. Observations are processed as
 scalars in sequence against one linearisation point per epoch (the batch EKF update, since R
 is diagonal); a missing reading (NaN) is skipped.
@@ -19,63 +22,35 @@ import numpy as np
 
 from tma.estimator import Estimator
 from tma.families.bearing_doppler3d.log import HydrophoneLog
-from tma.families.bearing_doppler3d.model import PHI, STATE_NAMES, A, V, X, Y
-from tma.families.bearing_doppler3d.scenario import auv_model
+from tma.families.bearing_doppler3d.model import STATE_NAMES, AuvModel, model_record
 
 IU = np.triu_indices(6)
 
 
-def initial_moments(initial: dict):
-    """Mean (6,) and covariance (6, 6) of the initial distribution, exactly."""
-    mean = np.array([*initial["position_mean_m"],
-                     0.5 * (initial["speed_min_m_s"] + initial["speed_max_m_s"]),
-                     initial["heading_mean_rad"],
-                     0.5 * (initial["accel_min_m_s2"] + initial["accel_max_m_s2"])])
-    f = np.float64  # numpy scalars: an absurd scale gives inf (flagged), not OverflowError
-    var = np.array([*np.square(initial["position_sd_m"]),
-                    f(initial["speed_max_m_s"] - initial["speed_min_m_s"]) ** 2 / 12,
-                    f(initial["heading_sd_rad"]) ** 2,
-                    f(initial["accel_max_m_s2"] - initial["accel_min_m_s2"]) ** 2 / 12])
-    return mean, np.diag(var)
-
-
-def drift_times_rows(M, x, lam):
-    """A @ M for the drift Jacobian A at states x (6, n); M (6, k, n) (or (6, n))."""
-    out = np.zeros_like(M)
-    c, s, v, a = np.cos(x[PHI]), np.sin(x[PHI]), x[V], x[A]
-    out[X] = c * M[V] - (v * s) * M[PHI]
-    out[Y] = s * M[V] + (v * c) * M[PHI]
-    out[PHI] = (-a / v**2) * M[V] + M[A] / v
-    out[A] = -lam * M[A]
-    return out
-
-
-def drift_step(x, dt, lam, nu):
-    """One Euler step of the mean, x (6, n)."""
-    out = x.copy()
-    out[X] += x[V] * np.cos(x[PHI]) * dt
-    out[Y] += x[V] * np.sin(x[PHI]) * dt
-    out[PHI] += x[A] / x[V] * dt
-    out[A] += (-lam * x[A] + nu) * dt
-    return out
+def dataset_model_record(dataset) -> dict:
+    """The model record of a dataset of this family (from its manifest's scenario config):
+    what ``prepare`` trains for."""
+    return model_record(dataset.manifest["config"])
 
 
 class AuvEstimator(Estimator):
     side_tables = ("covariance",)  # full covariances every covariance_every epochs
     family = "bearing_doppler3d"
+
     def estimate(self, log: HydrophoneLog) -> dict:
-        record = log.model
-        model = auv_model(record)
+        model = AuvModel.from_record(log.model)
         if log.obs.shape[2] != model.n_obs:
             raise ValueError(f"the log holds {log.obs.shape[2]} readings per epoch, the model "
                              f"{model.n_obs}")
         # a wrecked path overflows on its own (paths never mix); it is flagged, not raised
         with np.errstate(all="ignore"):
-            est, cov, ok = self.solve(model, record, log.t_s, log.obs)  # (n,K,6), (n,K,6,6), (n,)
+            est, cov, ok = self.solve(model, log.t_s, log.obs)  # (n,K,6), (n,K,6,6), (n,)
             return output_columns(est, cov, ok, log.t_s, self.config.covariance_every,
                                   log.track_id)
 
-    def solve(self, model, record, t, obs):
+    def solve(self, model: AuvModel, t, obs):
+        """Estimates (n, K, 6), covariances (n, K, 6, 6) and a flag per path (n,) from the
+        readings obs (n, K, m) at times t (K,)."""
         raise NotImplementedError
 
 
@@ -85,18 +60,18 @@ class KalmanFilterBase(AuvEstimator):
     how they hold the covariance (``initial_factor``, ``predict_factor``, ``update``,
     ``covariance``)."""
 
-    def solve(self, model, record, t, obs):
+    def solve(self, model, t, obs):
         n, K, _ = obs.shape
-        dt = record["filter_step_s"]
-        mean0, cov0 = initial_moments(record["initial"])
+        dt = model.filter_step_s
+        mean0, cov0 = model.initial.moments()
         x = np.repeat(mean0[:, None], n, axis=1)
-        factor = self.initial_factor(cov0, n, record)
+        factor = self.initial_factor(cov0, n)
         xs, Ps = np.empty((K, 6, n)), np.empty((K, 6, 6, n))
         for k in range(K):
             if k:
-                for _ in range(int(round((t[k] - t[k - 1]) / dt))):
-                    factor = self.predict_factor(factor, x, dt, record)
-                    x = drift_step(x, dt, record["lam"], record["nu"])
+                for _ in range(model.n_filter_steps(t[k] - t[k - 1])):
+                    factor = self.predict_factor(factor, x, dt, model)
+                    x = model.euler_step(x, dt)
             x, factor = self.update(x, factor, obs[:, k], model)
             xs[k], Ps[k] = x, self.covariance(factor)
         est, cov = to_paths_first(xs, Ps)

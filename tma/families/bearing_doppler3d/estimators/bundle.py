@@ -1,11 +1,12 @@
 """The simulated training bundle shared by ``cmnf`` and ``prior_mean``: ``n_paths`` paths of
-the dataset's model (Doppler always simulated; bearings-only consumers drop it), truth at the
-observation epochs (float64) and observations (float32), built in parallel shards and cached
-as an artefact keyed by the model, size and seed."""
+the dataset's model (``AuvModel.simulate``: every reading, Doppler included; bearings-only
+consumers select theirs with ``AuvModel.select_readings``), truth at the observation epochs
+(float64) and readings (float32), built in parallel shards and cached as an artefact keyed by
+the model, size and seed."""
 
 import numpy as np
 
-from tma.families.bearing_doppler3d.scenario import simulate_paths
+from tma.families.bearing_doppler3d.model import AuvModel
 from tma.io.artefacts import load_or_build
 from tma.parallel import run_tasks
 
@@ -20,7 +21,7 @@ def _bundle_shard(task):
     rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(index,)))
     # an extreme (valid) model can overflow: the consumers' filters flag such paths
     with np.errstate(over="ignore", invalid="ignore"):
-        truth, obs = simulate_paths({**record, "no_doppler": False}, n, rng)
+        truth, obs = AuvModel.from_record(record).simulate(n, rng)
         return truth, obs.astype(np.float32)
 
 
@@ -41,12 +42,3 @@ def training_bundle(data_dir, model_record, n_paths, seed, n_jobs=1, progress=Fa
                 "obs": np.concatenate([p[1] for p in parts])}
 
     return load_or_build(data_dir, "bundle", spec, build)
-
-
-def bundle_observations(arrays: dict, no_doppler: bool) -> np.ndarray:
-    """The bundle's observations (float32) for the Doppler or the bearings-only model."""
-    obs = arrays["obs"]
-    if no_doppler:
-        M, K, m = obs.shape
-        obs = obs.reshape(M, K, m // 3, 3)[..., :2].reshape(M, K, -1)
-    return obs

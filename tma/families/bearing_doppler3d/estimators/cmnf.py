@@ -17,13 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.config import require
-from tma.families.bearing_doppler3d.estimators.base import AuvEstimator
-from tma.families.bearing_doppler3d.estimators.bundle import (
-    MAX_PATHS,
-    bundle_observations,
-    training_bundle,
-)
-from tma.families.bearing_doppler3d.scenario import auv_model, epochs
+from tma.families.bearing_doppler3d.estimators.base import AuvEstimator, dataset_model_record
+from tma.families.bearing_doppler3d.estimators.bundle import MAX_PATHS, training_bundle
+from tma.families.bearing_doppler3d.model import AuvModel
 from tma.io.artefacts import load_arrays, load_or_build
 
 
@@ -108,9 +104,18 @@ def apply(gains, obs, predict, observe):
     return est
 
 
-def model_prediction(model, record, t):
-    """The basic prediction of the AUV model: Euler integration over [t_(k-1), t_k]."""
-    return lambda x_hat, k: model.predict_mean(x_hat, t[k] - t[k - 1], record["filter_step_s"])
+def model_functions(model, t):
+    """The AUV model's basic prediction (its Euler prediction of the mean over
+    [t_(k-1), t_k]) and observation function, on paths-first arrays (n, 6) as ``train`` and
+    ``apply`` take them."""
+
+    def predict(x_hat, k):
+        return model.predict_mean(x_hat.T, t[k] - t[k - 1]).T
+
+    def observe(x):
+        return model.observe(x.T).T
+
+    return predict, observe
 
 
 class CMNF(AuvEstimator):
@@ -121,28 +126,25 @@ class CMNF(AuvEstimator):
     def prepare(cls, config: dict, dataset, data_dir, n_jobs=1, progress=False) -> dict:
         """Train (or reuse) the gains for the dataset's model; returns the config with the
         artefact's record (kind, key, sha256), which the run manifest keeps."""
-        from tma.families import scenario_module
-
-        record = scenario_module(dataset.family).model_record_of(dataset)
+        record = dataset_model_record(dataset)
         bundle = training_bundle(data_dir, record, config["training_paths"],
                                  config["training_seed"], n_jobs, progress)
         spec = {"model": record, "bundle": bundle["sha256"], "pinv_rtol": config["pinv_rtol"]}
 
         def build():
             arrays = load_arrays(bundle, data_dir)
-            obs = bundle_observations(arrays, record["no_doppler"])
-            model = auv_model(record)
-            t = epochs(record)
+            model = AuvModel.from_record(record)
+            obs = model.select_readings(arrays["obs"])  # the bundle holds every reading
             # a bundle that overflowed gives non-finite gains: the paths are flagged online
             with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-                return train(arrays["truth"], obs, model_prediction(model, record, t),
-                             model.observe, config["pinv_rtol"])
+                return train(arrays["truth"], obs, *model_functions(model, model.epochs()),
+                             config["pinv_rtol"])
 
         return {**config, "artefact": load_or_build(data_dir, "cmnf", spec, build)}
 
-    def solve(self, model, record, t, obs):
+    def solve(self, model, t, obs):
         gains = load_arrays(self.config.artefact, self.data_dir)
-        est = apply(gains, obs, model_prediction(model, record, t), model.observe)
+        est = apply(gains, obs, *model_functions(model, t))
         n, K, _ = obs.shape
         cov = np.broadcast_to(gains["K_hat"][None], (n, K, 6, 6))
         return est, cov, np.isfinite(est).all(axis=(1, 2))

@@ -11,7 +11,7 @@ import numpy as np
 
 from tma.config import require
 from tma.families.bearing_doppler3d.estimators.base import KalmanFilterBase
-from tma.families.bearing_doppler3d.model import PHI, A, V, X, Y
+from tma.families.bearing_doppler3d.model import A, transition_times
 
 
 @dataclass
@@ -24,40 +24,27 @@ class Config:
                 "covariance_every must be >= 1")
 
 
-def predict_covariance(P, x, dt, lam, mu):
-    """P <- Phi P Phi^T + b b^T dt with Phi = I + A dt; P (6, 6, n), x (6, n).
-
-    Only rows and columns X, Y, phi, a of A are non-zero, so M = Phi P changes four rows of P
-    and M Phi^T four columns of M (``drift_times_rows`` is the general form). Updated in place,
-    in an order where each row (column) reads only rows (columns) not yet updated.
-    """
-    c, s, v, a = np.cos(x[PHI]), np.sin(x[PHI]), x[V], x[A]
-    cdt, sdt, vsdt, vcdt = c * dt, s * dt, v * s * dt, v * c * dt
-    adt, idt, keep_a = -a / (v * v) * dt, dt / v, 1.0 - lam * dt
-    P[X] += cdt * P[V] - vsdt * P[PHI]
-    P[Y] += sdt * P[V] + vcdt * P[PHI]
-    P[PHI] += adt * P[V] + idt * P[A]
-    P[A] *= keep_a
-    P[:, X] += cdt * P[:, V] - vsdt * P[:, PHI]
-    P[:, Y] += sdt * P[:, V] + vcdt * P[:, PHI]
-    P[:, PHI] += adt * P[:, V] + idt * P[:, A]
-    P[:, A] *= keep_a
-    P[A, A] += mu * mu * dt
+def predict_covariance(P, x, dt, model):
+    """P <- Phi P Phi^T + b b^T dt, Phi = I + F dt (F the drift Jacobian at x); P (6, 6, n),
+    x (6, n). In place: Phi changes four rows of P, then Phi^T four of its columns."""
+    F = model.drift_jacobian(x, dt)
+    transition_times(F, P)  # Phi P
+    transition_times(F, P.swapaxes(0, 1))  # (Phi P) Phi^T
+    P[A, A] += model.mu * model.mu * dt  # b b^T dt
     return P
 
 
 def sequential_update(x, P, obs_k, model):
     """EKF update with one epoch's readings obs_k (n, m) (NaN = missing), in place."""
-    h, H = model.observe_with_jacobian(x.T)  # (n, m), (n, m, 6)
+    h, H = model.observe_with_jacobian(x)  # (m, n), (m, 6, n)
     x_lin = x.copy()
     r = model.obs_sd**2
-    for j in range(h.shape[1]):
-        hj = H[:, j].T  # (6, n)
-        Ph = np.einsum("ijn,jn->in", P, hj)
-        s = np.einsum("in,in->n", hj, Ph) + r[j]
+    for j in range(h.shape[0]):
+        Ph = np.einsum("ijn,jn->in", P, H[j])  # P H_j^T
+        s = np.einsum("in,in->n", H[j], Ph) + r[j]
         valid = np.isfinite(obs_k[:, j])
-        innovation = np.where(valid, obs_k[:, j] - h[:, j]
-                              - np.einsum("in,in->n", hj, x - x_lin), 0.0)
+        innovation = np.where(valid, obs_k[:, j] - h[j]
+                              - np.einsum("in,in->n", H[j], x - x_lin), 0.0)
         K = np.where(valid, Ph / s, 0.0)
         x += K * innovation
         P -= K[:, None, :] * Ph[None, :, :]
@@ -68,11 +55,11 @@ class EKF(KalmanFilterBase):
     name = "ekf"
     Config = Config
 
-    def initial_factor(self, cov0, n, record):
+    def initial_factor(self, cov0, n):
         return np.repeat(cov0[:, :, None], n, axis=2)
 
-    def predict_factor(self, P, x, dt, record):
-        return predict_covariance(P, x, dt, record["lam"], record["mu"])
+    def predict_factor(self, P, x, dt, model):
+        return predict_covariance(P, x, dt, model)
 
     def update(self, x, P, obs_k, model):
         return sequential_update(x, P, obs_k, model)

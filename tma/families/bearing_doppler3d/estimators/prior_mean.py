@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.config import require
-from tma.families.bearing_doppler3d.estimators.base import AuvEstimator
+from tma.families.bearing_doppler3d.estimators.base import AuvEstimator, dataset_model_record
 from tma.families.bearing_doppler3d.estimators.bundle import MAX_PATHS, training_bundle
 from tma.io.artefacts import load_arrays
 
@@ -36,14 +36,12 @@ class PriorMean(AuvEstimator):
 
     @classmethod
     def prepare(cls, config: dict, dataset, data_dir, n_jobs=1, progress=False) -> dict:
-        from tma.families import scenario_module
-
-        record = scenario_module(dataset.family).model_record_of(dataset)
+        record = dataset_model_record(dataset)
         bundle = training_bundle(data_dir, record, config["bundle_paths"], config["bundle_seed"],
                                  n_jobs, progress)
         return {**config, "artefact": bundle}
 
-    def solve(self, model, record, t, obs):
+    def solve(self, model, t, obs):
         truth = load_arrays(self.config.artefact, self.data_dir)["truth"]
         if truth.shape[1] != t.size:
             raise ValueError("the bundle's epochs differ from the log's")

@@ -1,7 +1,7 @@
 """``srekf``: the square-root form of ``ekf`` (same filter, Cholesky factor S with P = S S^T).
 
 In the state order (v, a, phi, X, Y, Z) the drift Jacobian is lower triangular, so
-Phi = I + A dt is too and Phi S stays lower triangular. Each Euler step triangularises
+Phi = I + F dt is too and Phi S stays lower triangular. Each Euler step triangularises
 [Phi S, b sqrt(dt)] orthogonally: Givens rotations fold the single noise column into Phi S
 (a structured QR, equal to ``numpy.linalg.qr`` of the same array up to signs). Each scalar
 reading updates by the array algorithm: Givens rotations triangularise
@@ -14,11 +14,11 @@ import numpy as np
 
 from tma.config import require
 from tma.families.bearing_doppler3d.estimators.base import KalmanFilterBase
-from tma.families.bearing_doppler3d.model import PHI, A, V
+from tma.families.bearing_doppler3d.model import A, transition_times
 
 ORDER = np.array([3, 5, 4, 0, 1, 2])  # (v, a, phi, X, Y, Z) in the model's state indices
-INVERSE = np.argsort(ORDER)
-SV, SA, SPHI, SX, SY = 0, 1, 2, 3, 4  # positions in the square-root order
+INVERSE = np.argsort(ORDER)  # INVERSE[i]: the row of state i in the square-root order
+SA = INVERSE[A]  # the row of a, the state the manoeuvre noise drives
 
 
 @dataclass
@@ -28,17 +28,6 @@ class Config:
 
     def __post_init__(self):
         require(self.covariance_every >= 1, "estimator 'srekf'", "covariance_every must be >= 1")
-
-
-def phi_times(S, x, dt, lam):
-    """(I + A dt) S in the square-root order, in place; S (6, 6, n), x (6, n) in model order.
-    Rows X, Y read phi, phi reads a: update X, Y, then phi, then a."""
-    c, s, v, a = np.cos(x[PHI]), np.sin(x[PHI]), x[V], x[A]
-    S[SX] += (c * dt) * S[SV] - (v * s * dt) * S[SPHI]
-    S[SY] += (s * dt) * S[SV] + (v * c * dt) * S[SPHI]
-    S[SPHI] += (-a / v**2 * dt) * S[SV] + (dt / v) * S[SA]
-    S[SA] *= 1.0 - lam * dt
-    return S
 
 
 def fold_noise(L, q):
@@ -74,13 +63,13 @@ def scalar_update(S, h, r, innovation, valid):
 
 def square_root_update(x, S, obs_k, model):
     """One epoch's readings, scalar by scalar, against the predicted mean's linearisation."""
-    h, H = model.observe_with_jacobian(x.T)
+    h, H = model.observe_with_jacobian(x)  # (m, n), (m, 6, n)
     x_lin = x.copy()
     r = model.obs_sd**2
-    for j in range(h.shape[1]):
+    for j in range(h.shape[0]):
         valid = np.isfinite(obs_k[:, j])
-        innovation = obs_k[:, j] - h[:, j] - np.einsum("in,in->n", H[:, j].T, x - x_lin)
-        S, step = scalar_update(S, H[:, j].T[ORDER], r[j], innovation, valid)
+        innovation = obs_k[:, j] - h[j] - np.einsum("in,in->n", H[j], x - x_lin)
+        S, step = scalar_update(S, H[j][ORDER], r[j], innovation, valid)
         x = x + step[INVERSE]
     return x, S
 
@@ -89,15 +78,17 @@ class SquareRootEKF(KalmanFilterBase):
     name = "srekf"
     Config = Config
 
-    def initial_factor(self, cov0, n, record):
+    def initial_factor(self, cov0, n):
         # cov0 is diagonal (independent initial components): its Cholesky factor is the
         # root of the diagonal, which exists even where a variance underflowed to 0
         return np.repeat(np.diag(np.sqrt(np.diag(cov0)[ORDER]))[:, :, None], n, axis=2)
 
-    def predict_factor(self, S, x, dt, record):
+    def predict_factor(self, S, x, dt, model):
+        """S <- the triangular factor of [Phi S, b sqrt(dt)]."""
+        transition_times(model.drift_jacobian(x, dt), S, at=INVERSE)  # Phi S
         q = np.zeros((6, S.shape[2]))
-        q[SA] = record["mu"] * np.sqrt(dt)
-        return fold_noise(phi_times(S, x, dt, record["lam"]), q)
+        q[SA] = model.mu * np.sqrt(dt)
+        return fold_noise(S, q)
 
     def update(self, x, S, obs_k, model):
         return square_root_update(x, S, obs_k, model)
