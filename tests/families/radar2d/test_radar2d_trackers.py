@@ -1,19 +1,12 @@
-"""radar2d: alpha-beta = least squares, the fuzzy selector, the IMM, vectorisation, bad input."""
+"""radar2d trackers: alpha-beta = least squares, the fuzzy selector, the IMM, vectorisation."""
 
 import numpy as np
-import pandas as pd
 import pytest
 
-from pipeline.aggregate import aggregate_stage
-from pipeline.estimate import estimate_stage
-from pipeline.simulate import simulate_stage
-from tests.conftest import compose_cfg
-from tma.errors import ConfigError, InputError
 from tma.families import build_estimator
 from tma.families.radar2d.estimators.base import alpha_beta_window
 from tma.families.radar2d.fuzzy import memory_length_selector, sigmoid
-from tma.families.radar2d.log import RadarLog, read_radar_log, write_radar_log
-from tma.families.radar2d.metrics import per_scan_errors, summary_row
+from tma.families.radar2d.log import RadarLog
 from tma.families.radar2d.scenario import Config, simulate_shard
 from tma.families.radar2d.turn import coordinated_turn
 
@@ -111,66 +104,6 @@ def test_vectorised_equals_single_run(name):
             np.testing.assert_allclose(single[key][0], batch[key][i], rtol=1e-12, atol=1e-12)
 
 
-def test_missing_plots_skip_the_scan_and_keep_the_track(tmp_path):
-    log, _ = _log(n=4)
-    log.plots_m[1, 20, :] = np.nan
-    log.plots_m[2, 10:12, 0] = np.nan
-    write_radar_log(tmp_path / "r.mcap", log)
-    back = read_radar_log(tmp_path / "r.mcap")
-    assert np.isnan(back.plots_m[1, 20]).all()
-    for name in ("alphabeta", "fuzzy_mm", "imm"):
-        out = build_estimator({"name": name}).estimate(back)
-        assert np.all(np.isfinite(out["x_m"][:, 2:])), name
-
-
-def test_bad_scan_times_and_contradicting_period(tmp_path):
-    log, _ = _log(n=2)
-    with pytest.raises(InputError, match=r"scan_period_s = 2 s in the config contradicts .* 3 s"):
-        build_estimator({"name": "fuzzy_mm", "scan_period_s": 2.0}).estimate(log)
-    bad = RadarLog(log.t_s.copy(), log.track_id, log.plots_m, log.sensor)
-    bad.t_s[5] = bad.t_s[4]
-    with pytest.raises(InputError, match="not increasing"):
-        bad.validate("log")
-    gap = RadarLog(np.delete(log.t_s, 7), log.track_id, np.delete(log.plots_m, 7, axis=1),
-                   log.sensor)
-    with pytest.raises(InputError, match="not uniform"):
-        build_estimator({"name": "imm"}).estimate(gap)
-
-
-def test_polar_noise_and_pipeline_table(tmp_path):
-    overrides = ["experiment=radar2d_table", "scenario.n_tracks=40", "scenario.shard_size=20",
-                 "scenario.noise=polar", "progress=false", f"paths.data_dir={tmp_path}/data",
-                 f"paths.tables_dir={tmp_path}/tables"]
-    cfg = compose_cfg(overrides)
-    simulate_stage(cfg)
-    estimate_stage(cfg)
-    aggregate_stage(cfg)
-    table = pd.read_csv(tmp_path / "tables" / "radar2d.csv")
-    assert len(table) == 6 and set(table.speed_m_s) == {10, 20}
-    fuzzy = table[table.estimator == "fuzzy_mm"]
-    assert (fuzzy.m_median == 10).all() and (fuzzy.m_min_turn_median < 10).all()
-    assert (table.straight1_mean_m < 15).all()
-    metrics = sorted((tmp_path / "data" / "runs").glob("*/*/metrics.parquet"))
-    assert len(metrics) == 6
-    lost = sorted(pd.read_parquet(p).groupby("track_id")["status"].first().eq("track_lost")
-                  .mean() for p in metrics)
-    assert lost == sorted(table.track_loss)
-    for name in ("radar2d.md", "radar2d.png", "radar2d_memory.png"):
-        assert (tmp_path / "tables" / name).exists()
-
-
-def test_nan_estimates_and_flagged_runs_count_as_track_lost():
-    _, truth = _log(n=4)
-    truth = truth.to_pandas()
-    est = truth.assign(x_m=truth["x_m"] + 5.0, status="ok")  # 5 m off: within the gate
-    est.loc[(est.track_id == 1) & (est.step >= 20), "x_m"] = np.nan  # no estimate from 60 s
-    est.loc[est.track_id == 3, "status"] = "divergent"  # the tracker's own verdict
-    per_scan = per_scan_errors(est, truth)
-    status = per_scan.groupby("track_id")["status"].first()
-    assert list(status) == ["ok", "track_lost", "ok", "track_lost"]
-    assert summary_row(per_scan, "imm", 10.0)["track_loss"] == 0.5
-
-
 def test_imm_model_probabilities_survive_underflowing_likelihoods():
     """Tiny process noise in a 20 m/s turn: both models' likelihoods underflow to 0, which
     made the model probabilities 0/0 = NaN for the rest of the run."""
@@ -186,23 +119,3 @@ def test_tracker_without_a_start_is_flagged_divergent():
     log.plots_m[1, 1] = np.nan  # the IMM starts from the line through plots 0 and 1
     out = build_estimator({"name": "imm"}).estimate(log)
     assert list(out["status"]) == ["ok", "divergent", "ok"]
-
-
-@pytest.mark.parametrize(("node", "key"), [
-    ({"name": "imm", "initial_probs": [-1.0, 2.0]}, "initial_probs"),
-    ({"name": "imm", "cv_accel_psd": -0.01}, "cv_accel_psd"),
-    ({"name": "imm", "p_stay": float("nan")}, "p_stay"),
-    ({"name": "fuzzy_mm", "bad_centre": 4.0}, "bad_centre"),
-    ({"name": "alphabeta", "scan_period_s": -3.0}, "scan_period_s"),
-])
-def test_impossible_tracker_configs_are_refused(node, key):
-    with pytest.raises(ConfigError, match=key):
-        build_estimator(node)
-
-
-def test_impossible_scenarios_are_refused():
-    with pytest.raises(ConfigError, match=r"legs\[1\]"):
-        Config(legs=[{"duration_s": 45.0}, {"turn_radius_m": -300.0, "duration_s": 45.0,
-                                            "direction": "left"}])
-    with pytest.raises(ConfigError, match="scan_period_s"):
-        Config(scan_period_s=100.0)  # a 120 s path seen in 2 scans
