@@ -246,8 +246,9 @@ def check_integrity(data: bytes) -> str | None:
     return None
 
 
-def read_log(path, expected: dict[str, str]):
-    """Read an MCAP log. ``expected`` maps topic -> schema name.
+def read_log(path, expected: dict[str, str], nonempty: bool = False):
+    """Read an MCAP log. ``expected`` maps topic -> schema name; ``nonempty``: each of these
+    topics must hold a message.
 
     Returns ``(messages, metadata)``: ``messages[topic]`` is a list of decoded dicts in
     log-time order, ``metadata`` maps metadata record names to dicts. Raises one
@@ -266,7 +267,7 @@ def read_log(path, expected: dict[str, str]):
     if problem:
         raise InputError(f"{path}: not a valid MCAP log ({problem})")
     try:
-        return _read_records(BytesIO(data), expected, str(path))
+        messages, metadata = _read_records(BytesIO(data), expected, str(path))
     except InputError:
         raise
     except Exception as exc:
@@ -275,6 +276,10 @@ def read_log(path, expected: dict[str, str]):
         detail = " ".join(str(exc).split())[:200]
         raise InputError(f"{path}: not a valid MCAP log ({type(exc).__name__}: {detail})"
                          ) from None
+    empty = [topic for topic in expected if nonempty and not messages[topic]]
+    if empty:
+        raise InputError(f"{path}: no messages on {', '.join(empty)}")
+    return messages, metadata
 
 
 def _read_records(stream, expected: dict[str, str], where: str):

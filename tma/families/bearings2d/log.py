@@ -120,13 +120,9 @@ def read_bearings_log(path) -> BearingsLog:
     messages with equal ``t_s`` are one epoch, and a contact may appear once per epoch.
     A message that does not follow its schema raises InputError naming the file.
     """
-    messages, metadata = read_log(path, SCHEMAS)
+    messages, metadata = read_log(path, SCHEMAS, nonempty=True)
     nav, obs = messages[OWNSHIP_TOPIC], messages[BEARINGS_TOPIC]
     where = str(path)
-    if not nav:
-        raise InputError(f"{where}: no messages on {OWNSHIP_TOPIC}")
-    if not obs:
-        raise InputError(f"{where}: no messages on {BEARINGS_TOPIC}")
     with schema_errors(where, f"a message on {OWNSHIP_TOPIC}"):
         nav_t = np.array([number(m["t_s"]) for m in nav])
         nav_x = np.array([number(m["x_m"]) for m in nav])

@@ -70,11 +70,9 @@ def write_radar_log(path, log: RadarLog, metadata=None) -> int:
 
 
 def read_radar_log(path) -> RadarLog:
-    messages, metadata = read_log(path, SCHEMAS)
+    messages, metadata = read_log(path, SCHEMAS, nonempty=True)
     msgs = messages[PLOTS_TOPIC]
     where = str(path)
-    if not msgs:
-        raise InputError(f"{where}: no messages on {PLOTS_TOPIC}")
     sensor = read_json_record(metadata, "tma.sensor", where)
     with schema_errors(where, f"a message on {PLOTS_TOPIC}"):
         t = np.array([number(m["t_s"]) for m in msgs])

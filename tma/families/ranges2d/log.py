@@ -88,11 +88,9 @@ def write_ranges_log(path, log: RangesLog, metadata=None) -> int:
 
 
 def read_ranges_log(path) -> RangesLog:
-    messages, metadata = read_log(path, SCHEMAS)
+    messages, metadata = read_log(path, SCHEMAS, nonempty=True)
     msgs = messages[RANGES_TOPIC]
     where = str(path)
-    if not msgs:
-        raise InputError(f"{where}: no messages on {RANGES_TOPIC}")
     model = read_json_record(metadata, "tma.model", where)
     with schema_errors(where, f"a message on {RANGES_TOPIC}"):
         t_msg = np.array([number(m["t_s"]) for m in msgs])
