@@ -54,6 +54,11 @@ def _load_or_build(root: Path, kind: str, spec: dict, build) -> tuple[Path, str]
     return root / ARRAYS, sha
 
 
+def is_record(record) -> bool:
+    """True for what ``load_or_build`` returns: ``{"kind", "key", "sha256"}``."""
+    return isinstance(record, dict) and {"kind", "key", "sha256"} <= set(record)
+
+
 def load_arrays(record: dict, data_dir) -> dict:
     """Arrays of the artefact ``record`` under ``data_dir`` (hash-checked)."""
     path = Path(data_dir) / "artefacts" / record["key"] / ARRAYS

@@ -13,6 +13,7 @@ import pandas as pd  # noqa: E402
 import pyarrow as pa  # noqa: E402
 import pyarrow.parquet as pq  # noqa: E402
 
+from tma.families import estimator_class  # noqa: E402
 from tma.families.bearing_doppler3d.metrics import (  # noqa: E402
     DIVERGENCE_AFTER_S,
     DIVERGENCE_M,
@@ -63,9 +64,9 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
         write_parquet_atomic(e.run_root / "metrics.parquet",
                              pa.Table.from_pandas(steps, preserve_index=False))
         doppler = not e.dataset.manifest["config"]["no_doppler"]
-        cfg = e.manifest["config"]
+        size = estimator_class(e.estimator).training_size  # declared, not guessed from keys
         row = {"estimator": e.estimator, "doppler": doppler, "n_paths": len(keep),
-               "training_paths": cfg.get("training_paths", cfg.get("bundle_paths", np.nan))}
+               "training_paths": e.manifest["config"][size] if size else np.nan}
         for when, target in (("50", MID_S), ("T", t[-1])):
             k = int(np.argmin(np.abs(t - target)))
             at = steps[steps.step == k].set_index("component")

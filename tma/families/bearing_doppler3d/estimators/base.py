@@ -36,6 +36,7 @@ def dataset_model_record(dataset) -> dict:
 class AuvEstimator(Estimator):
     side_tables = ("covariance",)  # full covariances every covariance_every epochs
     family = "bearing_doppler3d"
+    training_size = None  # the config field holding the paths it was trained on, if any
 
     def estimate(self, log: HydrophoneLog) -> dict:
         model = AuvModel.from_record(log.model)

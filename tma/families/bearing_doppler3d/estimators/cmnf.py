@@ -20,7 +20,7 @@ from tma.config import require
 from tma.families.bearing_doppler3d.estimators.base import AuvEstimator, dataset_model_record
 from tma.families.bearing_doppler3d.estimators.bundle import MAX_PATHS, training_bundle
 from tma.families.bearing_doppler3d.model import AuvModel
-from tma.io.artefacts import load_arrays, load_or_build
+from tma.io.artefacts import is_record, load_arrays, load_or_build
 
 
 @dataclass
@@ -39,7 +39,7 @@ class Config:
         require(self.training_seed >= 0, w, "training_seed must be >= 0")
         require(0 < self.pinv_rtol < 1, w, "pinv_rtol must lie in (0, 1) (relative threshold)")
         require(self.covariance_every >= 1, w, "covariance_every must be >= 1")
-        require(self.artefact is None or {"kind", "key", "sha256"} <= set(self.artefact), w,
+        require(self.artefact is None or is_record(self.artefact), w,
                 "artefact must be null or {kind, key, sha256} (set by the estimate stage)")
 
 
@@ -119,6 +119,7 @@ def model_functions(model, t):
 
 
 class CMNF(AuvEstimator):
+    training_size = "training_paths"
     name = "cmnf"
     Config = Config
 

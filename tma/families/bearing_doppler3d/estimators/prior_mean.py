@@ -9,7 +9,7 @@ import numpy as np
 from tma.config import require
 from tma.families.bearing_doppler3d.estimators.base import AuvEstimator, dataset_model_record
 from tma.families.bearing_doppler3d.estimators.bundle import MAX_PATHS, training_bundle
-from tma.io.artefacts import load_arrays
+from tma.io.artefacts import is_record, load_arrays
 
 
 @dataclass
@@ -26,11 +26,12 @@ class Config:
                 f"bundle_paths must be in [100, {MAX_PATHS}]")
         require(self.bundle_seed >= 0, w, "bundle_seed must be >= 0")
         require(self.covariance_every >= 1, w, "covariance_every must be >= 1")
-        require(self.artefact is None or {"kind", "key", "sha256"} <= set(self.artefact), w,
+        require(self.artefact is None or is_record(self.artefact), w,
                 "artefact must be null or {kind, key, sha256} (set by the estimate stage)")
 
 
 class PriorMean(AuvEstimator):
+    training_size = "bundle_paths"  # the simulated paths its mean and covariance come from
     name = "prior_mean"
     Config = Config
 
