@@ -31,8 +31,11 @@ table: $(STAMP)  ## simulate -> estimate -> aggregate every default experiment i
 	  $(PY) -m pipeline.aggregate experiment=$$exp $(ARGS); \
 	done
 
-test: $(STAMP)  ## run the test suite (pytest)
-	$(PY) -m pytest -q $(ARGS)
+# one pytest worker per core (at most 4: each builds its module fixtures); TEST_JOBS=0 runs in
+# this process, e.g. for a debugger
+TEST_JOBS ?= auto --maxprocesses=4
+test: $(STAMP)  ## run the test suite (pytest, one worker per core)
+	$(PY) -m pytest -q -n $(TEST_JOBS) $(ARGS)
 
 lint: $(STAMP)  ## ruff
 	$(VENV)/bin/ruff check tma pipeline tests bench

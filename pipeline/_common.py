@@ -34,7 +34,7 @@ from tma.families import (
 from tma.io.atomic import write_json_atomic
 from tma.io.dataset import Dataset, datasets_dir
 from tma.io.owned import plain_name
-from tma.parallel import keep_freed_memory
+from tma.parallel import Engine, keep_freed_memory
 
 CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
 log = logging.getLogger("tma")
@@ -44,7 +44,8 @@ SWEEP_RECORD = "tma-aggregate.json"  # what an aggregate job of a multirun read
 PROBE_BYTES = 1 << 16  # more than Hydra writes of its own before the stage starts
 KNOWN_KEYS = {  # top-level keys of conf/config.yaml and conf/ingest.yaml (+key adds none)
     "dataset", "estimator", "force", "grid", "parallel", "paths", "progress", "scenario",
-    "table", "bearing_units", "format", "input", "min_bearings", "name", "sigma_deg"}
+    "table", "format", "input", "min_bearings", "name", "sigma_deg", "navigation", "columns",
+    "bearing", "ownship", "csv", "time", "nav", "origin"}
 
 
 def fail(message: str, status: int = 2):
@@ -242,26 +243,36 @@ def check_stage_options(cfg: DictConfig):
     for key in ("dataset", "table", "name"):
         if cfg.get(key) is not None:
             plain_name(cfg[key], key)
-    n_jobs_requested(cfg)
+    engine_requested(cfg)
 
 
-def n_jobs_requested(cfg: DictConfig) -> int:
-    value = cfg.parallel.n_jobs
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ConfigError(f"parallel.n_jobs must be a whole number >= 1, got '{value}'")
-    return value
+def engine_requested(cfg: DictConfig) -> Engine:
+    """The ``parallel`` group as an ``Engine``; unknown keys and bad values are one line."""
+    node = cfg.get("parallel")
+    if not isinstance(node, DictConfig):
+        raise ConfigError(f"parallel must be a config group entry (default, serial, dask), "
+                          f"got '{node}'")
+    known = {f.name for f in dataclasses.fields(Engine)} - {"kind"} | {"engine"}
+    unknown = sorted(set(node) - known)
+    if unknown:
+        raise ConfigError(f"unknown option(s) parallel.{', parallel.'.join(unknown)} (known: "
+                          f"{', '.join(sorted(known))})")
+    values = OmegaConf.to_container(node, resolve=True)
+    return Engine(kind=values.pop("engine", "joblib"), **values)
 
 
-def n_jobs(cfg: DictConfig) -> int:
-    """Worker processes for shards; 1 inside a joblib-launcher job (one parallel layer)."""
-    requested = n_jobs_requested(cfg)
+def engine(cfg: DictConfig) -> Engine:
+    """Where shards run; in this process inside a job of a parallel launcher (joblib,
+    submitit): one parallel layer only."""
+    requested = engine_requested(cfg)
     try:
-        launcher = str(HydraConfig.get().launcher.get("_target_", ""))
+        launcher = str(HydraConfig.get().launcher.get("_target_", "")).lower()
     except ValueError:  # not running under Hydra (tests calling stage functions)
         launcher = ""
-    if "joblib" in launcher.lower() and requested != 1:
-        log.info("joblib launcher active: shards run serially inside each job")
-        return 1
+    parallel_launcher = "joblib" in launcher or "submitit" in launcher
+    if parallel_launcher and requested.kind == "joblib" and requested.n_jobs != 1:
+        log.info("parallel launcher active: shards run serially inside each job")
+        return dataclasses.replace(requested, n_jobs=1)
     return requested
 
 

@@ -2,7 +2,7 @@
 
 import hydra
 
-from pipeline._common import CONF_DIR, estimator_nodes, log, n_jobs, run_stage, scenario_nodes
+from pipeline._common import CONF_DIR, engine, estimator_nodes, log, run_stage, scenario_nodes
 from tma.errors import ConfigError
 from tma.simulate import simulate_datasets
 
@@ -12,7 +12,7 @@ def simulate_stage(cfg):
         raise ConfigError("simulate creates datasets from the scenario config; "
                           "'dataset=' names an existing one (use it with estimate/aggregate)")
     estimator_nodes(cfg)  # the command line's estimator overrides fail here too, not later
-    roots = simulate_datasets(scenario_nodes(cfg), cfg.paths.data_dir, n_jobs=n_jobs(cfg),
+    roots = simulate_datasets(scenario_nodes(cfg), cfg.paths.data_dir, engine=engine(cfg),
                               force=cfg.force, progress=cfg.progress)
     for root in roots:
         log.info("dataset %s", root)

@@ -1,5 +1,6 @@
-"""Every failure a user can cause is one line on stderr and exit status 2, never a traceback,
-run as a user would (a subprocess per case). Issue 8, items 1, 4 and 5.
+"""Every failure a user can cause is one line on stderr and exit status 2, never a traceback.
+Issue 8, items 1, 4 and 5. Each case runs the stage's Hydra entry point in this process
+(``run_stage_here``); one case per verb also runs as a user would, in a new interpreter.
 
 The read-only and full disks are real: a small tmpfs in a private mount namespace
 (``unshare -m``, so nothing outside the test sees it).
@@ -13,7 +14,7 @@ import textwrap
 import pandas as pd
 import pytest
 
-from tests.conftest import REPO, run_cli
+from tests.conftest import REPO, run_cli, run_stage_here
 from tma.families.bearings2d.scenario import Config, simulate_shard
 
 PY = sys.executable
@@ -100,15 +101,21 @@ def _assert_one_line(proc, expected):
     assert expected in lines[0], lines[0]
 
 
-@pytest.mark.parametrize("case", sorted(CASES))
-def test_one_clear_line(workspace, case):
+# one case per verb also in a new interpreter: the ``python -m`` entry as a user runs it
+IN_A_NEW_PROCESS = ("name climbs out", "unknown dataset", "negative seed", "table climbs out")
+
+
+@pytest.mark.parametrize(("case", "run"), [
+    *[pytest.param(case, run_stage_here, id=case) for case in sorted(CASES)],
+    *[pytest.param(case, run_cli, id=f"{case} (new process)") for case in IN_A_NEW_PROCESS]])
+def test_one_clear_line(workspace, case, run):
     verb, overrides, expected = CASES[case]
     overrides = [o.format(root=workspace) for o in overrides]
     before = sorted(p for p in (workspace / "data").rglob("*") if "hydra" not in p.parts)
     scenario = [] if verb == "ingest" else ["scenario.n_tracks=20", "scenario.shard_size=10"]
-    proc = run_cli(verb, f"paths.data_dir={workspace / 'data'}", "progress=false",
-                   f"paths.tables_dir={workspace / 'tables'}", *scenario, *overrides,
-                   check=False)
+    args = (f"paths.data_dir={workspace / 'data'}", "progress=false",
+            f"paths.tables_dir={workspace / 'tables'}", *scenario, *overrides)
+    proc = run(verb, *args, check=False)
     _assert_one_line(proc, expected)
     after = sorted(p for p in (workspace / "data").rglob("*") if "hydra" not in p.parts)
     assert [p for p in after if p not in before and not p.name.endswith(".lock")] == []

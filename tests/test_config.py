@@ -8,8 +8,8 @@ from hydra import compose, initialize_config_dir
 from hydra.errors import ConfigCompositionException
 from omegaconf import OmegaConf
 
-from pipeline._common import CONF_DIR, estimator_nodes, scenario_nodes
-from tests.conftest import compose_cfg, run_cli
+from pipeline._common import CONF_DIR, engine_requested, estimator_nodes, scenario_nodes
+from tests.conftest import compose_cfg, run_stage_here
 from tma.config import to_plain
 from tma.errors import ConfigError
 from tma.families import (
@@ -48,7 +48,8 @@ def test_every_estimator_composes_from_its_dataclass_alone(name):
 
 @pytest.mark.parametrize("name", _options("parallel"))
 def test_every_parallel_option_composes(name):
-    assert compose_cfg([f"parallel={name}"]).parallel.n_jobs >= 1
+    engine = engine_requested(compose_cfg([f"parallel={name}"]))
+    assert engine.kind == ("dask" if name == "dask" else "joblib") and engine.n_jobs >= 1
 
 
 @pytest.mark.parametrize("name", _options("experiment"))
@@ -99,16 +100,17 @@ def test_unknown_keys_wrong_types_and_names_fail_clearly():
 
 
 def test_cli_errors_are_one_clear_line(tmp_path):
-    proc = run_cli("estimate", "estimator=kalman", f"paths.data_dir={tmp_path}", check=False)
+    proc = run_stage_here("estimate", "estimator=kalman", f"paths.data_dir={tmp_path}",
+                          check=False)
     assert proc.returncode != 0
     assert "Could not find 'estimator/kalman'" in proc.stderr
     assert "lm" in proc.stderr and "nbearings" in proc.stderr
-    proc = run_cli("simulate", "scenario.n_tracks=many", f"paths.data_dir={tmp_path}",
-                   check=False)
+    proc = run_stage_here("simulate", "scenario.n_tracks=many", f"paths.data_dir={tmp_path}",
+                          check=False)
     assert proc.returncode == 2
     assert "error: scenario 'bearings2d'" in proc.stderr and "Traceback" not in proc.stderr
-    proc = run_cli("estimate", f"paths.data_dir={tmp_path}", "scenario.n_tracks=5",
-                   check=False)
+    proc = run_stage_here("estimate", f"paths.data_dir={tmp_path}", "scenario.n_tracks=5",
+                          check=False)
     assert proc.returncode == 2
     assert "python -m pipeline.simulate" in proc.stderr
 

@@ -1,18 +1,35 @@
-"""MCAP and Parquet round trips, atomic writes and MCAP error handling."""
+"""MCAP and Parquet round trips, atomic writes and MCAP error handling; absolute (UTC) log
+times in every family; the geographic reference and Foxglove's own-ship fixes."""
 
+import dataclasses
 import json
 
 import numpy as np
+import pandas as pd
 import pyarrow.parquet as pq
+import pymap3d
 import pytest
+from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix
 from mcap.reader import make_reader
 from mcap.writer import Writer
+from mcap_protobuf.decoder import DecoderFactory
 
-from tma.errors import InputError
-from tma.families.bearings2d.log import CHANNELS, read_bearings_log, write_bearings_log
+from tma.errors import ConfigError, InputError
+from tma.families import NAMES, load_scenario
+from tma.families.bearings2d.log import (
+    CHANNELS,
+    GEO,
+    TRACKS,
+    read_bearings_log,
+    write_bearings_log,
+)
 from tma.families.bearings2d.scenario import Config, simulate_shard
 from tma.io.atomic import atomic_path, write_parquet_atomic
-from tma.io.mcap_log import LogWriter
+from tma.io.mcap_log import LogWriter, format_utc, json_record, parse_utc
+
+EPOCH = "2026-01-01T00:00:00Z"
+EPOCH_NS = 1_767_225_600 * 10**9  # the same instant, counted by hand
+ORIGIN = (59.9, 10.7)  # deg: Oslofjord
 
 
 def _small_log():
@@ -50,7 +67,9 @@ def test_mcap_is_a_genuine_log_for_plain_readers(tmp_path):
     assert len(msgs) == log.t_s.size
     first = json.loads(msgs[0][2].data)
     assert first["track_id"] == log.track_id.tolist()
-    assert msgs[3][2].log_time == int(log.t_s[3] * 1e9)
+    assert msgs[3][2].log_time == EPOCH_NS + int(log.t_s[3] * 1e9)  # UTC: epoch_utc + t_s
+    assert msgs[3][2].publish_time == msgs[3][2].log_time
+    assert json.loads(msgs[3][2].data)["t_s"] == log.t_s[3]  # payloads keep relative seconds
 
 
 def test_mcap_bytes_are_reproducible(tmp_path):
@@ -118,3 +137,161 @@ def test_atomic_path_leaves_nothing_on_failure(tmp_path):
         raise RuntimeError("killed")
     assert not target.exists()
     assert list(tmp_path.iterdir()) == []
+
+
+# -- absolute time ------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("text", [EPOCH, "2026-01-01T02:00:00+02:00", "2026-06-30 23:59:59.5Z",
+                                  "1970-01-01T00:00:00Z", "2031-03-04T05:06:07.123456789-01:30"])
+def test_utc_times_are_exact_to_the_nanosecond(text):
+    ns = parse_utc(text)
+    assert ns == pd.Timestamp(text).value  # pandas: an independent ISO-8601 parser
+    assert parse_utc(format_utc(ns)) == ns
+    assert format_utc(ns).endswith("Z")
+
+
+@pytest.mark.parametrize("bad", ["2026-01-01T00:00:00", "2026-01-01", "yesterday", "",
+                                 "2026-02-30T00:00:00Z", "1969-12-31T23:59:59Z",
+                                 "2300-01-01T00:00:00Z"])
+@pytest.mark.parametrize("family", NAMES)
+def test_a_bad_epoch_is_one_line_naming_the_key(family, bad):
+    with pytest.raises(ConfigError, match=rf"scenario '{family}': epoch_utc: '{bad}' "):
+        load_scenario({"family": family, "epoch_utc": bad})
+
+
+def _first_message(path):
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        _, _, message = next(reader.iter_messages(log_time_order=True))
+        records = {m.name: m.metadata for m in reader.iter_metadata()}
+    return message, records
+
+
+@pytest.mark.parametrize("family", NAMES)
+def test_every_family_logs_utc_times_from_its_epoch(family, tmp_path):
+    small = {"bearing_doppler3d": {"duration_s": 3.0}, "ranges2d": {}, "radar2d": {},
+             "bearings2d": {}}[family]
+    module, cfg = load_scenario({"family": family, "n_tracks": 2, "shard_size": 2,
+                                 "epoch_utc": "2026-05-17T12:00:00.25+02:00", **small})
+    log, _ = module.simulate_shard(cfg, 0)
+    module.write_log(tmp_path / "log.mcap", log)
+    epoch = 1_779_012_000 * 10**9 + 250_000_000  # 10:00:00.25 UTC, counted by hand
+    message, records = _first_message(tmp_path / "log.mcap")
+    t0 = json.loads(message.data)["t_s"]
+    assert message.log_time == message.publish_time == epoch + round(t0 * 1e9)
+    assert json.loads(records["tma.time"]["epoch_utc_ns"]) == epoch
+    back = module.read_log(tmp_path / "log.mcap")
+    assert back.epoch_utc_ns == epoch
+    np.testing.assert_array_equal(back.t_s, log.t_s)  # t from t_s, not from log times
+
+
+def test_without_an_epoch_log_times_stay_relative(tmp_path):
+    log, _ = _small_log()
+    write_bearings_log(tmp_path / "rel.mcap", dataclasses.replace(log, epoch_utc_ns=None))
+    message, records = _first_message(tmp_path / "rel.mcap")
+    assert message.log_time == 0 and "tma.time" not in records
+    assert read_bearings_log(tmp_path / "rel.mcap").epoch_utc_ns is None
+
+
+def test_a_log_time_beyond_mcap_range_is_one_clear_error(tmp_path):
+    log, _ = _small_log()
+    log.t_s = log.t_s - 2e9  # 63 years before a 2026 epoch: before 1970
+    with pytest.raises(InputError, match="outside MCAP's log time range"):
+        write_bearings_log(tmp_path / "neg.mcap", log)
+    assert list(tmp_path.iterdir()) == []
+
+
+# -- geographic reference -------------------------------------------------------------------
+
+def _geo_log():
+    cfg = load_scenario({"family": "bearings2d", "n_tracks": 3, "shard_size": 3,
+                         "origin": {"lat": ORIGIN[0], "lon": ORIGIN[1]}})[1]
+    log, _ = simulate_shard(cfg, 0)
+    log.track_label = np.array(["T1", "bravo 2", "ü"], dtype=object)
+    return log
+
+
+def _fixes(path, topic):
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        schema = next(s for s in reader.get_summary().schemas.values()
+                      if s.name == "foxglove.LocationFix")
+        fixes = [(m, d) for _, _, m, d in reader.iter_decoded_messages(topics=[topic])]
+    return schema, fixes
+
+
+def test_ownship_location_fix_in_foxglove_schema(tmp_path):
+    log = _geo_log()
+    path = tmp_path / "geo.mcap"
+    n = write_bearings_log(path, log)
+    assert n == 3 * log.t_s.size
+    schema, fixes = _fixes(path, "/ownship/location_fix")
+    assert schema.encoding == "protobuf"
+    assert len(fixes) == log.t_s.size
+    lat = np.array([d.latitude for _, d in fixes])
+    lon = np.array([d.longitude for _, d in fixes])
+    # own-ship stays within 6 km of the origin: the tangent-plane point (up = 0) and the
+    # sea-level point differ by < 3 mm there
+    ref_lat, ref_lon, _ = pymap3d.enu2geodetic(log.own_x_m, log.own_y_m, 0.0, *ORIGIN, 0.0)
+    np.testing.assert_allclose(lat, ref_lat, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(lon, ref_lon, rtol=0, atol=1e-7)
+    east, north, _ = pymap3d.geodetic2enu(lat, lon, 0.0, *ORIGIN, 0.0)  # exact inverse
+    np.testing.assert_allclose(east, log.own_x_m, rtol=0, atol=1e-3)
+    np.testing.assert_allclose(north, log.own_y_m, rtol=0, atol=1e-3)
+    for k, (message, fix) in enumerate(fixes):
+        assert type(fix).DESCRIPTOR.full_name == LocationFix.DESCRIPTOR.full_name
+        stamp = fix.timestamp.seconds * 10**9 + fix.timestamp.nanos
+        assert stamp == message.log_time == EPOCH_NS + round(log.t_s[k] * 1e9)
+        assert fix.frame_id == "ownship" and fix.position_covariance_type == 0
+        assert fix.altitude == 0.0
+
+
+def test_geo_references_round_trip_and_the_extra_channel_is_ignored(tmp_path):
+    log = _geo_log()
+    write_bearings_log(tmp_path / "geo.mcap", log)
+    back = read_bearings_log(tmp_path / "geo.mcap")
+    assert back.origin_deg == ORIGIN and back.epoch_utc_ns == EPOCH_NS
+    assert list(back.track_label) == ["T1", "bravo 2", "ü"]
+    np.testing.assert_array_equal(back.bearing_deg, log.bearing_deg)
+    np.testing.assert_array_equal(back.own_x_m, log.own_x_m)
+    _, records = _first_message(tmp_path / "geo.mcap")
+    assert {k: json.loads(v) for k, v in records[GEO].items()} == {
+        "origin_lat_deg": ORIGIN[0], "origin_lon_deg": ORIGIN[1], "epoch_utc_ns": EPOCH_NS}
+    write_bearings_log(tmp_path / "again.mcap", log)
+    assert (tmp_path / "again.mcap").read_bytes() == (tmp_path / "geo.mcap").read_bytes()
+
+
+def test_an_ownship_beyond_the_local_plane_is_refused(tmp_path):
+    log = _geo_log()
+    log.own_x_m = log.own_x_m + 2.5e6  # 2500 km east of the origin
+    with pytest.raises(InputError, match="own-ship goes farther than 2000 km from the origin"):
+        write_bearings_log(tmp_path / "far.mcap", log)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_scenario_origin_is_validated():
+    with pytest.raises(ConfigError, match="origin.lat and origin.lon must be given together"):
+        load_scenario({"family": "bearings2d", "origin": {"lat": 59.9}})
+    with pytest.raises(ConfigError, match=r"origin must be a latitude in \(-90, 90\)"):
+        load_scenario({"family": "bearings2d", "origin": {"lat": 95.0, "lon": 10.0}})
+    assert load_scenario({"family": "bearings2d"})[1].origin.lat is None  # none by default
+
+
+@pytest.mark.parametrize("record, message", [
+    ({TRACKS: {"track_id": [0, 1], "label": ["a", "b"]}}, r"no label for track\(s\) 2"),
+    ({TRACKS: {"track_id": [0, 1, 2], "label": ["a", "b", 3]}}, "one text label per track"),
+    ({TRACKS: {"track_id": [0, 1, 2], "label": ["a", "a", "b"]}}, "share one label"),
+    ({GEO: {"origin_lat_deg": "59.9", "origin_lon_deg": 10.7}}, "tma.geo does not follow"),
+    ({GEO: {"origin_lat_deg": 91.0, "origin_lon_deg": 10.7}}, "is not a latitude"),
+    ({"tma.time": {"epoch_utc_ns": 1.5}}, "tma.time does not follow"),
+])
+def test_bad_reference_records_are_one_clear_error(tmp_path, record, message):
+    log, _ = simulate_shard(Config(n_tracks=3, shard_size=3), 0)
+    path = tmp_path / "bad.mcap"
+    with LogWriter(path, CHANNELS, {k: json_record(v) for k, v in record.items()}) as w:
+        for k, t in enumerate(log.t_s.tolist()):
+            w.write("/ownship/navigation", t, {"t_s": t, "x_m": 0.0, "y_m": 0.0})
+            w.write("/sonar/bearings", t, {"t_s": t, "track_id": log.track_id,
+                                            "bearing_deg": log.bearing_deg[:, k]})
+    with pytest.raises(InputError, match=message):
+        read_bearings_log(path)

@@ -10,7 +10,7 @@ import pytest
 from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
 from pipeline.simulate import simulate_stage
-from tests.conftest import SMALL, compose_cfg, run_cli
+from tests.conftest import SMALL, compose_cfg, run_cli, run_stage_here
 from tma.errors import IntegrityError
 
 EXPECTED_COLUMNS = (
@@ -129,8 +129,9 @@ def test_tampered_dataset_is_refused(paths, tmp_path):
 def test_cli_sweep_and_joblib_launcher(tmp_path):
     common = [f"paths.data_dir={tmp_path}", "scenario.n_tracks=30", "scenario.shard_size=15",
               "progress=false"]
-    run_cli("simulate", "-m", "scenario.sigma_deg=0.1,0.5", *common)
-    run_cli("estimate", "-m", "estimator=lm,nbearings", "scenario.sigma_deg=0.1,0.5", *common)
+    run_stage_here("simulate", "-m", "scenario.sigma_deg=0.1,0.5", *common)
+    run_stage_here("estimate", "-m", "estimator=lm,nbearings", "scenario.sigma_deg=0.1,0.5",
+                   *common)
     runs = sorted(p.parent.name + "/" + p.name.split("-")[0]
                   for p in tmp_path.glob("runs/*/*/estimates.parquet"))
     assert len(runs) == 4

@@ -17,7 +17,7 @@ import pytest
 from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
 from pipeline.simulate import simulate_stage
-from tests.conftest import REPO, SMALL, compose_cfg, run_cli
+from tests.conftest import REPO, SMALL, compose_cfg, run_stage_here
 from tma.errors import ConfigError, InputError, IntegrityError
 from tma.families.bearings2d.ingest import ingest
 from tma.families.bearings2d.scenario import Config, simulate_shard
@@ -161,9 +161,9 @@ def test_a_damaged_run_is_a_clear_error_then_recomputed(tmp_path, damage):
 def test_kill_leaves_the_old_good_output_and_a_resumable_partial(tmp_path):
     """A ``force=true`` simulate killed half-way: the old dataset is untouched, the partial
     is tma's own, and the next run finishes it without leaving temporaries behind."""
-    common = [f"paths.data_dir={tmp_path / 'data'}", "scenario.n_tracks=3000",
-              "scenario.shard_size=100", "progress=false", "parallel=serial"]
-    run_cli("simulate", *common)
+    common = [f"paths.data_dir={tmp_path / 'data'}", "scenario.n_tracks=600",
+              "scenario.shard_size=20", "progress=false", "parallel=serial"]
+    run_stage_here("simulate", *common)
     dataset = next((tmp_path / "data" / "datasets").glob("*/manifest.json")).parent
     before = _tree(dataset)
     partial = dataset.with_name(f".{dataset.name}.partial")
@@ -176,7 +176,7 @@ def test_kill_leaves_the_old_good_output_and_a_resumable_partial(tmp_path):
     proc.wait()
     assert (partial / MARKER).exists() and _tree(dataset) == before
     (partial / "log" / ".shard-00029.mcap.tmp-999999").write_bytes(b"left by a kill")
-    run_cli("simulate", *common, "force=true")
+    run_stage_here("simulate", *common, "force=true")
     assert _tree(dataset) == before  # same config, same bytes
     leftovers = [p for p in (tmp_path / "data").rglob("*")
                  if ".tmp-" in p.name or ".old-" in p.name or p.name.endswith(".partial")]

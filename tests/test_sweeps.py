@@ -12,7 +12,7 @@ from hydra import compose, initialize_config_dir
 from pipeline._common import CONF_DIR, estimator_nodes, scenario_nodes
 from pipeline.estimate import estimate_stage
 from pipeline.simulate import simulate_stage
-from tests.conftest import run_cli
+from tests.conftest import run_stage_here
 from tma.errors import ConfigError
 
 SMALL = ["scenario.n_tracks=30", "scenario.shard_size=15", "progress=false", "parallel=serial"]
@@ -93,15 +93,15 @@ def data(tmp_path_factory):
 def test_cli_experiment_applies_overrides(data):
     root, common = data
     before = {p.parent for p in root.glob("data/runs/*/*/manifest.json")}
-    run_cli("estimate", "experiment=bearings2d_table", *common, "scenario.sigma_deg=0.5",
+    run_stage_here("estimate", "experiment=bearings2d_table", *common, "scenario.sigma_deg=0.5",
             "estimator.lambda0=1")
     new = {p.parent for p in root.glob("data/runs/*/*/manifest.json")} - before
     assert len(new) == 1  # nbearings unchanged (reused); lm at one sigma only, lambda0 = 1
     manifest = json.loads((new.pop() / "manifest.json").read_text())
     assert manifest["config"]["name"] == "lm" and manifest["config"]["lambda0"] == 1.0
     assert "sigma0.5" in manifest["dataset"]["name"]
-    proc = run_cli("estimate", "experiment=radar2d_table", *common, "estimator.lambda0=1",
-                   check=False)
+    proc = run_stage_here("estimate", "experiment=radar2d_table", *common, "estimator.lambda0=1",
+                          check=False)
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == [
         "error: estimator.lambda0=1: no estimator of this run has 'lambda0' "
@@ -110,14 +110,17 @@ def test_cli_experiment_applies_overrides(data):
 
 def test_cli_aggregate_sweep_writes_one_table_of_all_jobs(data):
     root, common = data
-    run_cli("aggregate", "-m", "estimator=lm,nbearings", "scenario.sigma_deg=0.1,0.5", *common)
+    run_stage_here("aggregate", "-m", "estimator=lm,nbearings", "scenario.sigma_deg=0.1,0.5",
+                   *common)
     tables = root / "tables"
     sweep = pd.read_csv(tables / "bearings2d-sweep.csv")
     assert list(zip(sweep.estimator, sweep.sigma_deg, strict=True)) == [
         ("lm", 0.1), ("lm", 0.5), ("nbearings", 0.1), ("nbearings", 0.5)]
     assert (sweep.n_tracks == 30).all() and (tables / "bearings2d-sweep.png").exists()
-    jobs = [p for p in tables.glob("*.csv") if p.name != "bearings2d-sweep.csv"]
+    jobs = [p for p in tables.glob("*.csv")
+            if p.name != "bearings2d-sweep.csv" and not p.name.endswith("_paper.csv")]
     assert len(jobs) == 4 and all(len(pd.read_csv(p)) == 1 for p in jobs)  # one per job
+    assert len(list(tables.glob("*_paper.csv"))) == 5  # each table beside the paper, sweep too
     # the metrics of every run: one dataset, with the run's config values as columns
     from tma.aggregate import metrics_dataset  # (imported here: new in this change)
 
@@ -133,7 +136,7 @@ def test_cli_aggregate_sweep_writes_one_table_of_all_jobs(data):
 
 def test_cli_experiment_sweep_names_its_tables(data):
     root, common = data
-    run_cli("aggregate", "-m", "experiment=bearings2d_table", "estimator=lm,nbearings",
+    run_stage_here("aggregate", "-m", "experiment=bearings2d_table", "estimator=lm,nbearings",
             "scenario.sigma_deg=[0.1,0.5]", "table=exp", *common)
     tables = root / "tables"
     assert len(pd.read_csv(tables / "exp.csv")) == 4  # the sweep

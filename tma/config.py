@@ -8,6 +8,9 @@ names the key, instead of surfacing later as a numpy error. Every float anywhere
 dataclass's ``__post_init__`` then checks ranges and consistency.
 """
 
+import copy
+import functools
+import json
 import math
 from dataclasses import asdict, fields, is_dataclass
 
@@ -18,9 +21,26 @@ from tma.errors import ConfigError
 
 
 def validate(schema, node, where: str):
-    """Return an instance of dataclass ``schema`` built from ``node`` (DictConfig or dict)."""
+    """Return an instance of dataclass ``schema`` built from ``node`` (DictConfig or dict).
+
+    OmegaConf's typed merge costs ~50 ms, and every shard task validates its config again
+    (tasks carry plain dicts to worker processes): a node validated before is answered from a
+    cache with a fresh copy."""
     if isinstance(node, DictConfig):
         node = OmegaConf.to_container(node, resolve=True)
+    try:
+        key = json.dumps(node, sort_keys=True)
+    except (TypeError, ValueError):  # not JSON (e.g. a non-string key): validate uncached
+        return _validate(schema, node, where)
+    return copy.deepcopy(_validated(schema, key, where))
+
+
+@functools.lru_cache(maxsize=256)
+def _validated(schema, key: str, where: str):
+    return _validate(schema, json.loads(key), where)
+
+
+def _validate(schema, node, where: str):
     try:
         merged = OmegaConf.merge(OmegaConf.structured(schema), node or {})
         check_finite(merged, where)  # before __post_init__: its range checks assume numbers

@@ -15,7 +15,7 @@ class Estimator:
     - ``side_tables``: small tables it returns under ``estimate(log)["extras"]`` (written
       beside the run's estimates, e.g. sample points for a plot, covariances);
     - ``reference``: True for the exact estimator others are measured against;
-    - ``prepare(config, dataset, data_dir, n_jobs, progress)``: a step run once before the
+    - ``prepare(config, dataset, data_dir, engine, progress)``: a step run once before the
       shards (e.g. training an artefact), returning the config the run records.
     """
 
@@ -30,7 +30,7 @@ class Estimator:
         self.config = config
 
     @classmethod
-    def prepare(cls, config: dict, dataset, data_dir, n_jobs=1, progress=False) -> dict:
+    def prepare(cls, config: dict, dataset, data_dir, engine=1, progress=False) -> dict:
         return config
 
     def estimate(self, log) -> dict:

@@ -1,17 +1,73 @@
-"""Run independent shard tasks serially or with joblib, with a progress bar.
+"""Run independent shard tasks: in this process, in local joblib workers, or on a Dask cluster.
 
-Results come back in task order whatever the number of workers, and each task computes with
-one BLAS thread, so outputs do not depend on ``n_jobs``.
+Results come back in task order whatever the engine and the number of workers, and each task
+computes with one BLAS thread, so outputs do not depend on where tasks ran. Tasks carry paths
+and configs, never arrays: on a cluster every worker reads and writes the shared data directory
+(``paths.data_dir`` on NFS, Lustre...), and each task's writes are atomic, so a worker killed
+mid-task leaves no half-written file; Dask runs the task again elsewhere (``retries``), and a
+run that stops anyway resumes from its finished shards.
 """
 
+import atexit
 import ctypes
 import functools
+import logging
+from dataclasses import dataclass
 
 from joblib import Parallel, delayed
 from threadpoolctl import threadpool_limits
 from tqdm.auto import tqdm
 
+from tma.errors import ConfigError
+
+log = logging.getLogger(__name__)
 M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc mallopt parameters
+ENGINES = ("joblib", "dask")
+
+
+@dataclass(frozen=True)
+class Engine:
+    """Where shard tasks run (the ``parallel`` config group).
+
+    kind: ``joblib`` (``n_jobs`` local worker processes; 1 = in this process) or ``dask``.
+    address: dask only; None starts a ``distributed.LocalCluster`` of ``n_workers`` worker
+    processes here, ``tcp://host:8786`` uses the scheduler of an existing cluster.
+    retries: dask only; how often a task that raised (e.g. an OSError of a flaky shared disk)
+    is run again. A task whose worker died is run again on another worker by Dask itself, up
+    to ``distributed.scheduler.allowed-failures`` (3) times.
+    """
+
+    kind: str = "joblib"
+    n_jobs: int = 1
+    address: str | None = None
+    n_workers: int = 2
+    retries: int = 2
+
+    def __post_init__(self):
+        if self.kind not in ENGINES:
+            raise ConfigError(f"parallel.engine must be one of {', '.join(ENGINES)}, "
+                              f"got '{self.kind}'")
+        for key in ("n_jobs", "n_workers"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ConfigError(f"parallel.{key} must be a whole number >= 1, got '{value}'")
+        if isinstance(self.retries, bool) or not isinstance(self.retries, int) \
+                or self.retries < 0:
+            raise ConfigError(f"parallel.retries must be a whole number >= 0, "
+                              f"got '{self.retries}'")
+        if self.address is not None and (not isinstance(self.address, str)
+                                         or "://" not in self.address):
+            raise ConfigError(f"parallel.address must be null or a scheduler address such as "
+                              f"tcp://host:8786, got '{self.address}'")
+
+    @property
+    def in_process(self) -> bool:
+        return self.kind == "joblib" and self.n_jobs == 1
+
+
+def as_engine(engine) -> Engine:
+    """An ``Engine``; a whole number ``n`` means ``n`` local joblib workers."""
+    return engine if isinstance(engine, Engine) else Engine(n_jobs=engine)
 
 
 @functools.cache
@@ -36,19 +92,79 @@ def _single_threaded(fn, task):
         return fn(task)
 
 
-def run_tasks(fn, tasks, *, n_jobs: int = 1, desc: str = "", progress: bool = True):
-    """Apply ``fn`` to each task; return the results in task order."""
-    tasks = list(tasks)
+def run_tasks(fn, tasks, *, engine=1, desc: str = "", progress: bool = True):
+    """Apply ``fn`` to each task on ``engine`` (an ``Engine`` or a number of local joblib
+    workers); return the results in task order. ``fn`` and the tasks must be picklable."""
+    engine, tasks = as_engine(engine), list(tasks)
     bar = tqdm(total=len(tasks), desc=desc, unit="shard", disable=not progress or not tasks)
-    results = []
-    if n_jobs == 1 or len(tasks) <= 1:
-        for task in tasks:
-            results.append(_single_threaded(fn, task))
-            bar.update()
-    else:
-        parallel = Parallel(n_jobs=n_jobs, return_as="generator")
+    try:
+        if engine.kind == "dask" and tasks:
+            return _on_dask(engine, fn, tasks, bar)
+        if engine.in_process or len(tasks) <= 1:
+            results = []
+            for task in tasks:
+                results.append(_single_threaded(fn, task))
+                bar.update()
+            return results
+        results = []
+        parallel = Parallel(n_jobs=engine.n_jobs, return_as="generator")
         for result in parallel(delayed(_single_threaded)(fn, t) for t in tasks):
             results.append(result)
             bar.update()
-    bar.close()
-    return results
+        return results
+    finally:
+        bar.close()
+
+
+def _on_dask(engine: Engine, fn, tasks, bar):
+    from distributed import as_completed
+
+    client = dask_client(engine.address, engine.n_workers)
+    # pure=False: a task is a side effect (it writes its shard), never deduplicated by Dask
+    futures = client.map(_single_threaded, [fn] * len(tasks), tasks, pure=False,
+                         retries=engine.retries)
+    try:
+        for _ in as_completed(futures):
+            bar.update()
+        return client.gather(futures)  # in task order; a task's own error is raised here
+    except BaseException:  # e.g. bad input in one shard: the others need not run on
+        client.cancel(futures)
+        raise
+
+
+def close_dask_clients():
+    """Close the clients (and local clusters) ``dask_client`` started."""
+    for client in _clients:
+        client.close()
+        if client.cluster is not None:
+            client.cluster.close()
+    _clients.clear()
+    dask_client.cache_clear()
+
+
+_clients = []
+
+
+@functools.cache
+def dask_client(address: str | None, n_workers: int):
+    """A client of the scheduler at ``address``, or of a LocalCluster of ``n_workers``
+    single-threaded worker processes started once per process (closed at exit)."""
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise ConfigError("parallel=dask needs Dask: pip install 'tma[dask]'") from None
+    if address is None:
+        cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        client = Client(cluster)
+    else:
+        try:
+            client = Client(address, timeout="10s")
+        except OSError as exc:
+            raise ConfigError(f"parallel.address={address}: no Dask scheduler answers "
+                              f"({exc})") from None
+    if not _clients:
+        atexit.register(close_dask_clients)
+    _clients.append(client)
+    log.info("dask: %s", client)
+    return client

@@ -10,9 +10,10 @@ Layout::
 
 ``key`` hashes the full estimator config (every default included), the dataset's content hash
 and the package version, so a run directory's content is a pure function of its inputs:
-byte-identical for any ``n_jobs``. A run is built in its staging directory and swapped in
-when complete (``tma.io.owned``); a finished run is reused only after its manifest and every
-file it lists verify, and the dataset it reads is verified on every use.
+byte-identical for any engine and number of workers. A run is built in its staging
+directory and swapped in when complete (``tma.io.owned``); a finished run is reused only
+after its manifest and every file it lists verify, and the dataset it reads is verified on
+every use.
 """
 
 import logging
@@ -210,7 +211,7 @@ def _is_good(root: Path) -> bool:
         return False
 
 
-def estimate_runs(data_dir, jobs, *, n_jobs=2, progress=True, force=False):
+def estimate_runs(data_dir, jobs, *, engine=2, progress=True, force=False):
     """Run every (dataset, estimator config) job, all shards in one worker pool; returns the
     run directories."""
     planned = []
@@ -219,11 +220,11 @@ def estimate_runs(data_dir, jobs, *, n_jobs=2, progress=True, force=False):
         est_cfg = full_config(dataset, est_cfg)
         planned.append((run_path(data_dir, dataset, est_cfg), dataset, est_cfg))
     with locked([p[0] for p in planned]):  # one process per run; a second one waits
-        return _estimate_locked(data_dir, planned, n_jobs=n_jobs, progress=progress,
+        return _estimate_locked(data_dir, planned, engine=engine, progress=progress,
                                 force=force)
 
 
-def _estimate_locked(data_dir, planned, *, n_jobs, progress, force):
+def _estimate_locked(data_dir, planned, *, engine, progress, force):
     todo, tasks = [], []
     for root, dataset, est_cfg in planned:
         recover(root)
@@ -236,7 +237,7 @@ def _estimate_locked(data_dir, planned, *, n_jobs, progress, force):
         # the key hashes the config before prepare, so training (an artefact the prepared
         # config records by content hash) happens only when the run must be computed
         key = run_key(dataset, est_cfg)
-        est_cfg = estimator_class(est_cfg["name"]).prepare(est_cfg, dataset, data_dir, n_jobs,
+        est_cfg = estimator_class(est_cfg["name"]).prepare(est_cfg, dataset, data_dir, engine,
                                                            progress)
         run_tasks_ = plan_run(data_dir, dataset, est_cfg, key, stage)
         todo.append((root, stage, dataset, est_cfg, run_tasks_))
@@ -246,7 +247,7 @@ def _estimate_locked(data_dir, planned, *, n_jobs, progress, force):
         groups.setdefault((t.dataset_root, t.shard), []).append(t)
     done = {}
     for group, records in zip(groups.values(), run_tasks(
-            estimate_shard_group, list(groups.values()), n_jobs=n_jobs, desc="estimate",
+            estimate_shard_group, list(groups.values()), engine=engine, desc="estimate",
             progress=progress), strict=True):
         done.update({t.out_path: r for t, r in zip(group, records, strict=True)})
     for root, stage, dataset, est_cfg, ts in todo:

@@ -100,15 +100,16 @@ def _is_good(root: Path, config: dict) -> bool:
         return False
 
 
-def simulate_datasets(scenario_nodes, data_dir, *, n_jobs=2, force=False, progress=True):
-    """Create the dataset of each scenario config node; returns the dataset directories."""
+def simulate_datasets(scenario_nodes, data_dir, *, engine=2, force=False, progress=True):
+    """Create the dataset of each scenario config node; returns the dataset directories.
+    ``engine``: where shards run (``tma.parallel.Engine``, or a number of local workers)."""
     configs = [load_scenario(node) for node in scenario_nodes]
     roots = [datasets_dir(data_dir) / dataset_name(module, cfg) for module, cfg in configs]
     with locked(roots):  # a second simulate of the same dataset waits, then finds it done
-        return _simulate_locked(configs, roots, n_jobs=n_jobs, force=force, progress=progress)
+        return _simulate_locked(configs, roots, engine=engine, force=force, progress=progress)
 
 
-def _simulate_locked(configs, roots, *, n_jobs, force, progress):
+def _simulate_locked(configs, roots, *, engine, force, progress):
     plans, tasks = [], []
     for (module, cfg), root in zip(configs, roots, strict=True):
         recover(root)
@@ -131,7 +132,7 @@ def _simulate_locked(configs, roots, *, n_jobs, force, progress):
         groups.setdefault(key, []).append(t)
     done = {}
     for group, records in zip(groups.values(), run_tasks(
-            simulate_group, list(groups.values()), n_jobs=n_jobs, desc="simulate",
+            simulate_group, list(groups.values()), engine=engine, desc="simulate",
             progress=progress), strict=True):
         done.update({(t.root, t.index): r for t, r in zip(group, records, strict=True)})
     for root, stage, module, plain, shard_tasks in plans:

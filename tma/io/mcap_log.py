@@ -1,8 +1,11 @@
-"""MCAP logs with JSON-schema channels: a thin layer over the ``mcap`` library.
+"""MCAP logs with JSON-schema channels: written by ``tma.io.mcap_writer`` (the bytes of the
+``mcap`` library's writer, whole columns at a time), read with the ``mcap`` library.
 
 Messages are JSON (``orjson``, which serialises numpy arrays directly); schemas live in
 ``tma/io/schemas/*.json`` and are embedded in every log, so Foxglove and any MCAP reader can
-decode them. Writes are atomic.
+decode them. A log may add protobuf channels of published schemas (Foxglove's
+``LocationFix``, so its Map panel shows own-ship), built from the message classes themselves.
+Log times are absolute (UTC ns) when the log has an epoch (``tma.time``). Writes are atomic.
 
 Integrity: ``LogWriter`` writes every CRC MCAP has (chunk ``uncompressed_crc``, DataEnd
 ``data_section_crc``, Footer ``summary_crc``), so every byte of a file tma writes is covered
@@ -13,12 +16,15 @@ write files so): what it would cover is then unchecked, see docs/formats.md.
 """
 
 import contextlib
+import math
 import numbers
+import re
 import struct
 import sys
 import zlib
 from collections import Counter
 from dataclasses import dataclass, field
+from datetime import UTC, datetime, timedelta
 from io import BytesIO
 from pathlib import Path
 
@@ -26,11 +32,12 @@ import numpy as np
 import orjson
 from mcap.decoder import DecoderFactory
 from mcap.reader import NonSeekingReader, SeekingReader
-from mcap.writer import CompressionType, Writer
+from mcap_protobuf.schema import build_file_descriptor_set
 
 from tma import __version__
-from tma.errors import InputError
+from tma.errors import ConfigError, InputError
 from tma.io.atomic import atomic_path
+from tma.io.mcap_writer import CHUNK_SIZE, MAGIC, Encoded, McapWriter, interleave
 
 SCHEMA_DIR = Path(__file__).parent / "schemas"
 PROFILE = ""  # plain JSON channels: no ROS profile
@@ -135,63 +142,209 @@ def schema_bytes(name: str) -> bytes:
 
 @dataclass(frozen=True)
 class Channel:
-    """A topic, the name of its JSON schema, and metadata (units, frames) for readers."""
+    """A topic, the name of its schema, and metadata (units, frames) for readers.
+
+    ``message_class``: None for tma's JSON channels (schema ``tma/io/schemas/<schema>.json``);
+    a protobuf message class (e.g. Foxglove's ``LocationFix``) for a protobuf channel, whose
+    schema mcap-protobuf-support builds from the class itself (``Channel.protobuf``)."""
 
     topic: str
     schema: str
     metadata: dict = field(default_factory=dict)
+    message_class: type | None = None
+
+    @classmethod
+    def protobuf(cls, topic: str, message_class: type, metadata=None) -> "Channel":
+        return cls(topic, message_class.DESCRIPTOR.full_name, metadata or {}, message_class)
 
 
-def seconds_to_ns(t_s: float) -> int:
-    return int(round(t_s * 1e9))
+# -- absolute time ----------------------------------------------------------------------------
+
+TIME = "tma.time"  # metadata record: {"epoch_utc_ns", "epoch_utc"} when the log has UTC times
+MAX_EPOCH_NS = 7_258_118_400 * 10**9  # 2200-01-01: leaves log_time (uint64 ns) 350 years
+_ISO_UTC = re.compile(r"(\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}(?::\d{2})?)(?:[.,](\d{1,9}))?"
+                      r"(Z|[+-]\d{2}(?::?\d{2})?)", re.IGNORECASE)
+_UNIX_EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
+
+
+def parse_utc(text) -> int:
+    """An ISO-8601 time with a zone (``2026-01-01T00:00:00Z``, ``...T02:00:00.25+02:00``) as
+    UTC nanoseconds since the Unix epoch, exact to the nanosecond; between 1970 and 2200.
+    Raises ValueError saying what is wrong."""
+    match = _ISO_UTC.fullmatch(text.strip()) if isinstance(text, str) else None
+    if match is None:
+        raise ValueError(f"'{text}' is not an ISO-8601 time with a zone "
+                         "(e.g. 2026-01-01T00:00:00Z or 2026-01-01T01:00:00+01:00)")
+    base, fraction, zone = match.groups()
+    try:
+        when = datetime.fromisoformat(base.replace(" ", "T")
+                                      + ("+00:00" if zone.upper() == "Z" else zone))
+    except ValueError as exc:
+        raise ValueError(f"'{text}' is not a valid time ({exc})") from None
+    ns = (when - _UNIX_EPOCH) // timedelta(seconds=1) * 10**9 + int((fraction or "").ljust(9, "0"))
+    if not 0 <= ns < MAX_EPOCH_NS:
+        raise ValueError(f"'{text}' is not between 1970 and 2200")
+    return ns
+
+
+def format_utc(ns: int) -> str:
+    """UTC nanoseconds since the Unix epoch as ISO-8601 (``2026-01-01T00:20:00.5Z``)."""
+    seconds, nanos = divmod(int(ns), 10**9)
+    text = (_UNIX_EPOCH + timedelta(seconds=seconds)).strftime("%Y-%m-%dT%H:%M:%S")
+    return text + (f".{nanos:09d}".rstrip("0") if nanos else "") + "Z"
+
+
+def config_epoch_ns(value, where: str, key: str = "epoch_utc") -> int:
+    """A config's ``epoch_utc`` (UTC of t = 0) in ns; ConfigError naming the key otherwise."""
+    try:
+        return parse_utc(value)
+    except ValueError as exc:
+        raise ConfigError(f"{where}: {key}: {exc}") from None
+
+
+def read_epoch(metadata: dict, where: str) -> int | None:
+    """UTC ns of t = 0 from the ``tma.time`` record, None when the log has none."""
+    if TIME not in metadata:
+        return None
+    with schema_errors(where, f"the metadata record {TIME}"):
+        ns = integer(read_json_record(metadata, TIME, where)["epoch_utc_ns"])
+        if not 0 <= ns < MAX_EPOCH_NS:
+            raise ValueError(f"epoch_utc_ns {ns} is not between 1970 and 2200")
+        return ns
 
 
 class LogWriter:
-    """Write JSON messages to an MCAP file atomically (zstd chunks)::
+    """Write messages to an MCAP file atomically (zstd chunks)::
 
-        with LogWriter(path, channels, metadata={"tma.dataset": {...}}) as log:
-            log.write("/topic", t_s, {"t_s": t_s, ...})
+        with LogWriter(path, channels, metadata={"tma.dataset": {...}},
+                       epoch_utc_ns=...) as log:
+            log.write("/topic", t_s, {"t_s": t_s, ...})  # one message
+            log.write_epochs(t_s_array, {"/a": json_objects({...}), "/b": [...]})  # many
+
+    Messages are dicts on JSON channels, message objects on protobuf channels, or already
+    encoded (``Encoded``, e.g. ``json_objects`` of whole columns: the fast way). The file is
+    byte for byte what ``mcap.writer.Writer`` writes for the same messages
+    (``tma.io.mcap_writer``). ``epoch_utc_ns``: UTC of t = 0; ``log_time`` = ``publish_time``
+    = epoch + t (absolute time, as Foxglove and other MCAP tools expect), recorded in the
+    metadata record ``tma.time``; None keeps log times relative (t in ns). Payloads keep
+    relative ``t_s``.
     """
 
-    def __init__(self, path, channels, metadata=None):
-        self.path, self.channels, self.metadata = Path(path), channels, metadata or {}
+    def __init__(self, path, channels, metadata=None, epoch_utc_ns=None):
+        self.path, self.channels, self.metadata = Path(path), channels, dict(metadata or {})
+        self.epoch_utc_ns = 0 if epoch_utc_ns is None else int(epoch_utc_ns)
+        if not 0 <= self.epoch_utc_ns < 2**63:
+            raise InputError(f"{self.path}: epoch {self.epoch_utc_ns} ns is not a UTC time "
+                             "after 1970 that MCAP log times can hold")
+        if epoch_utc_ns is not None:
+            self.metadata[TIME] = json_record({"epoch_utc_ns": self.epoch_utc_ns,
+                                               "epoch_utc": format_utc(self.epoch_utc_ns)})
         self.n_messages = 0
+
+    def log_times(self, t_s) -> np.ndarray:
+        """The log times (uint64 ns) of relative times ``t_s`` (s): epoch + t rounded to the
+        ns (half to even), exactly. One InputError for a time outside 1970 + 2^64 ns."""
+        t = np.asarray(t_s, dtype=float).ravel()
+        with np.errstate(over="ignore", invalid="ignore"):  # refused below, in one line
+            ns = np.rint(t * 1e9)
+        fits = (ns > -(2.0**63)) & (ns < 2.0**64)  # False for NaN
+        before = fits & (ns < 0)
+        back = np.where(before, -ns, 0).astype(np.uint64)  # exact: integers below 2^64
+        ahead = np.where(fits & ~before, ns, 0).astype(np.uint64)
+        epoch = np.uint64(self.epoch_utc_ns)
+        fits &= np.where(before, back <= epoch, ahead <= np.uint64(2**64 - 1) - epoch)
+        if not fits.all():
+            raise self._outside(t[np.argmin(fits)])
+        return np.where(before, epoch - back, epoch + ahead)
+
+    def time_ns(self, t_s: float) -> int:
+        """The log time (ns) of one relative time ``t_s`` (s), as ``log_times`` gives it."""
+        ns = float(t_s) * 1e9
+        t_ns = self.epoch_utc_ns + round(ns) if math.isfinite(ns) else -1
+        if not 0 <= t_ns < 2**64:
+            raise self._outside(t_s)
+        return t_ns
+
+    def _outside(self, t_s) -> InputError:
+        return InputError(f"{self.path}: time {float(t_s)!r} s (epoch {self.epoch_utc_ns} ns) "
+                          "is outside MCAP's log time range (0 to 2^64 ns after 1970)")
 
     def __enter__(self):
         self._stack = contextlib.ExitStack()
         tmp = self._stack.enter_context(atomic_path(self.path))
         self._file = self._stack.enter_context(open(tmp, "wb"))  # closed before the rename
-        # every CRC MCAP has: chunks, the data section (not on by default) and the summary
-        self._writer = Writer(self._file, compression=CompressionType.ZSTD, enable_crcs=True,
-                              enable_data_crcs=True)
-        self._writer.start(profile=PROFILE, library=f"tma {__version__}")
-        self._ids, schema_ids = {}, {}
+        self._mcap = McapWriter(self._file, profile=PROFILE, library=f"tma {__version__}")
+        self._ids, self._protobuf, schema_ids = {}, set(), {}
         for ch in self.channels:
             if ch.schema not in schema_ids:
-                schema_ids[ch.schema] = self._writer.register_schema(
-                    name=ch.schema, encoding="jsonschema", data=schema_bytes(ch.schema)
-                )
-            self._ids[ch.topic] = self._writer.register_channel(
-                topic=ch.topic, message_encoding="json", schema_id=schema_ids[ch.schema],
-                metadata={k: str(v) for k, v in ch.metadata.items()},
-            )
+                schema_ids[ch.schema] = (
+                    self._mcap.add_schema(ch.schema, "jsonschema", schema_bytes(ch.schema))
+                    if ch.message_class is None  # else the class's own FileDescriptorSet
+                    else self._mcap.add_schema(ch.schema, "protobuf", build_file_descriptor_set(
+                        ch.message_class).SerializeToString()))
+            self._ids[ch.topic] = self._mcap.add_channel(
+                ch.topic, "json" if ch.message_class is None else "protobuf",
+                schema_ids[ch.schema], {k: str(v) for k, v in ch.metadata.items()})
+            if ch.message_class is not None:
+                self._protobuf.add(ch.topic)
         for name, record in self.metadata.items():
-            self._writer.add_metadata(name, {k: str(v) for k, v in record.items()})
+            self._mcap.add_metadata(name, {k: str(v) for k, v in record.items()})
+        self._loose = ([], [], [], bytearray())  # write()'s messages: ids, times, sizes, data
         return self
 
-    def write(self, topic: str, t_s: float, message: dict):
-        t_ns = seconds_to_ns(t_s)
-        self._writer.add_message(
-            self._ids[topic], log_time=t_ns, publish_time=t_ns,
-            data=orjson.dumps(message, default=_strided_array, option=_JSON_OPTIONS),
-            sequence=self.n_messages,
-        )
+    def _encode(self, topic: str, message) -> bytes:
+        return (message.SerializeToString(deterministic=True) if topic in self._protobuf
+                else orjson.dumps(message, default=_strided_array, option=_JSON_OPTIONS))
+
+    def write(self, topic: str, t_s: float, message):
+        """Write ``message`` (a dict, or a protobuf message on a protobuf channel) at
+        relative time ``t_s`` (s)."""
+        channel, t_ns, data = self._ids[topic], self.time_ns(t_s), self._encode(topic, message)
+        ids, times, sizes, payloads = self._loose
+        ids.append(channel)
+        times.append(t_ns)
+        sizes.append(len(data))
+        payloads += data  # not kept as objects: many small bytes alive slow orjson down
         self.n_messages += 1
+        if len(payloads) > CHUNK_SIZE:
+            self._flush_loose()
+
+    def _flush_loose(self):
+        ids, times, sizes, payloads = self._loose
+        if ids:
+            self._mcap.add_messages(np.array(ids, np.uint16), np.array(times, np.uint64),
+                                    [np.frombuffer(payloads, np.uint8)],
+                                    np.cumsum(sizes) - sizes, np.array(sizes))
+            self._loose = ([], [], [], bytearray())
+
+    def write_epochs(self, t_s, messages: dict):
+        """At each time ``t_s[i]`` (s), one message per topic of ``messages``, in its order:
+        ``messages[topic]`` holds one message per time, as an ``Encoded`` or a sequence of
+        what ``write`` takes."""
+        times = self.log_times(t_s)
+        columns = [m if isinstance(m, Encoded) else Encoded.of([self._encode(topic, x)
+                                                                for x in m])
+                   for topic, m in messages.items()]
+        if any(len(c) != times.size for c in columns):
+            raise ValueError("write_epochs needs one message per topic and time")
+        if not times.size:
+            return
+        self._flush_loose()
+        buffers, starts, lengths = interleave(columns)
+        ids = np.tile(np.array([self._ids[topic] for topic in messages], np.uint16), times.size)
+        self._mcap.add_messages(ids, np.repeat(times, len(columns)), buffers, starts, lengths)
+        self.n_messages += ids.size
+
+    def write_many(self, topic: str, t_s, messages):
+        """One message on ``topic`` at each time ``t_s[i]`` (s): ``write_epochs`` of one
+        topic."""
+        self.write_epochs(t_s, {topic: messages})
 
     def __exit__(self, exc_type, exc, tb):
         if exc_type is None:
             try:
-                self._writer.finish()
+                self._flush_loose()
+                self._mcap.finish()
             except BaseException:
                 if not self._stack.__exit__(*sys.exc_info()):
                     raise
@@ -206,7 +359,6 @@ class JsonDecoderFactory(DecoderFactory):
         return orjson.loads if message_encoding == "json" else None
 
 
-MAGIC = b"\x89MCAP0\r\n"
 _FOOTER = struct.Struct("<BQQQI")  # opcode, length, summary_start, summary_offset_start, crc
 _DATA_END = struct.Struct("<BQI")  # opcode, length, data_section_crc
 _FOOTER_OPCODE, _DATA_END_OPCODE = 0x02, 0x0F

@@ -35,7 +35,9 @@ LM = {"initial_bearing_deg": st.one_of(st.none(), st.floats(-720, 720)),
       "lambda_up": log_uniform(0.5, 1e3), "lambda_down": st.floats(0.0, 2.0),
       "f_tol_rad2": log_uniform(1e-20, 1.0), "max_iter": st.integers(0, 300),
       "lambda_max": log_uniform(1e-2, 1e30), "pd_rtol": log_uniform(1e-20, 10.0),
-      "block_tracks": st.integers(0, 100)}
+      "loss": st.sampled_from(["squared", "huber", "cauchy", "l1"]),
+      "scale": st.sampled_from(["sigma", "mad", "iqr"]), "starts": st.integers(0, 5),
+      "start_min_m": log_uniform(1e-2, 1e12), "start_max_m": log_uniform(1e-2, 1e12)}
 
 
 def configs(name, fields):

@@ -1,4 +1,8 @@
-"""Ingest of external bearing logs (CSV, MCAP) and the report for datasets without truth."""
+"""Ingest of recorded bearing logs: the stage (options, manifest, refusals, CLI) and the report
+for datasets without truth. The readers have their own test files (``..._sources_*.py``)."""
+
+import json
+import time
 
 import numpy as np
 import pandas as pd
@@ -6,11 +10,22 @@ import pytest
 
 from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
-from tests.conftest import compose_cfg, run_cli
+from tests.conftest import compose_cfg, run_cli, run_stage_here
+from tests.families.bearings2d.recorded_geometry import (
+    EPOCH_NS,
+    ORIGIN,
+    check_against_truth,
+    estimate,
+    iso,
+    latlon,
+    ownship_en,
+    recorded,
+)
 from tma.errors import ConfigError, InputError
 from tma.families.bearings2d.ingest import ingest
 from tma.families.bearings2d.log import write_bearings_log
 from tma.families.bearings2d.scenario import Config, simulate_shard
+from tma.io.atomic import sha256_file
 
 T_OFFSET = 1.7e9  # e.g. unix time stamps
 
@@ -75,7 +90,9 @@ def test_tracks_with_different_own_ships_get_their_own_shards(tmp_path):
 
 
 BAD_CSV = {
-    "missing_column": (lambda df: df.drop(columns="own_y_m"), r"missing column\(s\) own_y_m"),
+    "missing_column": (lambda df: df.drop(columns="own_y_m"),
+                       r"no y column: columns found: time_s, own_x_m, bearing_deg, track_id; "
+                       r"set columns.y=<name>"),
     "nan": (lambda df: df.assign(bearing_deg=df.bearing_deg.where(df.index != 7)),
             r"column bearing_deg has missing, NaN .* \(line 9\)"),
     "text": (lambda df: df.astype({"time_s": object}).assign(
@@ -106,9 +123,11 @@ def test_bad_csv_is_a_clear_error_and_writes_nothing(tmp_path, case):
 def test_bad_ingest_arguments(tmp_path):
     with pytest.raises(ConfigError, match="needs input="):
         ingest(None, data_dir=tmp_path)
-    (tmp_path / "x.txt").write_text("1")
-    with pytest.raises(ConfigError, match="set format=csv or format=mcap"):
-        ingest(tmp_path / "x.txt", data_dir=tmp_path)
+    (tmp_path / "x.dat").write_text("1")
+    with pytest.raises(ConfigError, match="set format=csv, format=nmea or format=mcap"):
+        ingest(tmp_path / "x.dat", data_dir=tmp_path)
+    with pytest.raises(InputError, match="the first line holds numbers, not column names"):
+        ingest(tmp_path / "x.dat", data_dir=tmp_path, fmt="csv")
     with pytest.raises(InputError, match="no such file"):
         ingest(tmp_path / "absent.csv", data_dir=tmp_path)
 
@@ -138,10 +157,11 @@ def test_cli_ingest_of_a_truncated_mcap(tmp_path):
 def test_a_log_in_radians_is_refused_unless_its_units_are_stated(tmp_path):
     log, truth, df = _recording(sigma=0.2)
     df.assign(bearing_deg=np.deg2rad(df.bearing_deg)).to_csv(tmp_path / "rad.csv", index=False)
-    with pytest.raises(InputError, match="look like radians. Set bearing_units=rad"):
+    with pytest.raises(InputError, match="look like radians. Set bearing.units=rad"):
         ingest(tmp_path / "rad.csv", data_dir=tmp_path / "data")
     assert not (tmp_path / "data").exists()
-    ingest(tmp_path / "rad.csv", data_dir=tmp_path / "data", bearing_units="rad", name="rec")
+    ingest(tmp_path / "rad.csv", data_dir=tmp_path / "data", options={"bearing": {"units": "rad"}},
+           name="rec")
     report = _estimate_and_report(tmp_path, "rec")
     assert (report.status == "ok").all()
     np.testing.assert_allclose(report.sqrt_ka_deg, 0.2, rtol=0.15)
@@ -150,7 +170,14 @@ def test_a_log_in_radians_is_refused_unless_its_units_are_stated(tmp_path):
 @pytest.mark.parametrize("options, message", [
     ({"min_bearings": 0}, "min_bearings must be"), ({"min_bearings": 1.5}, "min_bearings"),
     ({"min_bearings": True}, "min_bearings"), ({"sigma_deg": "abc"}, "sigma_deg must be"),
-    ({"sigma_deg": 0.0}, "sigma_deg must be"), ({"bearing_units": "grad"}, "bearing_units"),
+    ({"sigma_deg": 0.0}, "sigma_deg must be"),
+    ({"options": {"bearing": {"units": "grad"}}}, "bearing.units must be one of null, deg, rad"),
+    ({"options": {"columns": {"foo": "x"}}}, r"unknown option columns.foo \(the columns options"),
+    ({"options": {"time": {"format": "local"}}}, "time.format must be one of"),
+    ({"options": {"nav": {"max_gap_s": -1}}}, "nav.max_gap_s must be"),
+    ({"options": {"origin": {"lat": 59.9}}}, "origin.lat and origin.lon go together"),
+    ({"options": {"csv": {"delimiter": "::"}}}, "csv.delimiter must be one character"),
+    ({"fmt": "xls"}, "format must be auto, csv, nmea or mcap"),
 ])
 def test_bad_ingest_options_are_refused(tmp_path, options, message):
     _, _, df = _recording()
@@ -168,3 +195,166 @@ def test_columns_of_booleans_or_absurd_integers_are_refused(tmp_path):
                                                                        index=False)
     with pytest.raises(InputError, match="track_id"):
         ingest(tmp_path / "id.csv", data_dir=tmp_path / "data")
+
+
+# -- the ingest options on the command line --------------------------------------------------
+
+def _one_line(proc, expected):
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2, (proc.returncode, proc.stderr)
+    assert "Traceback" not in proc.stderr + proc.stdout
+    assert len(lines) == 1 and lines[0].startswith("error: "), proc.stderr
+    assert expected in lines[0], lines[0]
+
+
+@pytest.mark.parametrize("override, expected", [
+    ("columns.foo=bar", "unknown option columns.foo (the columns options: columns.time, "),
+    ("+columns.foo=bar", "unknown option columns.foo"),
+    ("nav.max_gap=3", "unknown option nav.max_gap (the nav options: nav.max_extrapolation_s, "
+                      "nav.max_gap_s)"),
+    ("bearing.units=grad", "bearing.units must be one of null, deg, rad, got 'grad'"),
+    ("time.format=local", "time.format must be one of auto, s, unix_s"),
+    ("nav.max_extrapolation_s=abc", "nav.max_extrapolation_s"),
+    ("origin.lat=95", "origin.lat and origin.lon go together"),
+])
+def test_cli_bad_reading_options_are_one_line(tmp_path, override, expected):
+    _, _, df = _recording()
+    df.to_csv(tmp_path / "rec.csv", index=False)
+    proc = run_stage_here("ingest", f"input={tmp_path / 'rec.csv'}", override,
+                          f"paths.data_dir={tmp_path / 'data'}", "progress=false", check=False)
+    _one_line(proc, expected)
+    assert not (tmp_path / "data" / "datasets").exists()
+
+
+def test_cli_unknown_column_option_in_a_new_process(tmp_path):
+    proc = run_cli("ingest", f"input={tmp_path / 'rec.csv'}", "columns.foo=bar",
+                   f"paths.data_dir={tmp_path / 'data'}", check=False)
+    _one_line(proc, "unknown option columns.foo")
+
+
+def test_cli_reading_options_reach_the_readers(tmp_path):
+    """``;`` separated, decimal commas, odd column names, radians, relative times: every
+    option on the command line as a user types it."""
+    _, _, df = _recording()
+    df = df.rename(columns={"time_s": "tid", "own_x_m": "ost", "own_y_m": "nord",
+                            "bearing_deg": "peiling", "track_id": "kontakt"})
+    df["tid"] -= T_OFFSET
+    df["peiling"] = np.deg2rad(df["peiling"])
+    df.to_csv(tmp_path / "rec.csv", index=False, sep=";", decimal=",")
+    run_stage_here("ingest", f"input={tmp_path / 'rec.csv'}", "name=rec", "columns.time=tid",
+                   "columns.x=ost", "columns.y=nord", "columns.bearing=peiling",
+                   "columns.track=kontakt", "bearing.units=rad", "csv.delimiter=semicolon",
+                   "csv.decimal=comma", "time.format=s", f"paths.data_dir={tmp_path / 'data'}",
+                   "progress=false")
+    manifest = json.loads((tmp_path / "data" / "datasets" / "rec" / "manifest.json").read_text())
+    assert manifest["config"]["options"]["bearing"]["units"] == "rad"
+    assert manifest["epoch_utc_ns"] is None and manifest["time_origin_s"] == 0.0
+    assert manifest["shards"]["log/shard-00000.mcap"]["tracks"] == 3
+    report = _estimate_and_report(tmp_path, "rec")
+    assert (report.status == "ok").all()
+
+
+# -- what the manifest records --------------------------------------------------------------
+
+def test_manifest_records_time_origin_labels_navigation_and_choices(tmp_path):
+    rec = recorded(("T1", "T2"))
+    b = rec.bearings
+    pd.DataFrame({"timestamp_utc": iso(b.t_s), "contact": b.track,
+                  "bearing_deg": b.bearing_deg}).to_csv(tmp_path / "brg.csv", index=False)
+    nav = rec.navigation[rec.navigation.t_s >= 3.0]  # own-ship starts 2.5 s after a bearing
+    nav = nav[(nav.t_s < 100) | (nav.t_s > 130)]  # and has a 32 s gap
+    pd.DataFrame({"time": iso(nav.t_s), "lat": nav.lat, "lon": nav.lon}).to_csv(
+        tmp_path / "gps.csv", index=False)
+    root = ingest(tmp_path / "brg.csv", navigation=tmp_path / "gps.csv",
+                  data_dir=tmp_path / "data", name="trial")
+    m = json.loads((root / "manifest.json").read_text())
+    first_kept = 6.5  # the bearings at 0.5 s were more than 1 s before the first fix at 3 s
+    assert m["epoch_utc_ns"] == EPOCH_NS + int(first_kept * 1e9)
+    assert m["start_utc"] == "2025-06-01T08:00:06.500000Z"
+    assert m["time_origin_s"] == m["epoch_utc_ns"] / 1e9
+    lat0, lon0 = latlon(*ownship_en(np.array([3.0])))
+    np.testing.assert_allclose(m["origin_deg"], [lat0[0], lon0[0]], atol=1e-12)
+    assert m["track_labels"] == {"0": "T1", "1": "T2"}
+    assert m["dropped_bearings"]["count"] == 2 and m["dropped_bearings"]["before_navigation"] == 2
+    assert "nav.max_extrapolation_s" in m["dropped_bearings"]["why"]
+    gaps = m["nav_gaps"]
+    assert gaps["count"] == 1 and gaps["longest_s"] == 32.0  # fixes at 99 s, then 131 s
+    assert gaps["gaps"][0]["from_s"] == 99.0 - first_kept
+    assert gaps["gaps"][0]["bearings_inside"] == 2 * 5  # 102.5 ... 126.5 s, two contacts
+    assert any("timestamp_utc" in n for n in m["notes"])
+    assert m["navigation"]["sha256"] == sha256_file(tmp_path / "gps.csv")
+    assert m["input"]["sha256"] == sha256_file(tmp_path / "brg.csv")
+    assert m["navigation"]["kind"] == "csv" and m["input"]["kind"] == "csv"
+
+
+def test_separate_navigation_file_recovers_the_target(tmp_path):
+    rec = recorded(("T1", "T2", "T3"))
+    b, nav = rec.bearings, rec.navigation
+    pd.DataFrame({"utc": iso(b.t_s), "track": b.track, "bearing_deg": b.bearing_deg}).to_csv(
+        tmp_path / "brg.csv", index=False)
+    pd.DataFrame({"unix_time": EPOCH_NS / 1e9 + nav.t_s, "latitude": nav.lat,
+                  "longitude": nav.lon}).to_csv(tmp_path / "gps.csv", index=False)
+    root = ingest(tmp_path / "brg.csv", navigation=tmp_path / "gps.csv",
+                  data_dir=tmp_path / "data")
+    m = json.loads((root / "manifest.json").read_text())
+    np.testing.assert_allclose(m["origin_deg"], ORIGIN, atol=1e-12)  # the first fix, at t = 0
+    check_against_truth(estimate(root), t_offset_s=(m["epoch_utc_ns"] - EPOCH_NS) / 1e9)
+
+
+def test_a_bearings_table_without_own_ship_names_the_options(tmp_path):
+    rec = recorded()
+    rec.bearings[["t_s", "bearing_deg"]].to_csv(tmp_path / "brg.csv", index=False)
+    with pytest.raises(InputError, match=r"no own-ship position: columns found: t_s, "
+                                         r"bearing_deg; set columns.lat=<name> .*navigation=FILE"):
+        ingest(tmp_path / "brg.csv", data_dir=tmp_path / "data")
+
+
+def test_mixed_absolute_and_relative_clocks_are_refused(tmp_path):
+    rec = recorded()
+    b, nav = rec.bearings, rec.navigation
+    pd.DataFrame({"timestamp_utc": iso(b.t_s), "bearing_deg": b.bearing_deg}).to_csv(
+        tmp_path / "brg.csv", index=False)
+    pd.DataFrame({"time_s": nav.t_s, "own_x_m": nav.east_m, "own_y_m": nav.north_m}).to_csv(
+        tmp_path / "nav.csv", index=False)
+    with pytest.raises(InputError, match=r"nav.csv has relative times .*brg.csv has absolute "
+                                         r"UTC times \(time.format=auto\)"):
+        ingest(tmp_path / "brg.csv", navigation=tmp_path / "nav.csv", data_dir=tmp_path / "d")
+    assert not (tmp_path / "d").exists()
+
+
+# -- speed ------------------------------------------------------------------------------------
+
+def _big_table(path, n_tracks, n=1_000_000):
+    per = n // n_tracks
+    t = np.repeat(np.arange(per) * 2.0, n_tracks)
+    rng = np.random.default_rng(3)
+    pd.DataFrame({"time_s": t, "own_x_m": 3.0 * t, "own_y_m": 500.0 * np.sin(t / 600.0),
+                  "bearing_deg": rng.uniform(0.0, 360.0, t.size),
+                  "track_id": np.tile(np.arange(n_tracks), per)}).to_csv(path, index=False)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("n_tracks", [1, 1000])
+def test_a_million_bearings_ingest(tmp_path, n_tracks, capsys):
+    """Measured, not asserted (the machine is shared): the whole ``ingest()`` call on 1M
+    bearings, and the part of it spent writing the dataset MCAP (write_bearings_log)."""
+    _big_table(tmp_path / "big.csv", n_tracks)
+    writes = []
+
+    def timed_write(*args, **kwargs):
+        start = time.perf_counter()
+        try:
+            return write_bearings_log(*args, **kwargs)
+        finally:
+            writes.append(time.perf_counter() - start)
+
+    start = time.perf_counter()
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr("tma.families.bearings2d.ingest.write_bearings_log", timed_write)
+        root = ingest(tmp_path / "big.csv", data_dir=tmp_path / "data")
+    total = time.perf_counter() - start
+    m = json.loads((root / "manifest.json").read_text())
+    assert sum(s["tracks"] for s in m["shards"].values()) == n_tracks
+    with capsys.disabled():
+        print(f"\n1M bearings, {n_tracks} track(s): ingest {total:.2f} s, of which "
+              f"write_bearings_log {sum(writes):.2f} s")

@@ -21,6 +21,7 @@ from tma.io.mcap_log import (
     is_number,
     json_record,
     number,
+    read_epoch,
     read_json_record,
     read_log,
     schema_errors,
@@ -40,6 +41,7 @@ class HydrophoneLog:
     track_id: np.ndarray  # (n,)
     obs: np.ndarray  # (n, n_epochs, n_obs)
     model: dict  # the model record (``model.model_record``; ``AuvModel.from_record`` reads it)
+    epoch_utc_ns: int | None = None  # UTC of t = 0 (ns since 1970); None: relative times
 
     @property
     def n_tracks(self) -> int:
@@ -57,7 +59,7 @@ def write_hydrophone_log(path, log: HydrophoneLog, metadata=None) -> int:
                                            "units": "t_s: s; doppler_hz: Hz"})
                 for i, s in enumerate(sensors)]
     meta = {**(metadata or {}), "tma.model": json_record(log.model)}
-    with LogWriter(path, channels, meta) as w:
+    with LogWriter(path, channels, meta, epoch_utc_ns=log.epoch_utc_ns) as w:
         for k, t in enumerate(log.t_s.tolist()):
             for i in range(len(sensors)):
                 msg = {"t_s": t, "sensor_id": i, "track_id": log.track_id}
@@ -107,4 +109,4 @@ def read_hydrophone_log(path) -> HydrophoneLog:
                     obs[:, k, per * i + f] = values
     if t.size and np.any(np.diff(t) <= 0):
         raise InputError(f"{where}: epochs are not increasing")
-    return HydrophoneLog(t, track_id, obs, model)
+    return HydrophoneLog(t, track_id, obs, model, read_epoch(metadata, where))

@@ -18,18 +18,22 @@ path's heading; covariances are (6, 6, n), readings h (m, n), observation Jacobi
 transposed (``x.T``, a view).
 """
 
+import math
 from dataclasses import dataclass, fields, replace
 
 import numpy as np
-from scipy.signal import lfilter
 
 from tma.config import to_plain
 from tma.errors import ConfigError
+from tma.jit import njit
 
 X, Y, Z, V, PHI, A = range(6)
+# The drift Jacobian's non-zero entries, in the order of the rows of ``jacobian_columns``.
+JACOBIAN_ENTRIES = ((X, V), (X, PHI), (Y, V), (Y, PHI), (PHI, V), (PHI, A), (A, A))
+SERIES_MAX = 1e-2  # |angle| up to which ``unit_rotation``'s series is exact to rounding
 STATE_NAMES = ("X_m", "Y_m", "Z_m", "v_m_s", "phi_rad", "a_m_s2")
 # Keys of a scenario config the filters do not know (everything else is the model record).
-SCENARIO_ONLY = ("family", "n_tracks", "seed", "shard_size")
+SCENARIO_ONLY = ("family", "n_tracks", "seed", "shard_size", "epoch_utc")  # not the model
 
 
 def model_record(scenario_config) -> dict:
@@ -119,25 +123,20 @@ class AuvModel:
     # ------------------------------------------------------------------------- dynamics
 
     def drift(self, x):
-        """a(x) at states x (6, ...)."""
-        out = np.zeros_like(x)
-        out[X] = x[V] * np.cos(x[PHI])
-        out[Y] = x[V] * np.sin(x[PHI])
-        out[PHI] = x[A] / x[V]
-        out[A] = -self.lam * x[A] + self.nu
-        return out
+        """a(x) at states x (6, ...) (``drift_columns``)."""
+        flat = np.asarray(x, dtype=float).reshape(6, -1)
+        out = np.zeros_like(flat)
+        drift_columns(flat, np.cos(flat[PHI]), np.sin(flat[PHI]), self.lam, self.nu, out)
+        return out.reshape(np.shape(x))
 
     def drift_jacobian(self, x, dt=1.0):
         """F dt, F = da/dx the drift Jacobian at states x (6, ...), as its non-zero entries
-        ``{(row, column): values}``; Phi = I + F dt is the Euler transition of the
-        linearised SDE (``transition_times``). dt = 1 gives F itself. Each entry is computed
-        with dt folded in (dt / v, not (1 / v) dt), as the filters always have: another order
-        changes the last bits of every estimate."""
-        c, s, v, a = np.cos(x[PHI]), np.sin(x[PHI]), x[V], x[A]
-        return {(X, V): c * dt, (X, PHI): -(v * s * dt),
-                (Y, V): s * dt, (Y, PHI): v * c * dt,
-                (PHI, V): -a / (v * v) * dt, (PHI, A): dt / v,
-                (A, A): -self.lam * dt}
+        ``{(row, column): values}`` (``jacobian_columns``); Phi = I + F dt is the Euler
+        transition of the linearised SDE (``transition_times``). dt = 1 gives F itself."""
+        flat = np.asarray(x, dtype=float).reshape(6, -1)
+        F = np.empty((len(JACOBIAN_ENTRIES), flat.shape[1]))
+        jacobian_columns(flat, np.cos(flat[PHI]), np.sin(flat[PHI]), self.lam, float(dt), F)
+        return {key: F[i].reshape(np.shape(x)[1:]) for i, key in enumerate(JACOBIAN_ENTRIES)}
 
     def euler_step(self, x, dt):
         """x + a(x) dt: one Euler step of the mean (the filters' prediction)."""
@@ -243,6 +242,8 @@ class AuvModel:
         if self.nu:
             forcing += self.nu * dt_s
         rho = 1.0 - self.lam * dt_s
+        from scipy.signal import lfilter  # here: importing scipy.signal costs every CLI ~1 s
+
         a_next = lfilter([1.0], [1.0, -rho], forcing, axis=1, zi=(rho * x[A])[:, None])[0]
         dphi = np.empty((n, n_steps))  # phi_(k+1) - phi_k = a_k dt / v
         dphi[:, 0] = x[A]
@@ -280,23 +281,107 @@ class AuvModel:
 
 
 def transition_times(F, M, at=range(6)):
-    """M <- Phi M in place, Phi = I + F dt with F dt given by ``AuvModel.drift_jacobian``;
-    M (6, ...) holds state i in row ``at[i]``. Each row is updated before the rows it reads:
-    X and Y read v and phi, phi reads v and a. For M Phi^T, pass M transposed (a view)."""
-    x_, y_, v_, phi_, a_ = at[X], at[Y], at[V], at[PHI], at[A]
-    M[x_] += F[X, V] * M[v_] + F[X, PHI] * M[phi_]
-    M[y_] += F[Y, V] * M[v_] + F[Y, PHI] * M[phi_]
-    M[phi_] += F[PHI, V] * M[v_] + F[PHI, A] * M[a_]
-    M[a_] *= 1.0 + F[A, A]
+    """M <- Phi M in place (``transition``), Phi = I + F dt with F dt given by
+    ``AuvModel.drift_jacobian``; M (6, ...) holds state i in row ``at[i]``, the entries of F
+    broadcast against M[0]. For M Phi^T, pass M transposed (a view)."""
+    entries = np.stack([np.broadcast_to(np.asarray(F[key], dtype=float), M.shape[1:])
+                        for key in JACOBIAN_ENTRIES]).reshape(len(JACOBIAN_ENTRIES), -1)
+    flat = M.reshape(6, 1, -1)  # a view of M when its layout allows, else a copy
+    transition(flat, np.ascontiguousarray(entries), np.asarray(at, dtype=np.int64))
+    if not np.shares_memory(flat, M):
+        M[...] = flat.reshape(M.shape)
     return M
 
 
-def _unit_rotations(delta):
-    """exp(i delta) for small angles by its series (exact to rounding for |delta| < 1e-2)."""
-    if np.max(np.abs(delta), initial=0.0) > 1e-2:
-        return np.exp(1j * delta)
+# --------------------------------------------------------------- compiled per-state pieces
+# Loops over columns (states, or paths) that the filters call inside their compiled loops and
+# the vectorised methods above call on whole arrays: the model's dynamics written once.
+
+
+@njit(error_model="numpy")
+def drift_columns(x, cos_phi, sin_phi, lam, nu, out):
+    """a(x) for states x (6, k) into ``out`` (6, k) (rows X, Y, phi, a; the zero rows Z and v
+    are not written), cos and sin of each heading given."""
+    for p in range(x.shape[1]):
+        v, a = x[V, p], x[A, p]
+        out[X, p] = v * cos_phi[p]
+        out[Y, p] = v * sin_phi[p]
+        out[PHI, p] = a / v
+        out[A, p] = -lam * a + nu
+
+
+@njit(error_model="numpy")
+def jacobian_columns(x, cos_phi, sin_phi, lam, dt, F):
+    """The drift Jacobian's non-zero entries times dt at states x (6, k) into F (7, k), in the
+    order of ``JACOBIAN_ENTRIES``. Each entry is computed with dt folded in (dt / v, not
+    (1 / v) dt), as the filters always have: another order changes the last bits."""
+    for p in range(x.shape[1]):
+        c, s, v, a = cos_phi[p], sin_phi[p], x[V, p], x[A, p]
+        F[0, p] = c * dt
+        F[1, p] = -(v * s * dt)
+        F[2, p] = s * dt
+        F[3, p] = v * c * dt
+        F[4, p] = -a / (v * v) * dt
+        F[5, p] = dt / v
+        F[6, p] = -lam * dt
+
+
+@njit()
+def transition(M, F, at):
+    """M <- Phi M in place for M (6, c, k): state i in row ``at[i]``, column j of path p in
+    M[:, j, p], F (7, k) from ``jacobian_columns``. Each row is updated before the rows it
+    reads: X and Y read v and phi, phi reads v and a."""
+    x_, y_, v_, phi_, a_ = at[X], at[Y], at[V], at[PHI], at[A]
+    for j in range(M.shape[1]):
+        for p in range(M.shape[2]):
+            M[x_, j, p] += F[0, p] * M[v_, j, p] + F[1, p] * M[phi_, j, p]
+            M[y_, j, p] += F[2, p] * M[v_, j, p] + F[3, p] * M[phi_, j, p]
+            M[phi_, j, p] += F[4, p] * M[v_, j, p] + F[5, p] * M[a_, j, p]
+            M[a_, j, p] *= 1.0 + F[6, p]
+
+
+@njit()
+def unit_rotation(delta):
+    """(cos delta, sin delta) by their series, exact to rounding for |delta| < SERIES_MAX."""
     d2 = delta * delta
+    return (1.0 - d2 * (0.5 - d2 * (1.0 / 24.0 - d2 / 720.0)),
+            delta * (1.0 - d2 * (1.0 / 6.0 - d2 * (1.0 / 120.0 - d2 / 5040.0))))
+
+
+@njit(error_model="numpy")
+def euler_columns(x, cos_phi, sin_phi, lam, nu, dt):
+    """x <- x + a(x) dt for states x (6, k) in place, and cos and sin of each heading carried
+    to the new heading by a rotation through its increment a / v dt (the series; exact
+    cosines and sines where the increment exceeds SERIES_MAX). Carried over the 100 filter
+    steps of an epoch they stay within ~1e-14 of cos(phi), sin(phi)."""
+    large = False
+    for p in range(x.shape[1]):
+        v, a, c, s = x[V, p], x[A, p], cos_phi[p], sin_phi[p]
+        dphi = a / v * dt
+        x[X, p] += v * c * dt
+        x[Y, p] += v * s * dt
+        x[PHI, p] += dphi
+        x[A, p] += (-lam * a + nu) * dt
+        cd, sd = unit_rotation(dphi)
+        cos_phi[p], sin_phi[p] = c * cd - s * sd, s * cd + c * sd
+        large |= not abs(dphi) <= SERIES_MAX
+    if large:  # rare (a path far outside the model): a scalar pass apart keeps the above SIMD
+        for p in range(x.shape[1]):
+            if not abs(x[A, p] / x[V, p] * dt) <= SERIES_MAX:
+                cos_phi[p], sin_phi[p] = math.cos(x[PHI, p]), math.sin(x[PHI, p])
+
+
+def _unit_rotations(delta):
+    """exp(i delta) for small angles by the series of ``unit_rotation``."""
+    if np.max(np.abs(delta), initial=0.0) > SERIES_MAX:
+        return np.exp(1j * delta)
     out = np.empty(delta.shape, dtype=complex)
-    out.real = 1.0 - d2 * (0.5 - d2 * (1.0 / 24.0 - d2 / 720.0))
-    out.imag = delta * (1.0 - d2 * (1.0 / 6.0 - d2 * (1.0 / 120.0 - d2 / 5040.0)))
+    _unit_rotations_into(delta.reshape(-1), out.reshape(-1))
     return out
+
+
+@njit()
+def _unit_rotations_into(delta, out):
+    for i in range(delta.size):
+        re, im = unit_rotation(delta[i])
+        out[i] = complex(re, im)

@@ -1,5 +1,6 @@
-"""``bearing_doppler3d`` outputs: one row per (estimator, Doppler on/off) and RMSE-vs-time
-plots with each filter's own std dashed."""
+"""``bearing_doppler3d`` outputs: one row per (estimator, Doppler on/off), RMSE-vs-time
+plots with each filter's own std dashed, and the section "Against the paper"
+(``tma.families.bearing_doppler3d.paper``)."""
 
 import json
 from pathlib import Path
@@ -14,6 +15,7 @@ import pyarrow as pa  # noqa: E402
 import pyarrow.parquet as pq  # noqa: E402
 
 from tma.families import estimator_class  # noqa: E402
+from tma.families.bearing_doppler3d import paper  # noqa: E402
 from tma.families.bearing_doppler3d.metrics import (  # noqa: E402
     DIVERGENCE_AFTER_S,
     DIVERGENCE_M,
@@ -25,6 +27,7 @@ from tma.families.bearing_doppler3d.metrics import (  # noqa: E402
 )
 from tma.families.bearing_doppler3d.model import STATE_NAMES  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
+from tma.paper import write_against_paper  # noqa: E402
 from tma.tables import markdown_table, save_figure, write_csv, write_markdown  # noqa: E402
 
 SHORT = {"X_m": "X", "Y_m": "Y", "Z_m": "Z", "v_m_s": "v", "phi_rad": "phi", "a_m_s2": "a"}
@@ -46,7 +49,7 @@ def _timing_us(run_root: Path, n_epochs: int) -> float:
 
 
 def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
-    rows, curves = [], []
+    rows, curves, runs = [], [], []
     for e in entries:
         err, est, t, ok = errors(e.estimates, e.dataset.read_truth())
         K = t.size
@@ -81,6 +84,8 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
                     "us_per_path_obs": _timing_us(e.run_root, K)})
         rows.append(row)
         curves.append((e.estimator, doppler, steps))
+        runs.append(paper.Run(e.estimator, doppler, steps, divergent,
+                              e.dataset.manifest["config"], e.manifest["config"]))
     table = pd.DataFrame(rows, columns=_columns()).sort_values(
         ["doppler", "estimator"], ascending=[False, True], kind="stable").reset_index(drop=True)
     tables_dir = Path(tables_dir)
@@ -118,7 +123,13 @@ vectorised filters (2 workers share the shards) and vary between machines."""
                    intro, markdown_table(shown))
     for path, doppler in ((paths[2], True), (paths[3], False)):
         _plot(path, [c for c in curves if c[1] == doppler], doppler)
-    return paths
+    return paths + write_paper_section(runs, paths[1])
+
+
+def write_paper_section(runs: list, markdown_path: Path) -> list[Path]:
+    """"Against the paper" (``tma.families.bearing_doppler3d.paper``): appended to the
+    table's Markdown, and ``<table>_paper.csv`` beside it."""
+    return write_against_paper(paper.against_paper(runs), markdown_path, paper.INTRO)
 
 
 def _plot(path, curves, doppler):

@@ -21,6 +21,7 @@ from tma.families.bearing_doppler3d.log import (
     write_hydrophone_log,
 )
 from tma.families.bearing_doppler3d.model import STATE_NAMES, AuvModel, model_record
+from tma.io.mcap_log import config_epoch_ns
 from tma.sharding import shard_rng, shard_track_ids
 
 FAMILY = "bearing_doppler3d"
@@ -70,9 +71,11 @@ class Config:
     initial: InitialConfig = field(default_factory=InitialConfig)
     seed: int = 20260104
     shard_size: int = 2500
+    epoch_utc: str = "2026-01-01T00:00:00Z"  # UTC of t = 0 (ISO-8601 with zone): MCAP log times
 
     def __post_init__(self):
         w = "scenario 'bearing_doppler3d'"
+        config_epoch_ns(self.epoch_utc, w)
         require(self.family == FAMILY, w, f"family must be '{FAMILY}'")
         require(self.n_tracks >= 1 and self.shard_size >= 1, w,
                 "n_tracks, shard_size must be >= 1")
@@ -142,7 +145,8 @@ def from_raw(cfg: Config, shard_index: int, raw):
     model = AuvModel.from_record(record)
     track_id = shard_track_ids(cfg, shard_index)
     t = model.epochs()
-    log = HydrophoneLog(t, track_id, model.select_readings(obs), record)
+    log = HydrophoneLog(t, track_id, model.select_readings(obs), record,
+                        config_epoch_ns(cfg.epoch_utc, f"scenario '{FAMILY}'"))
     table = {"track_id": np.repeat(track_id, t.size), "step": np.tile(np.arange(t.size), n),
              "t_s": np.tile(t, n)}
     for i, name in enumerate(STATE_NAMES):

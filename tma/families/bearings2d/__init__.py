@@ -6,4 +6,6 @@ from tma.families import Family
 FAMILY = Family("bearings2d", estimators={
     "lm": "tma.families.bearings2d.estimators.lm:LevenbergMarquardt",
     "nbearings": "tma.families.bearings2d.estimators.nbearings:NBearings",
+    "iv": "tma.families.bearings2d.estimators.iv:InstrumentalVariable",
+    "mpekf": "tma.families.bearings2d.estimators.mpekf:ModifiedPolarEKF",
 })

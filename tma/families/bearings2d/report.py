@@ -1,7 +1,9 @@
 """``bearings2d`` outputs: the comparison table (md, csv, png) and, for datasets without
-truth (ingested logs), a per-track report of the estimated kinematics now with 1-sigma
-uncertainties from the Gauss-Newton covariance (J^T J)^-1 sigma^2 and each track's status
-(computed by the estimators, ``tma.families.bearings2d.status``)."""
+truth (ingested logs), a per-track report of the estimated state and kinematics now (local
+metres, latitude/longitude, UTC) with 1-sigma uncertainties from the Gauss-Newton covariance
+(J^T J)^-1 sigma^2 and each track's status (computed by the estimators,
+``tma.families.bearings2d.status``), with its maps (``map_outputs``): a PNG per contact and,
+when the dataset has a geographic origin, the estimated tracks as an MCAP for Foxglove."""
 
 import logging
 from pathlib import Path
@@ -14,6 +16,17 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 import pyarrow as pa  # noqa: E402
 
+from tma.families.bearings2d import benchmark, paper  # noqa: E402
+from tma.families.bearings2d.geo import local_to_geodetic  # noqa: E402
+from tma.families.bearings2d.map_outputs import (  # noqa: E402
+    MAX_PLOTS,
+    position_covariance,
+    read_logs,
+    reference,
+    theta_covariance,
+    write_map_mcap,
+    write_track_plots,
+)
 from tma.families.bearings2d.metrics import (  # noqa: E402
     REGIONS,
     TABLE_COLUMNS,
@@ -22,6 +35,8 @@ from tma.families.bearings2d.metrics import (  # noqa: E402
 )
 from tma.families.bearings2d.status import STATUSES  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
+from tma.io.mcap_log import format_utc  # noqa: E402
+from tma.paper import write_against_paper  # noqa: E402
 from tma.tables import markdown_table, save_figure, write_csv, write_markdown  # noqa: E402
 
 INTRO = """Bearings-only TMA of a constant-velocity target from a manoeuvring observer
@@ -126,16 +141,34 @@ def status_note(report: pd.DataFrame) -> list[str]:
     return notes
 
 
-def track_report(estimates: pd.DataFrame, time_origin_s=0.0) -> pd.DataFrame:
-    """Per-track kinematics at each track's last bearing ("now") with 1-sigma errors and
-    the status, as the estimator computed them; a note says why a track is not ok."""
+def track_report(estimates: pd.DataFrame, time_origin_s=0.0, epoch_utc_ns=None,
+                 origin_deg=None, labels=None) -> pd.DataFrame:
+    """Per-track state and kinematics at each track's last bearing ("now") with 1-sigma
+    errors and the status, as the estimator computed them; a note says why a track is not ok.
+
+    ``label``: the contact's name (``labels``: track id -> text; else the id);
+    ``time_now_utc``: ISO-8601 UTC of the last bearing (``epoch_utc_ns``: UTC of t = 0; else
+    blank); ``x_now_m``, ``y_now_m`` (local plane, m) with ``x_sd_m``, ``y_sd_m``;
+    ``lat_now_deg``, ``lon_now_deg`` (WGS84, from ``origin_deg`` = (lat, lon) of the local
+    plane's origin; NaN without one)."""
     e = estimates
     t = e["t_last_s"].to_numpy()
+    x_now = (e["x0_m"] + e["vx_m_s"] * t).to_numpy()
+    y_now = (e["y0_m"] + e["vy_m_s"] * t).to_numpy()
+    cov = position_covariance(theta_covariance(e), t)
+    lat, lon = ((np.full(t.size, np.nan),) * 2 if origin_deg is None
+                else local_to_geodetic(x_now, y_now, origin_deg))
+    ids = e["track_id"].tolist()
     report = pd.DataFrame({
         "track_id": e["track_id"],
+        "label": [(labels or {}).get(i, str(i)) for i in ids],
         "n_bearings": e["n_bearings"],
         "t_now_s": t + time_origin_s,
-        "x_now_m": e["x0_m"] + e["vx_m_s"] * t, "y_now_m": e["y0_m"] + e["vy_m_s"] * t,
+        "time_now_utc": ([None] * t.size if epoch_utc_ns is None else
+                         [format_utc(epoch_utc_ns + round(v * 1e9)) for v in t.tolist()]),
+        "x_now_m": x_now, "x_sd_m": np.sqrt(cov[:, 0, 0]),
+        "y_now_m": y_now, "y_sd_m": np.sqrt(cov[:, 1, 1]),
+        "lat_now_deg": lat, "lon_now_deg": lon,
         **{c: e[c] for c in REPORT_COLUMNS},
         "sqrt_ka_deg": np.rad2deg(np.sqrt(e["cost_rad2"] / e["n_bearings"])),
         "converged": e["converged"].astype(bool),
@@ -152,9 +185,18 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str)
         return [f"{v:{fmt}} ± {e:{fmt}}" if np.isfinite(e) else f"{v:{fmt}} ± ? (unobservable)"
                 for v, e in report[[value, sd]].to_numpy()]
 
+    def position():
+        if report["lat_now_deg"].isna().all():
+            return {}
+        return {"position now (lat, lon deg)": [
+            f"{a:.5f}, {b:.5f}" if np.isfinite(a) else "-"
+            for a, b in report[["lat_now_deg", "lon_now_deg"]].to_numpy()]}
+
     shown = pd.DataFrame({
-        "track": report["track_id"], "n": report["n_bearings"],
+        "track": report["label"], "n": report["n_bearings"],
         "t now (s)": report["t_now_s"].map("{:.1f}".format),
+        **({} if report["time_now_utc"].isna().all() else {"now (UTC)": report["time_now_utc"]}),
+        **position(),
         "range now (m)": pm("range_now_m", "range_sd_m", ".0f"),
         "bearing now (deg)": pm("bearing_now_deg", "bearing_sd_deg", ".2f"),
         "course (deg)": pm("course_deg", "course_sd_deg", ".1f"),
@@ -166,34 +208,66 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str)
     intro = (f"Estimates per track of `{source}` (no ground truth). 'now' is each track's last "
              "bearing epoch; ± is one standard deviation from (J^T J)^-1 sigma^2, sigma as in "
              "column sigma_used_deg of the CSV (nominal, or estimated from the residuals). "
-             "Trust only `ok` tracks; 'why' says what is wrong with the others.")
+             "Trust only `ok` tracks; 'why' says what is wrong with the others. The CSV also "
+             "holds the position now in local metres (x east, y north) with its one-sigma "
+             f"errors; `{name}-<track>.png` shows each contact on a plan (the first "
+             f"{MAX_PLOTS}).")
     write_markdown(paths[1], f"Bearings-only TMA estimates: {name}", intro, markdown_table(shown))
     return paths
 
 
+def _report_without_truth(entry, tables_dir, name: str) -> list[Path]:
+    """The per-track report of a dataset without truth: ``<name>.{csv,md}``, a PNG per
+    contact and, with a geographic origin, the map MCAP ``<name>.mcap``."""
+    m, dataset = entry.dataset.manifest, entry.dataset
+    logs = read_logs(dataset)
+    epoch, origin, labels = reference(logs, str(dataset.root))
+    report = track_report(entry.estimates, m.get("time_origin_s", 0.0), epoch, origin, labels)
+    for row in report[report["status"] != "ok"].itertuples(index=False):
+        log.warning("%s track %s: %s: %s", dataset.name, row.label, row.status, row.note)
+    write_parquet_atomic(entry.run_root / "report.parquet",
+                         pa.Table.from_pandas(report, preserve_index=False))
+    written = write_track_report(report, tables_dir, name,
+                                 m.get("input", {}).get("path", dataset.name))
+    written += write_track_plots(report, entry.estimates, logs, tables_dir, name)
+    if origin is None:
+        log.info("%s: no map MCAP (%s.mcap): the dataset has no geographic origin (its "
+                 "own-ship is in local metres; ingest latitude/longitude navigation or give "
+                 "origin.lat/origin.lon)", dataset.name, name)
+    else:
+        written.append(write_map_mcap(Path(tables_dir) / f"{name}.mcap", report,
+                                      entry.estimates, logs, epoch, origin,
+                                      {"dataset": dataset.name, "estimator": entry.estimator}))
+    return written
+
+
 def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
-    """Metrics per track into each run dir; the comparison table for simulated datasets and
-    a per-track report for each dataset without truth."""
-    rows, written = [], []
+    """Metrics per track into each run dir; the comparison table for simulated datasets, with
+    its section against the paper, and a per-track report for each dataset without truth."""
+    rows, written, runs = [], [], []
     for entry in entries:
         truth = entry.dataset.read_truth()
         if truth is None:
-            m = entry.dataset.manifest
-            report = track_report(entry.estimates, time_origin_s=m.get("time_origin_s", 0.0))
-            for row in report[report["status"] != "ok"].itertuples(index=False):
-                log.warning("%s track %s: %s: %s", entry.dataset.name, row.track_id, row.status,
-                            row.note)
-            write_parquet_atomic(entry.run_root / "report.parquet",
-                                 pa.Table.from_pandas(report, preserve_index=False))
             name = table_name if len(entries) == 1 else f"{entry.dataset.name}-{entry.estimator}"
-            written += write_track_report(report, tables_dir, name,
-                                          m.get("input", {}).get("path", entry.dataset.name))
+            written += _report_without_truth(entry, tables_dir, name)
             continue
         metrics = track_metrics(entry.estimates, truth)
         write_parquet_atomic(entry.run_root / "metrics.parquet",
                              pa.Table.from_pandas(metrics, preserve_index=False))
         sigma = entry.dataset.manifest["config"]["sigma_deg"]
         rows.append(summary_row(metrics, entry.estimator, sigma))
-    if rows:
+        runs.append(paper.Run(entry.estimator, sigma, metrics,
+                              entry.estimates["n_bearings"].to_numpy(),
+                              entry.dataset.manifest["config"], entry.manifest["config"]))
+    if rows and benchmark.is_benchmark(table_name):  # estimators x sigma against the CRLB
+        written += benchmark.write_benchmark(entries, tables_dir, table_name)
+    elif rows:
         written += write_table(rows, tables_dir, table_name)
+        written += write_paper_section(runs, Path(tables_dir) / f"{table_name}.md")
     return written
+
+
+def write_paper_section(runs: list, markdown_path: Path) -> list[Path]:
+    """"Against the paper" (``tma.families.bearings2d.paper``): appended to the table's
+    Markdown, and ``<table>_paper.csv`` beside it."""
+    return write_against_paper(paper.against_paper(runs), markdown_path, paper.INTRO)

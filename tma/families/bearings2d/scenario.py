@@ -5,6 +5,15 @@ degrees in config and log. Each shard draws its targets and its noise from
 ``SeedSequence(seed, spawn_key=(shard,))``, so a shard's content depends neither on the number
 of workers nor on sigma: datasets at different sigma share targets and standardised noise
 (common random numbers), which makes the success-rate curves smooth in sigma.
+
+Outliers (``outliers.prob`` > 0): each bearing is, independently with probability ``prob``,
+replaced by a wild reading drawn uniformly on the circle [0, 360) deg (a false detection that
+carries no information about the target). Which bearings and their values come from the
+shard's own child stream ``SeedSequence(seed, spawn_key=(shard, OUTLIER_STREAM))``, drawn for
+every bearing whatever ``prob`` (a bearing is replaced when its uniform draw is below
+``prob``): the targets and noise do not change with ``prob`` (``prob`` = 0 leaves a dataset
+byte for byte as without the option) and the outliers at a smaller ``prob`` are a subset of
+those at a larger one (common random numbers along the outlier axis too).
 """
 
 from dataclasses import dataclass, field
@@ -15,10 +24,12 @@ import pyarrow as pa
 from tma.angles import bearing_from_north, wrap_to_pi
 from tma.config import require
 from tma.families.bearings2d.log import BearingsLog, read_bearings_log, write_bearings_log
+from tma.io.mcap_log import config_epoch_ns
 from tma.path import LegPath
 from tma.sharding import shard_rng, shard_track_ids
 
 FAMILY = "bearings2d"
+OUTLIER_STREAM = 1  # spawn-key element of the outlier stream under the shard's (shard,)
 
 
 @dataclass
@@ -65,6 +76,22 @@ class PopulationConfig:
 
 
 @dataclass
+class OriginConfig:
+    """WGS84 position (deg) of the local plane's origin (x = y = 0); null: none. With one,
+    each log carries it and own-ship as ``foxglove.LocationFix`` (Foxglove's Map panel)."""
+
+    lat: float | None = None
+    lon: float | None = None
+
+
+@dataclass
+class OutlierConfig:
+    """Share ``prob`` of bearings replaced by draws uniform on the circle (module docstring)."""
+
+    prob: float = 0.0
+
+
+@dataclass
 class Config:
     family: str = FAMILY
     n_tracks: int = 10000  # targets in the dataset
@@ -74,15 +101,27 @@ class Config:
     sample_period_s: float = 2.0  # bearings at t = 0, dt, ..., end of the observer path
     observer: ObserverConfig = field(default_factory=ObserverConfig)
     population: PopulationConfig = field(default_factory=PopulationConfig)
+    epoch_utc: str = "2026-01-01T00:00:00Z"  # UTC of t = 0 (ISO-8601 with zone): MCAP log times
+    origin: OriginConfig = field(default_factory=OriginConfig)
+    outliers: OutlierConfig = field(default_factory=OutlierConfig)
 
     def __post_init__(self):
         where = "scenario 'bearings2d'"
+        config_epoch_ns(self.epoch_utc, where)
+        lat, lon = self.origin.lat, self.origin.lon
+        require((lat is None) == (lon is None), where,
+                "origin.lat and origin.lon must be given together (or both null)")
+        require(lat is None or (-90 < lat < 90 and -180 <= lon <= 180), where,
+                f"origin must be a latitude in (-90, 90) and a longitude in [-180, 180] deg, "
+                f"got ({lat}, {lon})")
         require(self.family == FAMILY, where, f"family must be '{FAMILY}'")
         require(self.n_tracks > 0, where, "n_tracks must be positive")
         require(self.shard_size > 0, where, "shard_size must be positive")
         require(0 <= self.sigma_deg < 90, where,
                 f"sigma_deg must be in [0, 90), got {self.sigma_deg}")
         require(self.seed >= 0, where, f"seed must be >= 0, got {self.seed}")
+        require(0 <= self.outliers.prob <= 1, where,
+                f"outliers.prob must be a probability in [0, 1], got {self.outliers.prob}")
         require(self.sample_period_s > 0, where, "sample_period_s must be positive")
         p = self.population
         require(0 < p.distance_min_m <= p.distance_max_m < 1e9, where,
@@ -103,7 +142,8 @@ class Config:
 
 
 def label(cfg: Config) -> str:
-    return f"sigma{cfg.sigma_deg:g}-n{cfg.n_tracks}"
+    outliers = f"-out{cfg.outliers.prob:g}" if cfg.outliers.prob > 0 else ""
+    return f"sigma{cfg.sigma_deg:g}{outliers}-n{cfg.n_tracks}"
 
 
 def observer_path(cfg: Config) -> LegPath:
@@ -139,10 +179,15 @@ def simulate_shard(cfg: Config, shard_index: int):
         x0[:, None] + vx[:, None] * t - own_x, y0[:, None] + vy[:, None] * t - own_y
     )
     measured = wrap_to_pi(true_bearing + np.deg2rad(cfg.sigma_deg) * noise)
+    if cfg.outliers.prob > 0:
+        measured = with_outliers(measured, cfg, shard_index)
 
+    origin = cfg.origin
     log = BearingsLog(
         t_s=t, own_x_m=own_x, own_y_m=own_y, track_id=track_id,
         bearing_deg=np.rad2deg(measured) % 360.0, sigma_deg=cfg.sigma_deg,
+        epoch_utc_ns=config_epoch_ns(cfg.epoch_utc, f"scenario '{FAMILY}'"),
+        origin_deg=None if origin.lat is None else (origin.lat, origin.lon),
     )
     truth = pa.table({
         "track_id": track_id,
@@ -151,6 +196,21 @@ def simulate_shard(cfg: Config, shard_index: int):
         "course_deg": np.rad2deg(course), "speed_m_s": speed,
     })
     return log, truth
+
+
+def outlier_rng(cfg: Config, shard_index: int) -> np.random.Generator:
+    """The shard's outlier stream, apart from its target and noise stream ``shard_rng``."""
+    return np.random.default_rng(
+        np.random.SeedSequence(cfg.seed, spawn_key=(shard_index, OUTLIER_STREAM)))
+
+
+def with_outliers(measured_rad, cfg: Config, shard_index: int) -> np.ndarray:
+    """``measured_rad`` (n_tracks, n_epochs) with each bearing replaced, with probability
+    ``cfg.outliers.prob``, by a draw uniform on [-pi, pi)."""
+    rng = outlier_rng(cfg, shard_index)
+    replaced = rng.random(measured_rad.shape) < cfg.outliers.prob
+    wild = rng.uniform(-np.pi, np.pi, measured_rad.shape)
+    return np.where(replaced, wild, measured_rad)
 
 
 def write_log(path, log: BearingsLog, metadata=None) -> int:

@@ -19,6 +19,7 @@ from tma.io.mcap_log import (
     is_number,
     json_record,
     number,
+    read_epoch,
     read_json_record,
     read_log,
     schema_errors,
@@ -36,6 +37,7 @@ class RadarLog:
     track_id: np.ndarray  # (n,)
     plots_m: np.ndarray  # (n, n_scans, 2)
     sensor: dict
+    epoch_utc_ns: int | None = None  # UTC of t = 0 (ns since 1970); None: relative times
 
     @property
     def n_tracks(self) -> int:
@@ -62,7 +64,7 @@ class RadarLog:
 
 def write_radar_log(path, log: RadarLog, metadata=None) -> int:
     meta = {**(metadata or {}), "tma.sensor": json_record(log.sensor)}
-    with LogWriter(path, CHANNELS, meta) as w:
+    with LogWriter(path, CHANNELS, meta, epoch_utc_ns=log.epoch_utc_ns) as w:
         for k, t in enumerate(log.t_s.tolist()):
             w.write(PLOTS_TOPIC, t, {"t_s": t, "track_id": log.track_id,
                                      "x_m": log.plots_m[:, k, 0], "y_m": log.plots_m[:, k, 1]})
@@ -89,6 +91,6 @@ def read_radar_log(path) -> RadarLog:
     for k, (i, x, y) in enumerate(zip(ids, xs, ys, strict=True)):
         rows = np.searchsorted(track_id, i)
         plots[rows, k, 0], plots[rows, k, 1] = x, y
-    log = RadarLog(t, track_id, plots, sensor)
+    log = RadarLog(t, track_id, plots, sensor, read_epoch(metadata, where))
     log.validate(where)
     return log

@@ -1,4 +1,5 @@
-"""``radar2d`` outputs: one row per (estimator, speed), error-vs-time and m-vs-time plots."""
+"""``radar2d`` outputs: one row per (estimator, speed), error-vs-time and m-vs-time plots, and
+the section "Against the paper" (``tma.families.radar2d.paper``)."""
 
 from pathlib import Path
 
@@ -11,6 +12,7 @@ import pandas as pd  # noqa: E402
 import pyarrow as pa  # noqa: E402
 
 from tma.families import estimator_class  # noqa: E402
+from tma.families.radar2d import paper  # noqa: E402
 from tma.families.radar2d.metrics import (  # noqa: E402
     DEFAULT_MEMORY,
     GATE_M,
@@ -22,6 +24,7 @@ from tma.families.radar2d.metrics import (  # noqa: E402
     table_columns,
 )
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
+from tma.paper import write_against_paper  # noqa: E402
 from tma.tables import markdown_table, save_figure, write_csv, write_markdown  # noqa: E402
 
 INTRO = """Tracking a small fast boat that turns sharply{radius} in front of a coastal
@@ -82,7 +85,7 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
         (e.manifest["config"]["memory"] for e in entries
          if e.dataset.name == name and "memory" in e.manifest["config"]),
         default=DEFAULT_MEMORY)), config) for name, config in configs.items()}
-    rows, sigma_times, curves = [], [], []
+    rows, sigma_times, curves, runs = [], [], [], []
     for e in entries:
         segs = by_dataset[e.dataset.name][0]
         per_scan = per_scan_errors(e.estimates, e.dataset.read_truth(), segs)
@@ -92,6 +95,9 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
         selects_memory = "m" in estimator_class(e.estimator).outputs
         rows.append(summary_row(per_scan, e.estimator, speed, segs,
                                 e.manifest["config"]["memory"] if selects_memory else None))
+        if e.estimator == paper.ESTIMATOR:
+            runs.append(paper.Run(speed, per_scan, segs, e.dataset.manifest["config"],
+                                  e.manifest["config"]))
         sigma_times.append(segs.sigma_times_s)
         g = per_scan.groupby("t_s")
         curve = pd.DataFrame({"t_s": g["error_m"].mean().index, "error_mean_m":
@@ -136,7 +142,13 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
     write_markdown(paths[1], "Vessel tracking: fuzzy multi-model alpha-beta vs alpha-beta vs IMM",
                    _intro(by_dataset), markdown_table(shown))
     _plot(paths[2], paths[3], curves)
-    return paths
+    return paths + write_paper_section(runs, paths[1])
+
+
+def write_paper_section(runs: list, markdown_path: Path) -> list[Path]:
+    """"Against the paper" (``tma.families.radar2d.paper``): appended to the table's
+    Markdown, and ``<table>_paper.csv`` beside it."""
+    return write_against_paper(paper.against_paper(runs), markdown_path, paper.INTRO)
 
 
 def _shade(ax, segs):

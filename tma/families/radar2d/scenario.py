@@ -15,6 +15,7 @@ import pyarrow as pa
 from tma.config import require
 from tma.errors import ConfigError
 from tma.families.radar2d.log import RadarLog, read_radar_log, write_radar_log
+from tma.io.mcap_log import config_epoch_ns
 from tma.path import LegPath
 from tma.sharding import shard_rng, shard_track_ids
 
@@ -56,9 +57,11 @@ class Config:
     bearing_sd_deg: float = 0.18  # polar
     seed: int = 20260103
     shard_size: int = 500
+    epoch_utc: str = "2026-01-01T00:00:00Z"  # UTC of t = 0 (ISO-8601 with zone): MCAP log times
 
     def __post_init__(self):
         w = "scenario 'radar2d'"
+        config_epoch_ns(self.epoch_utc, w)
         require(self.family == FAMILY, w, f"family must be '{FAMILY}'")
         require(self.n_tracks >= 1 and self.shard_size >= 1, w,
                 "n_tracks, shard_size must be >= 1")
@@ -113,7 +116,8 @@ def simulate_shard(cfg: Config, shard_index: int):
         rng_m = np.hypot(x - rx, y - ry) + cfg.range_sd_m * noise[..., 0]
         bearing = np.arctan2(x - rx, y - ry) + np.deg2rad(cfg.bearing_sd_deg) * noise[..., 1]
         plots = np.stack([rx + rng_m * np.sin(bearing), ry + rng_m * np.cos(bearing)], axis=-1)
-    log = RadarLog(t, track_id, plots, sensor_metadata(cfg))
+    log = RadarLog(t, track_id, plots, sensor_metadata(cfg),
+                   config_epoch_ns(cfg.epoch_utc, f"scenario '{FAMILY}'"))
     course = path.course(t)
     truth = pa.table({
         "track_id": np.repeat(track_id, t.size), "step": np.tile(np.arange(t.size), n),

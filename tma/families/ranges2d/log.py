@@ -20,6 +20,7 @@ from tma.io.mcap_log import (
     is_number,
     json_record,
     number,
+    read_epoch,
     read_json_record,
     read_log,
     schema_errors,
@@ -39,6 +40,7 @@ class RangesLog:
     track_id: np.ndarray  # (n,)
     ranges_m: np.ndarray  # (n, L, m)
     model: dict  # sigma_m, prior_mean_m, prior_sd_m
+    epoch_utc_ns: int | None = None  # UTC of t = 0 (ns since 1970); None: relative times
 
     @property
     def n_tracks(self) -> int:
@@ -78,7 +80,7 @@ def _pair(value) -> bool:
 def write_ranges_log(path, log: RangesLog, metadata=None) -> int:
     meta = {**(metadata or {}),
             "tma.model": json_record(log.model)}
-    with LogWriter(path, CHANNELS, meta) as w:
+    with LogWriter(path, CHANNELS, meta, epoch_utc_ns=log.epoch_utc_ns) as w:
         for k, t in enumerate(log.t_s.tolist()):
             for i, (lx, ly) in enumerate(log.landmarks_m.tolist()):
                 w.write(RANGES_TOPIC, t, {
@@ -115,6 +117,7 @@ def read_ranges_log(path) -> RangesLog:
     ranges = np.full((track_id.size, len(lm_ids), t.size), np.nan)
     for i, v, lm, k in zip(ids, values, lm_rows, cols, strict=True):
         ranges[np.searchsorted(track_id, i), lm, k] = v
-    log = RangesLog(t, np.array([landmarks[i] for i in lm_ids], float), track_id, ranges, model)
+    log = RangesLog(t, np.array([landmarks[i] for i in lm_ids], float), track_id, ranges, model,
+                    read_epoch(metadata, where))
     log.validate(where)
     return log

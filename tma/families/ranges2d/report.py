@@ -1,5 +1,6 @@
 """``ranges2d`` outputs: one row per estimator over repeated runs, errors against the
-``quadrature`` reference, and a plot of both samplers' draws over the posterior.
+``quadrature`` reference, a plot of both samplers' draws over the posterior, and the section
+"Against the paper" (``tma.families.ranges2d.paper``).
 
 Each run's ``status`` is its estimator's verdict (``tma.families.ranges2d.estimators.base``: ok,
 not_converged, box_too_small, failed); the table counts runs per status (``n_<status>``) and
@@ -21,10 +22,12 @@ from scipy.stats import norm  # noqa: E402
 
 from tma.errors import ConfigError  # noqa: E402
 from tma.families import estimator_class  # noqa: E402
+from tma.families.ranges2d import paper  # noqa: E402
 from tma.families.ranges2d.estimators.base import STATUSES  # noqa: E402
 from tma.families.ranges2d.log import read_ranges_log  # noqa: E402
 from tma.families.ranges2d.model import RangeModel  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
+from tma.paper import write_against_paper  # noqa: E402
 from tma.tables import markdown_table, save_figure, write_csv, write_markdown  # noqa: E402
 
 COLUMNS = [
@@ -94,7 +97,7 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
     if reference is None:
         raise ConfigError("the ranges2d table measures errors against 'quadrature': "
                           "include estimator=quadrature")
-    rows, samples = [], {}
+    rows, samples, runs = [], {}, []
     for e in entries:
         confidence = e.manifest["config"].get("confidence", 0.95)
         metrics = track_metrics(e.estimates, reference.estimates, e.dataset.read_truth(),
@@ -102,6 +105,9 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
         write_parquet_atomic(e.run_root / "metrics.parquet",
                              pa.Table.from_pandas(metrics, preserve_index=False))
         rows.append(summary_row(e.estimator, metrics, _seconds_per_run(e.run_root)))
+        if e.estimator in paper.ESTIMATORS:
+            runs.append(paper.Run(e.estimator, metrics, e.dataset.manifest["config"],
+                                  e.manifest["config"]))
         if (e.run_root / "samples.parquet").exists():
             samples[e.estimator] = pq.read_table(e.run_root / "samples.parquet").to_pandas()
     table = pd.DataFrame(rows, columns=COLUMNS)
@@ -146,7 +152,14 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
     write_markdown(paths[1], "Range-only navigation: Bayesian mean by importance sampling",
                    intro, markdown_table(shown))
     _plot(paths[2], ds, reference.estimates, samples)
-    return paths
+    return paths + write_paper_section(runs, reference.estimates, paths[1])
+
+
+def write_paper_section(runs: list, reference: pd.DataFrame, markdown_path: Path) -> list[Path]:
+    """"Against the paper" (``tma.families.ranges2d.paper``): appended to the table's
+    Markdown, and ``<table>_paper.csv`` beside it."""
+    return write_against_paper(paper.against_paper(runs, reference), markdown_path,
+                               paper.INTRO)
 
 
 def _pm(a, b):

@@ -16,6 +16,7 @@ import pyarrow as pa
 
 from tma.config import require
 from tma.families.ranges2d.log import RangesLog, read_ranges_log, write_ranges_log
+from tma.io.mcap_log import config_epoch_ns
 from tma.sharding import shard_rng, shard_track_ids
 
 FAMILY = "ranges2d"
@@ -43,9 +44,11 @@ class Config:
     prior_sd_m: list[float] = field(default_factory=lambda: [100.0, 100.0])
     seed: int = 20260102
     shard_size: int = 50
+    epoch_utc: str = "2026-01-01T00:00:00Z"  # UTC of t = 0 (ISO-8601 with zone): MCAP log times
 
     def __post_init__(self):
         w = "scenario 'ranges2d'"
+        config_epoch_ns(self.epoch_utc, w)
         require(self.family == FAMILY, w, f"family must be '{FAMILY}'")
         require(self.mode in ("concrete", "population"), w, "mode must be concrete|population")
         require(self.n_tracks >= 1 and self.shard_size >= 1, w,
@@ -84,17 +87,19 @@ def simulate_shard(cfg: Config, shard_index: int):
     landmarks = np.asarray(cfg.landmarks_m, float)
     model = {"sigma_m": cfg.sigma_m, "prior_mean_m": list(cfg.prior_mean_m),
              "prior_sd_m": list(cfg.prior_sd_m)}
+    epoch = config_epoch_ns(cfg.epoch_utc, f"scenario '{FAMILY}'")
     if cfg.mode == "concrete":
         ranges = np.broadcast_to(np.asarray(cfg.ranges_m, float), (n, *np.shape(cfg.ranges_m)))
         log = RangesLog(np.arange(len(cfg.ranges_m[0]), dtype=float), landmarks, track_id,
-                        ranges.copy(), model)
+                        ranges.copy(), model, epoch)
         return log, None
     rng = shard_rng(cfg, shard_index)
     pos = np.asarray(cfg.prior_mean_m) + np.asarray(cfg.prior_sd_m) * rng.standard_normal((n, 2))
     dist = np.hypot(pos[:, None, 0] - landmarks[:, 0], pos[:, None, 1] - landmarks[:, 1])
     noise = cfg.sigma_m * rng.standard_normal((n, len(landmarks), cfg.n_pairs))
     ranges = np.abs(dist[:, :, None] + noise)  # a range is non-negative
-    log = RangesLog(np.arange(cfg.n_pairs, dtype=float), landmarks, track_id, ranges, model)
+    log = RangesLog(np.arange(cfg.n_pairs, dtype=float), landmarks, track_id, ranges, model,
+                    epoch)
     truth = pa.table({"track_id": track_id, "x_m": pos[:, 0], "y_m": pos[:, 1]})
     return log, truth
 

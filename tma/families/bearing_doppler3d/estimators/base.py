@@ -4,7 +4,8 @@ Every estimator receives the family's model (``AuvModel``, built from the log's 
 record) and never simulates itself: the maths of the model lives in ``model.py`` alone.
 
 Filters keep paths on the last axis (state (6, n), covariance (6, 6, n)) so that each state
-row is a contiguous vector over paths. Both Kalman filters propagate the covariance of the
+row is a contiguous vector over paths: the compiled prediction loops over blocks of paths
+innermost (SIMD across paths). Both Kalman filters propagate the covariance of the
 Euler-discretised linearised SDE over each step dt: with Phi = I + F dt (F the drift
 Jacobian at the mean), P <- Phi P Phi^T + b b^T dt, b = (0, 0, 0, 0, 0, mu): the Euler step of
 dP = (F P + P F^T + b b^T) dt plus its own O(dt^2) term F P F^T dt^2, which keeps P positive
@@ -25,6 +26,7 @@ from tma.families.bearing_doppler3d.log import HydrophoneLog
 from tma.families.bearing_doppler3d.model import STATE_NAMES, AuvModel, model_record
 
 IU = np.triu_indices(6)
+BLOCK_PATHS = 128  # paths per block of the compiled prediction (cache-resident)
 
 
 def dataset_model_record(dataset) -> dict:
@@ -57,9 +59,10 @@ class AuvEstimator(Estimator):
 
 class KalmanFilterBase(AuvEstimator):
     """The continuous-discrete Kalman filter driver shared by ``ekf`` and ``srekf``: Euler
-    sub-steps of ``filter_step_s`` between observations, one update per epoch. Subclasses say
-    how they hold the covariance (``initial_factor``, ``predict_factor``, ``update``,
-    ``covariance``)."""
+    sub-steps of ``filter_step_s`` between observations, one update per epoch against the
+    observation model at the predicted mean (``AuvModel.observe_with_jacobian``, vectorised
+    over the paths). Subclasses hold the covariance their way and give the compiled loops:
+    ``initial_factor``, ``predict`` and ``update`` (in place), ``covariance``."""
 
     def solve(self, model, t, obs):
         n, K, _ = obs.shape
@@ -67,13 +70,15 @@ class KalmanFilterBase(AuvEstimator):
         mean0, cov0 = model.initial.moments()
         x = np.repeat(mean0[:, None], n, axis=1)
         factor = self.initial_factor(cov0, n)
+        r = np.ascontiguousarray(model.obs_sd**2)
         xs, Ps = np.empty((K, 6, n)), np.empty((K, 6, 6, n))
         for k in range(K):
             if k:
-                for _ in range(model.n_filter_steps(t[k] - t[k - 1])):
-                    factor = self.predict_factor(factor, x, dt, model)
-                    x = model.euler_step(x, dt)
-            x, factor = self.update(x, factor, obs[:, k], model)
+                self.predict(x, factor, dt, model.n_filter_steps(t[k] - t[k - 1]), model.lam,
+                             model.nu, model.mu, BLOCK_PATHS)
+            # views with paths first in memory: what the per-path update reads is contiguous
+            h, H = model.observe_with_jacobian(x)  # (m, n), (m, 6, n)
+            self.update(x, factor, h, H, obs[:, k], r)
             xs[k], Ps[k] = x, self.covariance(factor)
         est, cov = to_paths_first(xs, Ps)
         ok = np.isfinite(cov).all(axis=(1, 2, 3)) & np.isfinite(est).all(axis=(1, 2))

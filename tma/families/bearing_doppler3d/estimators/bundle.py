@@ -29,14 +29,14 @@ def bundle_spec(model_record: dict, n_paths: int, seed: int) -> dict:
     return {"model": {**model_record, "no_doppler": False}, "n_paths": n_paths, "seed": seed}
 
 
-def training_bundle(data_dir, model_record, n_paths, seed, n_jobs=1, progress=False) -> dict:
+def training_bundle(data_dir, model_record, n_paths, seed, engine=1, progress=False) -> dict:
     """The record of the bundle artefact (simulated on first use)."""
     spec = bundle_spec(model_record, n_paths, seed)
 
     def build():
         tasks = [(spec["model"], seed, i, min(SHARD, n_paths - i * SHARD))
                  for i in range(-(-n_paths // SHARD))]
-        parts = run_tasks(_bundle_shard, tasks, n_jobs=n_jobs, desc="training bundle",
+        parts = run_tasks(_bundle_shard, tasks, engine=engine, desc="training bundle",
                           progress=progress)
         return {"truth": np.concatenate([p[0] for p in parts]),
                 "obs": np.concatenate([p[1] for p in parts])}

@@ -124,12 +124,12 @@ class CMNF(AuvEstimator):
     Config = Config
 
     @classmethod
-    def prepare(cls, config: dict, dataset, data_dir, n_jobs=1, progress=False) -> dict:
+    def prepare(cls, config: dict, dataset, data_dir, engine=1, progress=False) -> dict:
         """Train (or reuse) the gains for the dataset's model; returns the config with the
         artefact's record (kind, key, sha256), which the run manifest keeps."""
         record = dataset_model_record(dataset)
         bundle = training_bundle(data_dir, record, config["training_paths"],
-                                 config["training_seed"], n_jobs, progress)
+                                 config["training_seed"], engine, progress)
         spec = {"model": record, "bundle": bundle["sha256"], "pinv_rtol": config["pinv_rtol"]}
 
         def build():

@@ -36,10 +36,10 @@ class PriorMean(AuvEstimator):
     Config = Config
 
     @classmethod
-    def prepare(cls, config: dict, dataset, data_dir, n_jobs=1, progress=False) -> dict:
+    def prepare(cls, config: dict, dataset, data_dir, engine=1, progress=False) -> dict:
         record = dataset_model_record(dataset)
         bundle = training_bundle(data_dir, record, config["bundle_paths"], config["bundle_seed"],
-                                 n_jobs, progress)
+                                 engine, progress)
         return {**config, "artefact": bundle}
 
     def solve(self, model, t, obs):

@@ -1,13 +1,31 @@
-"""``lm``: maximum-likelihood TMA by Marquardt's Levenberg-Marquardt, batched over tracks.
+"""``lm``: maximum-likelihood TMA by Marquardt's Levenberg-Marquardt, one track at a time in
+compiled code (``lm_kernel.marquardt``) over the tracks of a shard.
 
 Minimises F(theta) = sum_k wrap(X_k - f_k(theta))^2 (rad^2) per track with its own lambda:
 A = H + lambda diag(H), H = J^T J; a trial step whose F rises, or whose A is not positive
 definite, multiplies lambda by ``lambda_up``; an accepted step multiplies it by
 ``lambda_down``; a track stops when an accepted step lowers F by less than ``f_tol_rad2``.
-Every pass makes one fused evaluation of F, J^T J and J^T r at each still-active track's trial
-point (accepted and rejected alike; n_f_evals counts it once), so the per-track sequence is
-exactly the scalar algorithm's while the work stays vectorised: the evaluation runs in
-cache-sized chunks of tracks, the bookkeeping over every still-active track of the shard.
+Every pass makes one fused evaluation of F, J^T J and J^T r at the trial point (accepted and
+rejected alike; n_f_evals counts it once).
+
+``loss=huber|cauchy`` fits robustly (``lm_kernel.marquardt_robust``): F_rho = sum s^2
+rho(r/s), iteratively reweighted inside the same Marquardt loop (H = J^T Omega J, g = J^T
+Omega r, omega = rho'(u) / (2u), a step accepted when F_rho falls; c = 1.345 s for Huber,
+2.385 s for Cauchy). The scale s is the log's nominal sigma (``scale=sigma``), or with
+``scale=mad`` (or no nominal sigma > 0) 1.4826 median |r| at the first start, re-estimated
+twice at the robust solution (each a new pass from there). The covariance is the sandwich
+s^2 A^-1 B A^-1 (A = sum psi'(u) j j^T, B = sum psi(u)^2 j j^T, psi = rho' / 2), stored
+as the information ``jtj`` = A B^-1 A with ``sigma_used`` = s so that every reader's
+jtj^-1 sigma^2 is it; the fit test is
+``status.robust_fit_p`` on the bearings within c. ``cost_rad2`` stays the sum of squared
+residuals; ``cost_robust_rad2`` is F_rho, ``n_downweighted`` the bearings beyond c.
+``loss=squared`` (the default) runs the plain kernel exactly as before.
+
+``starts=K`` > 1 runs K initial distances per track in one kernel call: ``initial_distance_m``
+and K - 1 geometric between ``start_min_m`` and ``start_max_m`` (the default scenario's
+population, 5-50 km); each track keeps the start of lowest F (F_rho when robust; the earliest
+of those within ``f_tol_rad2`` of it), its index in ``start_won``; ``n_f_evals`` then
+counts every start's evaluations, ``n_iter`` and ``stop_reason`` are the winner's.
 """
 
 from dataclasses import dataclass
@@ -16,11 +34,28 @@ import numpy as np
 
 from tma.config import require
 from tma.families.bearings2d.estimators.base import BearingsConfig, BearingsEstimator
-from tma.families.bearings2d.model import BearingTerms
-from tma.linalg import jacobi_scaled_eigh, solve_shifted
+from tma.families.bearings2d.estimators.lm_kernel import (
+    LOSSES,
+    STOP_F_TOL,
+    TUNING,
+    marquardt,
+    marquardt_robust,
+)
+from tma.families.bearings2d.model import BearingTerms, bearing_jacobian, bearing_residuals
+from tma.families.bearings2d.status import (
+    NOISELESS_RMS_DEG,
+    assess,
+    robust_fit_p,
+    runs_test_p,
+)
+from tma.linalg import jacobi_scaled_eigh
 
-# Stop reasons recorded per track.
-STOP_F_TOL, STOP_MAX_ITER, STOP_LAMBDA_MAX = 0, 1, 2
+MAX_INT = np.iinfo(np.int64).max
+SCALES = ("sigma", "mad")
+MAD_TO_SD = 1.4826  # sd of a normal over its median absolute deviation
+MIN_SCALE_RAD = 1e-10  # floor of a MAD scale (a noiseless fit has residuals ~ round-off)
+MAX_STARTS = 64
+MAD_PASSES = 2  # re-estimations of a MAD scale at the solution
 
 
 @dataclass
@@ -39,7 +74,11 @@ class Config(BearingsConfig):
     max_iter: int = 200  # accepted steps
     lambda_max: float = 1e16  # a track whose lambda exceeds this stops (stalled)
     pd_rtol: float = 1e-12  # A is positive definite if its smallest scaled eigenvalue > this
-    block_tracks: int = 64  # tracks per chunk of the fused evaluation (cache-sized)
+    loss: str = "squared"  # squared | huber | cauchy
+    scale: str = "sigma"  # robust scale s: sigma (nominal) | mad (from the residuals)
+    starts: int = 1  # initial distances per track; the lowest F wins
+    start_min_m: float = 5000.0  # range of the extra starts (geometric)
+    start_max_m: float = 50000.0
 
     def __post_init__(self):
         super().__post_init__()
@@ -59,11 +98,27 @@ class Config(BearingsConfig):
         require(self.f_tol_rad2 > 0, w, "f_tol_rad2 must be positive")
         require(self.max_iter > 0, w, "max_iter must be positive")
         require(0 < self.pd_rtol < 1, w, "pd_rtol must lie in (0, 1)")
-        require(self.block_tracks >= 1, w, "block_tracks must be positive")
+        require(self.loss in LOSSES, w,
+                f"loss must be one of {', '.join(LOSSES)}, got {self.loss!r}")
+        require(self.scale in SCALES, w,
+                f"scale must be one of {', '.join(SCALES)}, got {self.scale!r}")
+        require(1 <= self.starts <= MAX_STARTS, w,
+                f"starts must lie in [1, {MAX_STARTS}], got {self.starts}")
+        require(0 < self.start_min_m <= self.start_max_m < 1e9, w,
+                "start_min_m and start_max_m must satisfy 0 < start_min_m <= start_max_m < 1e9"
+                f" m, got {self.start_min_m}, {self.start_max_m}")
 
 
-def initial_theta(cfg: Config, t, own_x, own_y, measured_rad, first):
-    """Prior guess (n_tracks, 4) placed relative to own-ship at t = 0."""
+def start_distances(cfg: Config) -> np.ndarray:
+    """The ``starts`` initial distances (m): ``initial_distance_m``, then ``starts`` - 1
+    geometric from ``start_min_m`` to ``start_max_m`` (one extra start: ``start_min_m``)."""
+    extra = np.geomspace(cfg.start_min_m, cfg.start_max_m, cfg.starts - 1)
+    return np.concatenate([[cfg.initial_distance_m], extra])
+
+
+def initial_theta(cfg: Config, t, own_x, own_y, measured_rad, first, distance_m=None):
+    """Prior guess (n_tracks, 4) placed relative to own-ship at t = 0, at ``distance_m``
+    (default ``initial_distance_m``)."""
     n = measured_rad.shape[0]
     if cfg.initial_bearing_deg is None:
         bearing = measured_rad[np.arange(n), first]
@@ -72,87 +127,184 @@ def initial_theta(cfg: Config, t, own_x, own_y, measured_rad, first):
     course, speed = np.deg2rad(cfg.initial_course_deg), cfg.initial_speed_m_s
     ox0 = np.interp(0.0, t, own_x)
     oy0 = np.interp(0.0, t, own_y)
-    d = cfg.initial_distance_m
+    d = cfg.initial_distance_m if distance_m is None else distance_m
     return np.column_stack([
         ox0 + d * np.sin(bearing), oy0 + d * np.cos(bearing),
         np.full(n, speed * np.sin(course)), np.full(n, speed * np.cos(course)),
     ])
 
 
+def _tiled(array, k):
+    """``array`` repeated ``k`` times along its first axis (a 0-row placeholder as it is)."""
+    return array if k == 1 or array.shape[0] == 0 else np.tile(array, (k, 1))
+
+
+def _best_start(cost, k, tol):
+    """Index (n,) of the start of lowest cost per track (NaN counts as +inf), from ``cost``
+    of the ``k`` starts stacked start-major (k * n,): the earliest start within ``tol`` of
+    the lowest (starts reaching one minimum differ by about the F tolerance)."""
+    cost = np.where(np.isnan(cost), np.inf, cost).reshape(k, -1)
+    return np.argmax(cost <= cost.min(axis=0) + tol, axis=0)
+
+
+def _pick(values, won, k):
+    """Rows of ``values`` (k * n, ...) stacked start-major: the winning start's per track."""
+    n = won.size
+    return values.reshape(k, n, *values.shape[1:])[won, np.arange(n)]
+
+
+def mad_scale(residuals, valid):
+    """1.4826 median |r| over each track's bearings (rad), floored at ``MIN_SCALE_RAD``."""
+    a = np.abs(residuals) if valid is None else np.where(valid, np.abs(residuals), np.nan)
+    return np.maximum(MAD_TO_SD * np.nanmedian(a, axis=1), MIN_SCALE_RAD)
+
+
+def sandwich_information(residuals, jac, scale, loss):
+    """A B^-1 A per track (n, 4, 4): the inverse of the sandwich covariance A^-1 B A^-1 s^2
+    over s^2, with A = sum psi'(u) j j^T, B = sum psi(u)^2 j j^T, u = r / s, psi = rho' / 2
+    (Gauss-Newton A: the curvature of the bearings themselves is left out). NaN where B is
+    numerically singular."""
+    c = TUNING[loss]
+    u = residuals / scale[:, None]
+    if loss == "huber":
+        inside = np.abs(u) <= c
+        psi, dpsi = np.where(inside, u, c * np.sign(u)), inside.astype(float)
+    else:  # cauchy
+        q = 1.0 + (u / c) ** 2
+        psi, dpsi = u / q, (2.0 - q) / (q * q)
+    A = np.einsum("nk,nki,nkj->nij", dpsi, jac, jac)
+    B = np.einsum("nk,nki,nkj->nij", psi * psi, jac, jac)
+    finite = np.isfinite(B).all(axis=(1, 2))
+    w, V, d = jacobi_scaled_eigh(np.where(finite[:, None, None], B, np.eye(4)))
+    singular = ~finite | (w[:, 0] <= 1e-14 * np.abs(w[:, -1]))
+    inv_w = 1.0 / np.where(singular[:, None], 1.0, w)
+    B_inv = np.einsum("nij,nj,nkj->nik", V, inv_w, V) / (d[:, :, None] * d[:, None, :])
+    info = A @ B_inv @ A
+    info = 0.5 * (info + np.swapaxes(info, 1, 2))
+    return np.where(singular[:, None, None], np.nan, info)
+
+
 class LevenbergMarquardt(BearingsEstimator):
     name = "lm"
     Config = Config
+    # present when starts > 1 / when the loss is robust (the default run adds none)
+    outputs = ("start_won", "cost_robust_rad2", "n_downweighted")
+
+    def estimate(self, log) -> dict:
+        """As every bearings estimator; a robust fit then replaces the status and one-sigma
+        columns by those of its sandwich covariance and robust fit test."""
+        self._nominal_sigma_deg = log.sigma_deg
+        columns = super().estimate(log)
+        if self.config.loss == "squared":
+            return columns
+        sigma2, fit_p = columns.pop("_sigma2_rad2"), columns.pop("_fit_p")
+        theta = np.column_stack([columns[c] for c in ("x0_m", "y0_m", "vx_m_s", "vy_m_s")])
+        jtj = np.empty((theta.shape[0], 4, 4))
+        for i in range(4):
+            for j in range(i, 4):
+                jtj[:, i, j] = jtj[:, j, i] = columns[f"jtj_{i}{j}"]
+        columns.update(assess(theta, columns["cost_rad2"], jtj, columns["n_bearings"],
+                              columns["converged"], columns["t_last_s"],
+                              columns["own_x_last_m"], columns["own_y_last_m"], log.sigma_deg,
+                              None, self.config, sigma2=sigma2, fit_p=fit_p))
+        return columns
 
     def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
         cfg = self.config
-        n = measured_rad.shape[0]
         terms = BearingTerms(t, own_x, own_y, measured_rad, valid)
-        out = {
-            "theta": initial_theta(cfg, t, own_x, own_y, measured_rad, first),
-            "n_f_evals": np.zeros(n, dtype=np.int64),
-            "n_iter": np.zeros(n, dtype=np.int64),
-            "stop_reason": np.full(n, -1, dtype=np.int64),
-            "cost_rad2": np.zeros(n),
-            "jtj": np.zeros((n, 4, 4)),
-        }
-        self._iterate(terms, np.arange(n), out)
+        starts = np.concatenate([initial_theta(cfg, t, own_x, own_y, measured_rad, first, d)
+                                 for d in start_distances(cfg)])
+        sigma = getattr(self, "_nominal_sigma_deg", None)
+        if cfg.loss != "squared" and cfg.scale == "sigma" and sigma is not None and sigma > 0:
+            scale = np.full(measured_rad.shape[0], np.deg2rad(sigma))
+            out = self._robust(terms, starts, scale)
+        elif cfg.loss == "squared":
+            out = self._squared(terms, starts)
+        else:  # scale from the residuals at the first start, then twice at the solution
+            n = measured_rad.shape[0]
+            r = bearing_residuals(starts[:n], t, own_x, own_y, measured_rad, valid)
+            out = self._robust(terms, starts, mad_scale(r, valid))
+            for _ in range(MAD_PASSES):
+                r = bearing_residuals(out["theta"], t, own_x, own_y, measured_rad, valid)
+                scale = mad_scale(r, valid)
+                again = self._robust(terms, out["theta"], scale)
+                again["n_f_evals"] += out["n_f_evals"]
+                if "start_won" in out:
+                    again["start_won"] = out["start_won"]
+                out = again
         out["converged"] = out["stop_reason"] == STOP_F_TOL
+        if cfg.loss != "squared":
+            self._robust_columns(out, t, own_x, own_y, measured_rad, valid, scale, sigma)
         return out
 
-    def _evaluate(self, terms, theta, rows):
-        """F, H, g at ``theta`` for tracks ``rows``, in cache-sized chunks of tracks (the
-        per-pass bookkeeping stays vectorised over every active track of the shard)."""
-        size = self.config.block_tracks
-        if rows.size <= size:
-            return terms(theta, rows)
-        parts = [terms(theta[i:i + size], rows[i:i + size]) for i in range(0, rows.size, size)]
-        return tuple(np.concatenate(p) for p in zip(*parts, strict=True))
-
-    def _iterate(self, terms, rows, out):
-        """Marquardt iterations for the tracks ``rows``; results written into ``out``."""
+    def _squared(self, terms, theta):
+        """Today's Marquardt kernel on every start (theta stacked start-major)."""
         cfg = self.config
-        theta = out["theta"][rows]
-        cost, H, g = self._evaluate(terms, theta, rows)
-        n = rows.size
-        n_f_evals = np.ones(n, dtype=np.int64)
-        n_iter = np.zeros(n, dtype=np.int64)
-        lam = np.full(n, cfg.lambda0)
-        stop = np.full(n, -1, dtype=np.int64)
-        w, V, d = jacobi_scaled_eigh(H)
-        active = np.arange(n)
+        k, m = cfg.starts, theta.shape[0]
+        out = {
+            "theta": theta,
+            "n_f_evals": np.zeros(m, dtype=np.int64),
+            "n_iter": np.zeros(m, dtype=np.int64),
+            "stop_reason": np.full(m, -1, dtype=np.int64),
+            "cost_rad2": np.zeros(m),
+            "jtj": np.zeros((m, 4, 4)),
+        }
+        marquardt(out["theta"], terms.t, terms.ox, terms.oy, _tiled(terms.measured, k),
+                  _tiled(terms.weight, k), terms.weighted, float(cfg.lambda0),
+                  float(cfg.lambda_up), float(cfg.lambda_down), float(cfg.f_tol_rad2),
+                  min(int(cfg.max_iter), MAX_INT), float(cfg.lambda_max), float(cfg.pd_rtol),
+                  out["n_f_evals"], out["n_iter"], out["stop_reason"], out["cost_rad2"],
+                  out["jtj"])
+        return self._winners(out, k, "cost_rad2")
 
-        while active.size:
-            # Step 4: raise lambda until A = H + lambda diag(H) is positive definite (the scaled
-            # A has eigenvalues w + lambda, so no refactorisation is needed).
-            wa = w[active]
-            floor = cfg.pd_rtol * np.maximum(wa[:, -1], 1.0)
-            not_pd = wa[:, 0] + lam[active] <= floor
-            while np.any(not_pd):
-                lam[active[not_pd]] *= cfg.lambda_up
-                not_pd &= wa[:, 0] + lam[active] <= floor
+    def _robust(self, terms, theta, scale):
+        """The robust kernel on every start (stacked start-major; ``scale`` per track)."""
+        cfg = self.config
+        k, m = theta.shape[0] // scale.size, theta.shape[0]
+        out = {
+            "theta": np.array(theta),
+            "n_f_evals": np.zeros(m, dtype=np.int64),
+            "n_iter": np.zeros(m, dtype=np.int64),
+            "stop_reason": np.full(m, -1, dtype=np.int64),
+            "cost_robust_rad2": np.zeros(m),
+        }
+        marquardt_robust(out["theta"], terms.t, terms.ox, terms.oy, _tiled(terms.measured, k),
+                         _tiled(terms.weight, k), terms.weighted, LOSSES[cfg.loss],
+                         TUNING[cfg.loss], np.tile(scale, k), float(cfg.lambda0),
+                         float(cfg.lambda_up), float(cfg.lambda_down), float(cfg.f_tol_rad2),
+                         min(int(cfg.max_iter), MAX_INT), float(cfg.lambda_max),
+                         float(cfg.pd_rtol), out["n_f_evals"], out["n_iter"],
+                         out["stop_reason"], out["cost_robust_rad2"])
+        return self._winners(out, k, "cost_robust_rad2")
 
-            trial = theta[active] + solve_shifted(wa, V[active], d[active], g[active], lam[active])
-            trial_cost, trial_H, trial_g = self._evaluate(terms, trial, rows[active])
-            n_f_evals[active] += 1
-            decrease = cost[active] - trial_cost
-            accepted = decrease >= 0  # NaN (a non-finite trial) counts as rejected
+    def _winners(self, out, k, cost):
+        """Each track's start of lowest ``cost``; ``start_won`` when there are several."""
+        if k == 1:
+            return out
+        won = _best_start(out[cost], k, self.config.f_tol_rad2)
+        total = out["n_f_evals"].reshape(k, -1).sum(axis=0)
+        out = {key: _pick(value, won, k) for key, value in out.items()}
+        out["n_f_evals"] = total
+        out["start_won"] = won.astype(np.int64)
+        return out
 
-            acc, rej = active[accepted], active[~accepted]
-            theta[acc], cost[acc] = trial[accepted], trial_cost[accepted]
-            H[acc], g[acc] = trial_H[accepted], trial_g[accepted]
-            w[acc], V[acc], d[acc] = jacobi_scaled_eigh(H[acc])
-            lam[acc] *= cfg.lambda_down
-            n_iter[acc] += 1
-            lam[rej] *= cfg.lambda_up
-
-            stop[acc[decrease[accepted] < cfg.f_tol_rad2]] = STOP_F_TOL
-            stop[active[(stop[active] < 0) & (n_iter[active] >= cfg.max_iter)]] = STOP_MAX_ITER
-            stop[active[(stop[active] < 0) & (lam[active] > cfg.lambda_max)]] = STOP_LAMBDA_MAX
-            active = active[stop[active] < 0]
-
-        out["theta"][rows] = theta
-        out["n_f_evals"][rows] = n_f_evals
-        out["n_iter"][rows] = n_iter
-        out["stop_reason"][rows] = stop
-        out["cost_rad2"][rows] = cost
-        out["jtj"][rows] = H
+    def _robust_columns(self, out, t, own_x, own_y, measured_rad, valid, scale, sigma):
+        """At the robust solution: the plain F, the sandwich information as ``jtj``, the
+        bearings beyond c, and (private, for ``estimate``) sigma^2 = s^2 and the fit test."""
+        loss = self.config.loss
+        theta = out["theta"]
+        r = bearing_residuals(theta, t, own_x, own_y, measured_rad, valid)
+        jac = bearing_jacobian(theta, t, own_x, own_y, valid)
+        out["cost_rad2"] = np.einsum("nk,nk->n", r, r)
+        out["jtj"] = sandwich_information(r, jac, scale, loss)
+        beyond = np.abs(r) > TUNING[loss] * scale[:, None]
+        out["n_downweighted"] = (beyond if valid is None else beyond & valid).sum(axis=1)
+        if sigma is None:
+            fit_p = runs_test_p(r, valid)
+        elif sigma > 0:
+            fit_p = robust_fit_p(r, valid, np.deg2rad(sigma), TUNING[loss])
+        else:  # declared noiseless: as the squared fit's test
+            n = r.shape[1] if valid is None else valid.sum(axis=1)
+            rms_deg = np.rad2deg(np.sqrt(out["cost_rad2"] / np.maximum(n, 1)))
+            fit_p = np.where(rms_deg > NOISELESS_RMS_DEG, 0.0, 1.0)
+        out["_sigma2_rad2"], out["_fit_p"] = scale**2, fit_p

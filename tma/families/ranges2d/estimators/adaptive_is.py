@@ -7,7 +7,6 @@ with ``check_samples`` draws from the prior and, above ``max_mass_outside``, the
 status ``box_too_small`` and no estimate (a logged warning names the share).
 """
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -23,7 +22,7 @@ from tma.families.ranges2d.estimators.prior_is import budget
 from tma.families.ranges2d.estimators.ratio import SamplingBudget
 
 MAX_CHECK = 10_000_000  # prior draws held in memory at once by the mass check
-MAX_BISECTIONS = 10_000_000  # cells are built as Python lists (~200 B each)
+MAX_BISECTIONS = 10_000_000  # cells, tree and heap take ~200 B per bisection
 
 
 @dataclass
@@ -71,23 +70,6 @@ def mass_outside(model, box, n, rng) -> float:
     return float(w[out].sum() / w.sum())
 
 
-def scalar_log_kernel(model):
-    """log f2 for one point with Python floats (the bisection evaluates one point at a time)."""
-    (mx, my), (sx, sy) = model.prior_mean_m.tolist(), model.prior_sd_m.tolist()
-    terms = [(lx, ly, float(n * 0.5 / model.sigma_m**2), r) for (lx, ly), n, r in
-             zip(model.landmarks_m.tolist(), model.counts.tolist(),
-                 model.mean_range_m.tolist(), strict=True) if n]
-
-    def log_f(x, y):
-        out = -0.5 * (((x - mx) / sx) ** 2 + ((y - my) / sy) ** 2)
-        for lx, ly, c, r in terms:
-            d = math.hypot(x - lx, y - ly) - r
-            out -= c * d * d
-        return out
-
-    return log_f
-
-
 class AdaptiveIS(RangesEstimator):
     side_tables = ("samples",)  # its first draws of one track, for the plot
     name = "adaptive_is"
@@ -104,8 +86,7 @@ class AdaptiveIS(RangesEstimator):
                 f"{cfg.box_m} m (limit {cfg.max_mass_outside:g}): enlarge estimator.box_m")
             out["mass_outside"] = outside
             return out
-        density = BisectionDensity.build(scalar_log_kernel(model), box, cfg.n_bisections,
-                                         cfg.shift, rng, cfg.split)
+        density = BisectionDensity.build(model, box, cfg.n_bisections, cfg.shift, rng, cfg.split)
 
         def draw(k, rng):
             points, cell = density.sample(k, rng)

@@ -1,0 +1,65 @@
+"""The geographic reference of a bearing log: local metres to WGS84, and Foxglove fixes.
+
+A log's local plane is the east-north tangent plane at its origin ``(lat, lon)`` (degrees,
+WGS84, height 0): x east, y north in metres, as pymap3d's ``geodetic2enu`` gives them for a
+point at sea level (height 0) with the up component dropped. ``local_to_geodetic`` is the
+exact inverse: the sea-level point whose east and north are (x, y). Positions on the map are
+``foxglove.LocationFix`` messages (Foxglove's own protobuf schema, so its Map panel shows
+them).
+"""
+
+import numpy as np
+import pymap3d
+from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix
+
+SEA_LEVEL_TOL_M = 1e-6  # height above the sea at which a point counts as on it
+MAX_ITERATIONS = 20  # each shrinks the height by ~(distance / earth radius)^2: 8 at 2000 km
+MAX_MAPPED_M = 2e6  # farther from the origin the tangent plane is no map: NaN
+
+
+def local_to_geodetic(x_m, y_m, origin_deg) -> tuple[np.ndarray, np.ndarray]:
+    """Latitude and longitude (deg, WGS84) of the sea-level points at east ``x_m`` and north
+    ``y_m`` (m) of ``origin_deg`` = (lat, lon) on its tangent plane; vectorised.
+
+    The tangent-plane point itself (up = 0) lies d^2 / 2R above the sea (18 m at 15 km), so
+    the up component is solved for: u <- u - h(x, y, u) until the height h is 0 (within a
+    micrometre; 2 or 3 iterations at the ranges bearings reach). NaN for points not finite or
+    farther than ``MAX_MAPPED_M`` (2000 km) from the origin."""
+    lat0, lon0 = origin_deg
+    x, y = np.broadcast_arrays(np.asarray(x_m, float), np.asarray(y_m, float))
+    lat, lon = np.full(x.shape, np.nan), np.full(x.shape, np.nan)
+    mapped = np.hypot(x, y) <= MAX_MAPPED_M  # False for NaN and inf too
+    x, y = x[mapped], y[mapped]
+    up = np.zeros_like(x)
+    for _ in range(MAX_ITERATIONS):
+        _, _, h = pymap3d.enu2geodetic(x, y, up, lat0, lon0, 0.0)
+        up = up - h
+        if np.all(np.abs(h) < SEA_LEVEL_TOL_M):
+            break
+    lat[mapped], lon[mapped], _ = pymap3d.enu2geodetic(x, y, up, lat0, lon0, 0.0)
+    return lat, lon
+
+
+UNKNOWN, KNOWN = (LocationFix.PositionCovarianceType.Value(k) for k in ("UNKNOWN", "KNOWN"))
+NO_COVARIANCE = [0.0] * 9
+
+
+def enu_covariance(covariance_en_m2) -> np.ndarray:
+    """(..., 9): 2x2 east-north position covariances (m^2) as LocationFix's row-major 3x3
+    ENU ones, up 0 (the model puts the target on the sea surface)."""
+    c = np.asarray(covariance_en_m2, float)
+    out = np.zeros((*c.shape[:-2], 3, 3))
+    out[..., :2, :2] = c
+    return out.reshape(*c.shape[:-2], 9)
+
+
+def location_fix(time_ns: int, frame_id: str, lat_deg: float, lon_deg: float,
+                 covariance_enu=None) -> LocationFix:
+    """A ``foxglove.LocationFix`` at sea level (altitude 0). ``covariance_enu``: 9 values
+    (``enu_covariance``), type KNOWN; None: unknown (type UNKNOWN, zeros)."""
+    fix = LocationFix(frame_id=frame_id, latitude=lat_deg, longitude=lon_deg, altitude=0.0,
+                      position_covariance=NO_COVARIANCE if covariance_enu is None
+                      else covariance_enu,
+                      position_covariance_type=UNKNOWN if covariance_enu is None else KNOWN)
+    fix.timestamp.seconds, fix.timestamp.nanos = divmod(int(time_ns), 10**9)
+    return fix

@@ -1,0 +1,254 @@
+"""Map outputs of a dataset without truth (an ingested log): per contact a PNG, and the
+estimated target tracks as an MCAP that Foxglove's Map panel shows.
+
+Both come from each track's estimate theta = (x0, y0, vx, vy) (position at the dataset's
+t = 0 and velocity; x east, y north, m) and its covariance (J^T J)^-1 sigma^2, with J^T J and
+sigma as the estimator stored them (``jtj_ij``, ``sigma_used_deg``). The position at time t
+is p(t) = p0 + v t, its covariance A(t) Sigma A(t)^T with A(t) = [I, t I]; the 95 % ellipse
+is {p : (p - p(t))^T C^-1 (p - p(t)) <= chi-square(2) 95 % point}.
+
+- ``tables/<name>-<label>.png``: own-ship path, every k-th bearing line from own-ship, the
+  estimated track over the contact's bearings and the 95 % ellipse at its last bearing, in
+  km east/north, the status in the title;
+- ``tables/<name>.mcap`` (only with a geographic origin): per track ``foxglove.LocationFix``
+  on ``/tma/estimate/<label>`` at each of its bearing epochs (estimated position, position
+  covariance in ENU m^2, type KNOWN), own-ship on ``/ownship/location_fix``; log times UTC
+  when the dataset has an epoch.
+"""
+
+import logging
+import re
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+from tma.errors import InputError  # noqa: E402
+from tma.families.bearings2d.geo import (  # noqa: E402
+    MAX_MAPPED_M,
+    LocationFix,
+    enu_covariance,
+    local_to_geodetic,
+    location_fix,
+)
+from tma.families.bearings2d.log import (  # noqa: E402
+    GEO,
+    OWNSHIP_FIX_TOPIC,
+    OWNSHIP_FRAME,
+    BearingsLog,
+    read_bearings_log,
+)
+from tma.io.mcap_log import Channel, LogWriter, json_record  # noqa: E402
+from tma.linalg import jacobi_scaled_eigh  # noqa: E402
+from tma.tables import save_figure  # noqa: E402
+
+log = logging.getLogger(__name__)
+
+CHI2_2_P95 = 5.991464547107979  # chi-square(2) 95 % point: the 95 % position ellipse
+MAX_PLOTS = 100  # PNGs per table: a log of thousands of contacts gets the first 100
+BEARING_LINES = 40  # at most about this many bearing lines per plot (every k-th bearing)
+ESTIMATE_TOPIC = "/tma/estimate/{label}"
+
+
+# -- covariance ------------------------------------------------------------------------------
+
+def theta_covariance(estimates: pd.DataFrame) -> np.ndarray:
+    """(n, 4, 4) covariance of theta = (x0, y0, vx, vy), (J^T J)^-1 sigma_used^2, from the
+    run's ``jtj_ij`` (upper triangle) and ``sigma_used_deg``; inverted in the diagonally
+    scaled form, as the estimators do. NaN where the estimator found J^T J singular (its
+    one-sigma columns are blank there)."""
+    n = len(estimates)
+    jtj = np.empty((n, 4, 4))
+    for i in range(4):
+        for j in range(i, 4):
+            jtj[:, i, j] = jtj[:, j, i] = estimates[f"jtj_{i}{j}"].to_numpy(float)
+    usable = (np.isfinite(estimates["range_sd_m"].to_numpy(float))
+              & np.isfinite(jtj).all(axis=(1, 2)))
+    w, V, d = jacobi_scaled_eigh(np.where(usable[:, None, None], jtj, np.eye(4)))
+    cov = np.einsum("nij,nj,nkj->nik", V, 1.0 / w, V) / (d[:, :, None] * d[:, None, :])
+    cov *= np.deg2rad(estimates["sigma_used_deg"].to_numpy(float))[:, None, None] ** 2
+    cov[~usable] = np.nan
+    return cov
+
+
+def position_covariance(theta_cov: np.ndarray, t_s) -> np.ndarray:
+    """Covariance (m^2, east-north) of p(t) = p0 + v t: ``(n, 2, 2)`` for one time per track
+    (``t_s`` shaped (n,)), ``(n, k, 2, 2)`` for ``t_s`` shaped (n, k)."""
+    t = np.asarray(t_s, float)[..., None, None]
+    c = theta_cov[:, None] if np.ndim(t_s) == 2 else theta_cov
+    pp, pv, vv = c[..., :2, :2], c[..., :2, 2:], c[..., 2:, 2:]
+    return pp + t * (pv + np.swapaxes(pv, -1, -2)) + t * t * vv
+
+
+def ellipse_points(center, cov, n=90) -> np.ndarray:
+    """(n, 2) points of the 95 % ellipse of a 2x2 covariance around ``center``."""
+    w, V = np.linalg.eigh(cov)
+    s = np.linspace(0.0, 2 * np.pi, n)
+    unit = np.stack([np.cos(s), np.sin(s)])
+    return np.asarray(center) + (V @ (np.sqrt(np.maximum(w, 0) * CHI2_2_P95)[:, None] * unit)).T
+
+
+# -- the dataset's logs ----------------------------------------------------------------------
+
+def read_logs(dataset) -> list[BearingsLog]:
+    """The bearing logs of every shard of ``dataset`` (each verified against the manifest)."""
+    return [read_bearings_log(dataset.verified_path(rel)) for rel in dataset.shard_paths]
+
+
+def reference(logs: list[BearingsLog], where: str):
+    """``(epoch_utc_ns, origin_deg, labels)`` shared by the shards (labels: track id ->
+    text, the id itself when unlabelled); InputError if the shards disagree."""
+    epochs = {lg.epoch_utc_ns for lg in logs}
+    origins = {None if lg.origin_deg is None else tuple(map(float, lg.origin_deg))
+               for lg in logs}
+    if len(epochs) > 1 or len(origins) > 1:
+        raise InputError(f"{where}: the shards disagree on their UTC epoch or geographic "
+                         "origin; ingest the log again")
+    labels = {}
+    for lg in logs:
+        names = lg.track_label if lg.track_label is not None else lg.track_id.astype(str)
+        labels.update(zip(lg.track_id.tolist(), map(str, names), strict=True))
+    return next(iter(epochs), None), next(iter(origins), None), labels
+
+
+def safe_label(label: str) -> str:
+    """``label`` as a file name part: characters other than letters, digits, ``._-``
+    become ``_``."""
+    return re.sub(r"[^A-Za-z0-9._-]", "_", label).lstrip(".") or "_"
+
+
+# -- per contact PNG -------------------------------------------------------------------------
+
+def _track_plot(path: Path, title: str, lg: BearingsLog, row: int, theta, cov_now):
+    """One contact: own-ship, bearing lines, estimated track, 95 % ellipse (km)."""
+    valid = np.flatnonzero(np.isfinite(lg.bearing_deg[row]))
+    t = lg.t_s[valid]
+    own = np.column_stack([lg.own_x_m, lg.own_y_m])
+    track = theta[:2] + np.outer(t, theta[2:])  # estimated positions over the contact's span
+    finite = np.isfinite(track).all()
+    reach = (np.hypot(*(track - own[valid]).T).max() * 1.3 if finite
+             else 20_000.0)  # no estimate: lines of a nominal 20 km
+    step = max(1, int(np.ceil(valid.size / BEARING_LINES)))
+    b = np.deg2rad(lg.bearing_deg[row, valid[::step]])
+    start = own[valid[::step]]
+    end = start + reach * np.column_stack([np.sin(b), np.cos(b)])
+    lines = np.stack([start, end, np.full_like(start, np.nan)], axis=1).reshape(-1, 2) / 1e3
+
+    fig, ax = plt.subplots(figsize=(7, 7))
+    shown = [own]
+    ax.plot(lines[:, 0], lines[:, 1], color="0.6", lw=0.5,  # one line, NaN between segments
+            label="bearings" + (f" (every {step}th)" if step > 1 else ""))
+    ax.plot(own[:, 0] / 1e3, own[:, 1] / 1e3, color="tab:blue", label="own-ship")
+    ax.plot(*own[valid[-1]] / 1e3, "o", color="tab:blue", ms=4)
+    if finite:
+        shown.append(track)
+        ax.plot(track[:, 0] / 1e3, track[:, 1] / 1e3, color="tab:red", label="estimated track")
+        ax.plot(*track[-1] / 1e3, "o", color="tab:red", ms=4)
+        if np.isfinite(cov_now).all():
+            ring = ellipse_points(track[-1], cov_now)
+            shown.append(ring)
+            ax.plot(ring[:, 0] / 1e3, ring[:, 1] / 1e3, color="tab:red", lw=1, ls="--",
+                    label="95 % position (last bearing)")
+    else:
+        shown.append(end)
+    box = np.concatenate(shown) / 1e3  # a square view of everything but the bearing lines
+    lo, hi = box.min(axis=0), box.max(axis=0)
+    mid, half = (lo + hi) / 2, 0.54 * (hi - lo).max() + 0.1
+    ax.set_xlim(mid[0] - half, mid[0] + half)
+    ax.set_ylim(mid[1] - half, mid[1] + half)
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("east (km)")
+    ax.set_ylabel("north (km)")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    save_figure(fig, path)
+    plt.close(fig)
+
+
+def write_track_plots(report: pd.DataFrame, estimates: pd.DataFrame, logs, tables_dir,
+                      name: str) -> list[Path]:
+    """``<name>-<label>.png`` per contact (the first ``MAX_PLOTS``); returns their paths."""
+    theta = estimates[["x0_m", "y0_m", "vx_m_s", "vy_m_s"]].to_numpy(float)
+    cov_now = position_covariance(theta_covariance(estimates),
+                                  estimates["t_last_s"].to_numpy(float))
+    where = {int(i): (lg, row) for lg in logs for row, i in enumerate(lg.track_id)}
+    if len(report) > MAX_PLOTS:
+        log.info("%s: plotting the first %d of %d contacts (MAX_PLOTS); the table and the map "
+                 "MCAP hold them all", name, MAX_PLOTS, len(report))
+    paths, used = [], set()
+    for n, r in enumerate(report.head(MAX_PLOTS).itertuples(index=False)):
+        lg, row = where[int(r.track_id)]
+        part = safe_label(r.label)
+        if part in used:  # two labels alike once sanitised: the id tells them apart
+            part = f"{part}-{r.track_id}"
+        used.add(part)
+        path = Path(tables_dir) / f"{name}-{part}.png"
+        _track_plot(path, f"{name}: contact {r.label}, status {r.status}\nrange "
+                    f"{r.range_now_m / 1e3:.2f} km, course {r.course_deg:.1f} deg, speed "
+                    f"{r.speed_m_s:.2f} m/s at t = {r.t_now_s:g} s", lg, row, theta[n],
+                    cov_now[n])
+        paths.append(path)
+    return paths
+
+
+# -- the estimated tracks as an MCAP ---------------------------------------------------------
+
+def write_map_mcap(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, epoch_utc_ns,
+                   origin_deg, run: dict) -> Path:
+    """Write the estimated tracks and own-ship as ``foxglove.LocationFix`` (see the module
+    docstring), in time order; returns ``path``. Tracks without a finite estimate within
+    ``MAX_MAPPED_M`` of the origin are left out (logged)."""
+    theta = estimates[["x0_m", "y0_m", "vx_m_s", "vy_m_s"]].to_numpy(float)
+    theta_cov = theta_covariance(estimates)
+    where = {int(i): (k, row) for k, lg in enumerate(logs) for row, i in enumerate(lg.track_id)}
+    own_topics = ([OWNSHIP_FIX_TOPIC] if len(logs) == 1
+                  else [f"/ownship/{k}/location_fix" for k in range(len(logs))])
+    channels = [Channel.protobuf(topic, LocationFix, {"frame": "own-ship, sea level"})
+                for topic in own_topics]
+    parts = []  # per topic: (t_s, lat, lon, covariance or None, frame_id)
+    for lg in logs:
+        lat, lon = local_to_geodetic(lg.own_x_m, lg.own_y_m, origin_deg)
+        parts.append((lg.t_s, lat.tolist(), lon.tolist(), None, OWNSHIP_FRAME))
+    skipped, used = [], set()
+    for n, r in enumerate(report.itertuples(index=False)):
+        k, row = where[int(r.track_id)]
+        t = logs[k].t_s[np.isfinite(logs[k].bearing_deg[row])]
+        x, y = (theta[n, :2, None] + theta[n, 2:, None] * t)
+        lat, lon = local_to_geodetic(x, y, origin_deg)
+        if not np.isfinite(lat).all():  # no finite estimate, or one farther than a map
+            skipped.append(r.label)
+            continue
+        topic = ESTIMATE_TOPIC.format(label=r.label)
+        if topic in used:  # labels of different shards alike: the id tells them apart
+            topic = f"{topic}-{r.track_id}"
+        used.add(topic)
+        cov = position_covariance(theta_cov[n:n + 1], t[None, :])[0]
+        cov = enu_covariance(cov).tolist() if np.isfinite(cov).all() else None
+        channels.append(Channel.protobuf(topic, LocationFix, {
+            "track_id": str(r.track_id), "status": r.status,
+            "estimate": "constant-velocity fit of all bearings; covariance (J^T J)^-1 sigma^2"}))
+        parts.append((t, lat.tolist(), lon.tolist(), cov, f"contact {r.label}"))
+    if skipped:
+        log.warning("%s: no finite estimate within %g km of the origin for %s: not in the map",
+                    path, MAX_MAPPED_M / 1e3, ", ".join(skipped))
+    t_all = np.concatenate([p[0] for p in parts])
+    which = np.repeat(np.arange(len(parts)), [p[0].size for p in parts])
+    index = np.concatenate([np.arange(p[0].size) for p in parts])
+    order = np.lexsort((which, t_all))  # time order; own-ship first at equal times
+    metadata = {GEO: json_record({"origin_lat_deg": origin_deg[0],
+                                  "origin_lon_deg": origin_deg[1], "epoch_utc_ns": epoch_utc_ns}),
+                "tma.run": json_record(run)}
+    topics = [ch.topic for ch in channels]
+    with LogWriter(path, channels, metadata, epoch_utc_ns=epoch_utc_ns) as w:
+        for m, i, t in zip(which[order].tolist(), index[order].tolist(), t_all[order].tolist(),
+                           strict=True):
+            _, lat, lon, cov, frame = parts[m]
+            w.write(topics[m], t, location_fix(w.time_ns(t), frame, lat[i], lon[i],
+                                               None if cov is None else cov[i]))
+    return Path(path)

@@ -1,0 +1,535 @@
+"""CSV / TSV tables of bearings and/or own-ship fixes -> ``Recording``s.
+
+One row per bearing (or per fix in a navigation file); a header row names the columns. What is
+read, and how each choice is made (every automatic choice is noted for the log):
+
+- columns: ``columns.<role>`` names one; otherwise our documented names (``time_s, own_x_m,
+  own_y_m, bearing_deg, track_id``) or a common name (``timestamp_utc``, ``latitude_deg``,
+  ``lon``...), matched without regard to case;
+- times (``time.format``): relative seconds, Unix time (s, ms, us, ns; told apart by
+  magnitude, or by a ``_ms``/``_us``/``_ns`` name) or ISO-8601 text with a zone;
+- bearings in degrees clockwise from north, or radians when ``bearing.units=rad``, the column
+  is named ``*_rad`` or the units row says ``rad``;
+- own-ship as ``x``/``y`` (metres east/north of any origin) or ``lat``/``lon`` (deg, WGS84);
+- ``csv.delimiter`` (sniffed among ``,`` ``;`` tab), ``csv.decimal`` (``,`` found when the
+  numbers are written ``12,5``); a units row under the header (``s,deg,deg`` or ``[s]``) is
+  skipped; extra columns are ignored; CRLF line ends and a UTF-8 byte-order mark are fine;
+- tracks: integer ids, or text ids (``T1``) kept as labels.
+
+Everything is vectorised over the rows (pandas' C parser, numpy sorts): a million rows take
+about a second. Bad values are one ``InputError`` naming the file, the column and the line.
+"""
+
+import csv
+import io
+import re
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from tma.errors import InputError
+from tma.families.bearings2d.sources.base import Bearings, Navigation, Recording, SourceOptions
+
+DOCUMENTED = {"time": "time_s", "x": "own_x_m", "y": "own_y_m", "bearing": "bearing_deg",
+              "track": "track_id"}
+COMMON = {  # candidates per role, in order of preference (lower case)
+    "time": ("time_s", "timestamp_utc", "timestamp", "time_utc", "utc", "datetime",
+             "date_time", "time", "t_s", "t", "unix_time", "unix_time_s", "epoch_s",
+             "time_ms", "timestamp_ms", "unix_ms", "time_us", "timestamp_us", "unix_us",
+             "time_ns", "timestamp_ns", "unix_ns"),
+    "x": ("own_x_m", "x_m", "own_east_m", "east_m", "easting_m", "x", "east"),
+    "y": ("own_y_m", "y_m", "own_north_m", "north_m", "northing_m", "y", "north"),
+    "lat": ("lat", "latitude", "latitude_deg", "lat_deg", "own_lat", "own_lat_deg",
+            "own_latitude", "own_latitude_deg"),
+    "lon": ("lon", "lng", "long", "longitude", "longitude_deg", "lon_deg", "own_lon",
+            "own_lon_deg", "own_longitude", "own_longitude_deg"),
+    "bearing": ("bearing_deg", "bearing_rad", "bearing", "brg", "brg_deg", "brg_rad",
+                "true_bearing_deg", "azimuth_deg", "azimuth_rad", "azimuth"),
+    "track": ("track_id", "track", "track_label", "contact_id", "contact", "target_id",
+              "target", "id"),
+}
+SNIFFED = (",", ";", "\t")
+SAMPLE_BYTES = 1 << 16
+SAMPLE_LINES = 50
+MAX_SPAN_S = 9.2e9  # MCAP log times are nanoseconds in 64 bits: about 292 years
+MAX_TRACK_ID = 2**53  # integers beyond this are not exact in a numeric CSV column
+UNIX_FROM_S = 1e8  # seconds: 1973; smaller numbers are relative times
+MAGNITUDE = ((1e17, "unix_ns"), (1e14, "unix_us"), (1e11, "unix_ms"), (UNIX_FROM_S, "unix_s"))
+SCALE_NS = {"unix_s": 10**9, "unix_ms": 10**6, "unix_us": 10**3, "unix_ns": 1}
+SAME_FIX = {"x": 1e-6, "lat": 1e-9}  # m, deg (0.1 mm): rows at one time share one own-ship
+UNIT_WORDS = {"s", "sec", "secs", "second", "seconds", "ms", "us", "ns", "utc", "iso",
+              "iso8601", "iso-8601", "deg", "degree", "degrees", "rad", "radian", "radians",
+              "m", "km", "nmi", "-", "id", "1", "m/s", "kn", "knots", "unix", "text", "none"}
+ZONED = r"\d\d:\d\d(?::\d\d(?:[.,]\d+)?)?\s*(?:[Zz]|[+-]\d\d(?::?\d\d)?)\s*$"
+
+
+def read_csv_table(path, options: SourceOptions, *, navigation: bool,
+                   bearings: bool) -> list[Recording]:
+    """Read a CSV/TSV table. ``navigation``: own-ship positions are needed (from this file);
+    ``bearings``: bearings are needed. Returns one Recording per own-ship: one, unless the
+    rows of different tracks give different own-ship positions at one time (then one per
+    track, as each track had its own own-ship)."""
+    path = Path(path)
+    table = _Table(path, options)
+    cols = table.columns(navigation=navigation, bearings=bearings)
+    df = table.read(cols)
+    line = table.lines(len(df))
+    notes = list(table.notes)
+    t, epoch = _times(df, cols["time"], options.time.format, path, line, notes)
+    track = None
+    if "bearing" in cols:
+        b, stated = _bearings(df, cols["bearing"], options, table, path, line, notes)
+        track = _tracks(df, cols.get("track"), path, line)
+        _check_increasing(t, track, cols["time"], path, line)
+    if not navigation:
+        return [Recording(None, Bearings(t, epoch, track, b, str(path), stated), notes=notes)]
+    geo = "lat" in cols
+    pos = (_numbers(df, cols["lat"], path, line), _numbers(df, cols["lon"], path, line)) if geo \
+        else (_numbers(df, cols["x"], path, line), _numbers(df, cols["y"], path, line))
+    if geo:
+        _check_lat_lon(*pos, cols, path, line)
+    nav_rows, consistent = _one_fix_per_time(t, pos, SAME_FIX["lat" if geo else "x"])
+    if not consistent.all() and not bearings:
+        row = nav_rows[int(np.flatnonzero(~consistent)[0])]
+        raise InputError(f"{path}: two different own-ship positions at the time of line "
+                         f"{line[row]} ({cols['time']}): one fix per time")
+    if not bearings:
+        return [Recording(_navigation(t, epoch, pos, nav_rows, geo, path), None, notes=notes)]
+    if consistent.all():
+        return [Recording(_navigation(t, epoch, pos, nav_rows, geo, path),
+                          Bearings(t, epoch, track, b, str(path), stated), notes=notes)]
+    notes.append("tracks report different own-ship positions at one time: each track gets "
+                 "its own own-ship (and dataset shard)")
+    recordings = []
+    code = _codes(track)
+    order = np.argsort(code, kind="stable")
+    starts = np.flatnonzero(np.r_[True, code[order][1:] != code[order][:-1]])
+    for rows in np.split(order, starts[1:]):  # times increase within a track (checked)
+        nav = _navigation(t, epoch, pos, rows, geo, path)
+        recordings.append(Recording(nav, Bearings(t[rows], epoch, track[rows], b[rows],
+                                                  str(path), stated), notes=notes))
+    return recordings
+
+
+class _Table:
+    """The file's layout from its first lines: delimiter, decimal mark, header, units row."""
+
+    def __init__(self, path: Path, options: SourceOptions):
+        self.path, self.options, self.notes = path, options, []
+        try:
+            with open(path, "rb") as f:
+                raw = f.read(SAMPLE_BYTES)
+        except FileNotFoundError:
+            raise InputError(f"{path}: no such file") from None
+        except IsADirectoryError:
+            raise InputError(f"{path}: a directory, not a CSV file") from None
+        try:
+            text = raw.decode("utf-8-sig")
+        except UnicodeDecodeError as exc:
+            if exc.start < len(raw) - 4:  # not merely a character cut by the sample's end
+                raise InputError(f"{path}: not UTF-8 text (byte {exc.start}); save the table "
+                                 "as UTF-8 CSV") from None
+            text = raw[:exc.start].decode("utf-8-sig")
+        lines = text.splitlines()[:SAMPLE_LINES]
+        if len(raw) == SAMPLE_BYTES and len(lines) > 1:
+            lines = lines[:-1]  # the last line of the sample may be cut
+        lines = [ln for ln in lines if ln.strip()]
+        if not lines:
+            raise InputError(f"{path}: empty file (a CSV needs a header row and data rows)")
+        self.delimiter = options.csv.delimiter or self._sniff(lines)
+        rows = list(csv.reader(io.StringIO("\n".join(lines[:3])), delimiter=self.delimiter,
+                               skipinitialspace=True))
+        self.header = [c.strip() for c in rows[0]]
+        self.decimal = options.csv.decimal or self._decimal(lines[1:])
+        if all(_is_number(c, self.decimal) for c in self.header if c):
+            raise InputError(f"{path}: the first line holds numbers, not column names: the "
+                             "table needs a header row (time, bearing, own-ship columns)")
+        self.units = rows[1] if len(rows) > 2 and self._units_row(rows[1], rows[2]) else None
+        if self.units is not None:
+            self.units = [u.strip() for u in self.units]
+            self.notes.append(f"{path.name}: line 2 ({', '.join(self.units)}) read as a units "
+                              "row and skipped")
+
+    def _sniff(self, lines) -> str:
+        """The candidate found in the header and equally often in every sampled line."""
+        counts = {d: [ln.count(d) for ln in lines] for d in SNIFFED}
+        steady = [d for d in SNIFFED if counts[d][0] > 0 and len(set(counts[d])) == 1]
+        pool = steady or [d for d in SNIFFED if counts[d][0] > 0] or [","]
+        delimiter = max(pool, key=lambda d: counts[d][0] if d in counts else 0)
+        if delimiter != ",":
+            self.notes.append(f"{self.path.name}: columns separated by "
+                              f"{'tab' if delimiter == chr(9) else repr(delimiter)}")
+        return delimiter
+
+    def _decimal(self, lines) -> str:
+        if self.delimiter == ",":
+            return "."
+        fields = [f.strip() for ln in lines for f in ln.split(self.delimiter)]
+        comma = sum(bool(re.fullmatch(r"[+-]?\d*,\d+(?:[eE][+-]?\d+)?", f)) for f in fields)
+        dot = sum(bool(re.fullmatch(r"[+-]?\d*\.\d+(?:[eE][+-]?\d+)?", f)) for f in fields)
+        if comma and not dot:
+            self.notes.append(f"{self.path.name}: decimal comma (12,5) found")
+            return ","
+        return "."
+
+    def _units_row(self, second, third) -> bool:
+        """Line 2 is a units row if it holds no number while line 3 has a number in a column
+        where line 2 has text, and its texts look like units (``deg``, ``[s]``, ``(m)``)."""
+        second = [c.strip() for c in second]
+        if any(_is_number(c, self.decimal) for c in second if c):
+            return False
+        text_over_number = any(c and _is_number(d.strip(), self.decimal)
+                               for c, d in zip(second, third, strict=False))
+        unit_like = all(not c or c.lower() in UNIT_WORDS or re.fullmatch(r"[\[(].*[\])]", c)
+                        for c in second)
+        return text_over_number and unit_like
+
+    def unit_of(self, column: str) -> str | None:
+        if self.units is None:
+            return None
+        i = self.header.index(column)
+        return self.units[i].strip("[]() ").lower() if i < len(self.units) else None
+
+    def columns(self, *, navigation: bool, bearings: bool) -> dict[str, str]:
+        """Role -> header name of the columns to read (``time``, ``bearing``, ``track``,
+        ``x``/``y`` or ``lat``/``lon``); InputError naming the option when one is missing."""
+        chosen = {}
+        roles = ["time"] + (["bearing", "track"] if bearings else [])
+        for role in roles:
+            name = self._find(role, required=role != "track")
+            if name is not None:
+                chosen[role] = name
+        if navigation:
+            chosen.update(self._position())
+        return chosen
+
+    def _given(self, role):
+        return getattr(self.options.columns, role)
+
+    def _find(self, role, required=True, note=True) -> str | None:
+        given = self._given(role)
+        lower = {c.lower(): c for c in reversed(self.header)}
+        if given is not None:
+            if given in self.header:
+                return given
+            if given.lower() in lower:
+                return lower[given.lower()]
+            raise InputError(f"{self.path}: columns.{role}={given}: no such column; columns "
+                             f"found: {', '.join(self.header)}")
+        for candidate in COMMON[role]:
+            if candidate in lower:
+                name = lower[candidate]
+                if note and name != DOCUMENTED.get(role):
+                    self.notes.append(f"{self.path.name}: {role} from column '{name}' "
+                                      f"(columns.{role}={name})")
+                return name
+        if required:
+            raise InputError(f"{self.path}: no {role} column: columns found: "
+                             f"{', '.join(self.header)}; set columns.{role}=<name>")
+        return None
+
+    def _position(self) -> dict[str, str]:
+        c = self.options.columns
+        local_given, geo_given = c.x is not None or c.y is not None, c.lat is not None or \
+            c.lon is not None
+        if local_given and geo_given:
+            raise InputError(f"{self.path}: give own-ship as columns.x/columns.y or as "
+                             "columns.lat/columns.lon, not both")
+        if not local_given:
+            lat, lon = self._find("lat", False, False), self._find("lon", False, False)
+            if lat and lon:
+                for role, name in (("lat", lat), ("lon", lon)):
+                    if self._given(role) is None and name != role:
+                        self.notes.append(f"{self.path.name}: {role} from column '{name}'")
+                return {"lat": lat, "lon": lon}
+            if geo_given or (lat or lon):
+                missing = "lon" if lat else "lat"
+                raise InputError(f"{self.path}: own-ship {'latitude' if lat else 'longitude'} "
+                                 f"in column '{lat or lon}' but no {missing} column: columns "
+                                 f"found: {', '.join(self.header)}; set columns.{missing}=<name>")
+        x, y = self._find("x", False), self._find("y", False)
+        if x and y:
+            return {"x": x, "y": y}
+        if local_given or x or y:
+            missing = "y" if x else "x"
+            raise InputError(f"{self.path}: own-ship {'x' if x else 'y'} in column '{x or y}' "
+                             f"but no {missing} column: columns found: "
+                             f"{', '.join(self.header)}; set columns.{missing}=<name>")
+        raise InputError(f"{self.path}: no own-ship position: columns found: "
+                         f"{', '.join(self.header)}; set columns.lat=<name> columns.lon=<name> "
+                         "(degrees) or columns.x=<name> columns.y=<name> (metres east, north), "
+                         "or give the own-ship in a separate file with navigation=FILE")
+
+    def read(self, cols: dict[str, str]) -> pd.DataFrame:
+        """The chosen columns (by position, so odd header spellings cannot get in the way).
+        Every column is parsed, so that a line with more fields than the header is refused."""
+        index = sorted({self.header.index(name) for name in cols.values()})
+        try:
+            with warnings.catch_warnings():  # a row longer than the header: refused
+                warnings.simplefilter("error", pd.errors.ParserWarning)
+                df = pd.read_csv(self.path, sep=self.delimiter, decimal=self.decimal,
+                                 skiprows=[1] if self.units is not None else None,
+                                 index_col=False, skipinitialspace=True,
+                                 encoding="utf-8-sig", low_memory=False)
+        except (pd.errors.ParserError, pd.errors.ParserWarning, pd.errors.EmptyDataError,
+                UnicodeDecodeError, ValueError) as exc:
+            raise InputError(f"{self.path}: not a readable CSV "
+                             f"({' '.join(str(exc).split())}); check csv.delimiter") from None
+        if df.empty:
+            raise InputError(f"{self.path}: no rows")
+        df = df.iloc[:, index]
+        df.columns = [self.header[i] for i in index]
+        return df
+
+    def lines(self, n: int) -> np.ndarray:
+        """File line number of each data row (1 = the header)."""
+        return np.arange(n) + (3 if self.units is not None else 2)
+
+
+def _is_number(text: str, decimal: str = ".") -> bool:
+    try:
+        float(text.replace(decimal, ".") if decimal != "." else text)
+    except ValueError:
+        return False
+    return True
+
+
+def _bad(values_ok: np.ndarray, line: np.ndarray) -> str:
+    return ", ".join(str(v) for v in line[np.flatnonzero(~values_ok)[:5]])
+
+
+def _numbers(df, col, path, line) -> np.ndarray:
+    """A column as finite float64; InputError naming the lines of the others."""
+    series = df[col]
+    if pd.api.types.is_bool_dtype(series):
+        raise InputError(f"{path}: column {col} holds true/false, not numbers")
+    if pd.api.types.is_numeric_dtype(series):
+        values = series.to_numpy(dtype=float)
+    else:
+        try:
+            values = pd.to_numeric(series, errors="coerce").to_numpy(dtype=float)
+        except (OverflowError, ValueError, TypeError) as exc:
+            raise InputError(f"{path}: column {col} has values that are not numbers of a "
+                             f"usable size ({exc})") from None
+    ok = np.isfinite(values)
+    if not ok.all():
+        raise InputError(f"{path}: column {col} has missing, NaN or non-numeric values "
+                         f"(line {_bad(ok, line)})")
+    return values
+
+
+def _times(df, col, fmt, path, line, notes) -> tuple[np.ndarray, int | None]:
+    """Seconds (float64) since ``epoch_utc_ns`` (absolute times) or relative (epoch None)."""
+    series = df[col]
+    numeric = pd.api.types.is_numeric_dtype(series)  # true/false too: _numbers refuses them
+    if fmt in ("iso", "iso_utc") or (fmt == "auto" and not numeric and _mostly_text(series)):
+        return _iso_times(series, col, fmt, path, line, notes)
+    if pd.api.types.is_integer_dtype(series):
+        values = series.to_numpy(dtype=np.int64)
+    else:
+        values = _numbers(df, col, path, line)
+    scaled_name = re.search(r"_(ms|us|ns)$", col.lower())
+    guessed = fmt == "auto"
+    if guessed:
+        if scaled_name:  # the name says the unit; the magnitude says Unix or relative
+            unit = scaled_name.group(1)
+            per_s = SCALE_NS["unix_s"] / SCALE_NS["unix_" + unit]
+            fmt = ("unix_" if abs(float(np.median(values))) / per_s >= UNIX_FROM_S
+                   else "rel_") + unit
+        else:
+            magnitude = abs(float(np.median(values)))
+            fmt = next((f for bound, f in MAGNITUDE if magnitude >= bound), "s")
+        if fmt != "s":
+            notes.append(f"{path.name}: {col} read as "
+                         f"{fmt.replace('unix_', 'Unix time in ').replace('rel_', 'relative ')}"
+                         f" (time.format={fmt if fmt.startswith('unix') else 's'})")
+    if fmt in ("s", "rel_ms", "rel_us", "rel_ns"):
+        seconds = values.astype(float) / {"s": 1, "rel_ms": 1e3, "rel_us": 1e6,
+                                           "rel_ns": 1e9}[fmt]
+        span = seconds.max() - seconds.min()
+        if span > MAX_SPAN_S:
+            far = int(np.argmax(np.abs(seconds - np.median(seconds))))
+            raise InputError(f"{path}: {col} {values[far]:g} on line {line[far]} makes the log "
+                             f"span {span:.3g} s (at most {MAX_SPAN_S:.3g} s): {col} must be "
+                             "seconds (or set time.format)")
+        return seconds, None
+    scale = SCALE_NS[fmt]
+    too_early = values < UNIX_FROM_S * (1e9 / scale)
+    if guessed and too_early.any():  # the magnitude chose Unix time: all must be Unix times
+        k = int(np.argmax(too_early))
+        raise InputError(f"{path}: {col} {values[k]:g} on line {line[k]} is not a Unix time "
+                         f"({fmt.replace('unix_', '')}) like the others: times must be all "
+                         "Unix or all relative (time.format=s, unix_s, unix_ms, unix_us, "
+                         "unix_ns)")
+    if values.dtype.kind == "i":
+        first = int(values.min())
+        seconds = (values - first).astype(float) * (scale / 1e9)
+        return _checked_span(seconds, values, col, path, line), first * scale
+    if np.abs(values).max() * scale >= 2**63:
+        k = int(np.argmax(np.abs(values)))
+        raise InputError(f"{path}: {col} {values[k]:g} on line {line[k]} is beyond the year "
+                         f"2262 as Unix time ({fmt}); check time.format")
+    first = float(values.min())
+    seconds = (values - first) * (scale / 1e9)
+    return _checked_span(seconds, values, col, path, line), int(round(first * scale))
+
+
+def _checked_span(seconds, values, col, path, line):
+    if seconds.max() > MAX_SPAN_S:
+        k = int(np.argmax(seconds))
+        raise InputError(f"{path}: {col} {values[k]:g} on line {line[k]} makes the log span "
+                         f"{seconds.max():.3g} s (at most {MAX_SPAN_S:.3g} s)")
+    return seconds
+
+
+def _mostly_text(series) -> bool:
+    """A text column of times, not numbers with a few bad cells (those are reported as such)."""
+    sample = series.dropna().astype(str).head(1000)
+    numeric = pd.to_numeric(sample, errors="coerce").notna().mean() if len(sample) else 0
+    return numeric < 0.5
+
+
+def _iso_times(series, col, fmt, path, line, notes):
+    text = series.astype("str").str.strip()
+    missing = series.isna().to_numpy()
+    if missing.any():
+        raise InputError(f"{path}: column {col} has missing times (line "
+                         f"{_bad(~missing, line)})")
+    zoned = text.str.contains(ZONED, regex=True).to_numpy(dtype=bool)
+    if fmt != "iso_utc" and not zoned.all():
+        k = int(np.argmax(~zoned))
+        raise InputError(f"{path}: {col} '{text.iloc[k]}' on line {line[k]} has no time zone: "
+                         f"write times with one ({text.iloc[k]}Z for UTC) or set "
+                         "time.format=iso_utc to read zone-less times as UTC")
+    if fmt == "iso_utc" and not zoned.all():
+        notes.append(f"{path.name}: {col} without time zone read as UTC (time.format=iso_utc)")
+    try:
+        parsed = pd.to_datetime(text, format="ISO8601", utc=True, errors="coerce")
+    except (ValueError, OverflowError) as exc:
+        raise InputError(f"{path}: column {col}: not ISO-8601 times ({exc})") from None
+    ok = parsed.notna().to_numpy()
+    if not ok.all():
+        raise InputError(f"{path}: column {col} has values that are not ISO-8601 times such as "
+                         f"2024-05-01T10:00:00Z (line {_bad(ok, line)}); set columns.time or "
+                         "time.format")
+    ns = parsed.dt.as_unit("ns").array.asi8
+    first = int(ns.min())
+    seconds = (ns - first) / 1e9
+    if fmt == "auto":
+        notes.append(f"{path.name}: {col} read as ISO-8601 times (time.format=iso)")
+    return _checked_span(seconds, ns, col, path, line), first
+
+
+def _bearings(df, col, options, table, path, line, notes):
+    """Bearings in degrees, and whether radians or degrees were stated: by ``bearing.units``,
+    or radians by the units row or a ``*_rad`` name. A name or units row saying degrees is
+    what a column of radians mislabelled would say too, so ``assemble`` still guards it."""
+    values = _numbers(df, col, path, line)
+    units, stated = options.bearing.units, options.bearing.units is not None
+    if units is None:
+        if table.unit_of(col) in ("rad", "radian", "radians"):
+            units, stated = "rad", True
+            notes.append(f"{path.name}: bearings in radians (units row)")
+        elif col.lower().endswith("_rad"):
+            units, stated = "rad", True
+            notes.append(f"{path.name}: bearings in radians (column name {col})")
+    if units == "rad":
+        outside = np.abs(values) > 2 * np.pi
+        if outside.any():
+            k = int(np.argmax(outside))
+            raise InputError(f"{path}: {col} {values[k]:g} on line {line[k]} is outside "
+                             "[-2 pi, 2 pi]; bearings in radians were stated (bearing.units)")
+        return np.rad2deg(values), stated
+    outside = np.abs(values) > 360
+    if outside.any():
+        k = int(np.argmax(outside))
+        raise InputError(f"{path}: {col} {values[k]:g} on line {line[k]} is outside "
+                         "[-360, 360]; bearings must be in degrees (or set bearing.units=rad)")
+    return values, stated
+
+
+def _tracks(df, col, path, line) -> np.ndarray:
+    """int64 track ids, or text labels (object array) when the ids are not all numbers."""
+    if col is None:
+        return np.zeros(len(df), dtype=np.int64)
+    series = df[col]
+    if pd.api.types.is_bool_dtype(series):
+        raise InputError(f"{path}: column {col} holds true/false, not track ids")
+    if pd.api.types.is_integer_dtype(series):
+        ids = series.to_numpy(dtype=np.int64)
+        big = np.abs(ids) > MAX_TRACK_ID
+        if big.any():
+            k = int(np.argmax(big))
+            raise InputError(f"{path}: {col} {ids[k]} on line {line[k]} is not an integer "
+                             "within +-2^53")
+        return ids
+    missing = series.isna().to_numpy()
+    if missing.any():
+        raise InputError(f"{path}: column {col} has missing track ids (line "
+                         f"{_bad(~missing, line)})")
+    if not pd.api.types.is_numeric_dtype(series):
+        text = series.astype("str").str.strip()
+        numeric = pd.to_numeric(text, errors="coerce")
+        if numeric.isna().any():  # text ids: kept as labels
+            return text.to_numpy(dtype=object)
+        series = numeric
+    ids = series.to_numpy(dtype=float)
+    bad = (ids != np.round(ids)) | ~(np.abs(ids) <= MAX_TRACK_ID)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise InputError(f"{path}: {col} {ids[k]:g} on line {line[k]} is not an integer within "
+                         "+-2^53")
+    return ids.astype(np.int64)
+
+
+def _codes(track: np.ndarray) -> np.ndarray:
+    """Integer codes of the tracks (labels factorised: sorting numbers is faster)."""
+    return pd.factorize(track)[0] if track.dtype == object else track
+
+
+def _check_increasing(t, track, col, path, line):
+    """Times must increase strictly within each track, in file order."""
+    code = _codes(track)
+    order = np.argsort(code, kind="stable")
+    ts, tr = t[order], code[order]
+    bad = (tr[1:] == tr[:-1]) & (np.diff(ts) <= 0)
+    if bad.any():
+        k = int(np.argmax(bad))
+        kind = "duplicate" if ts[k + 1] == ts[k] else "non-increasing"
+        raise InputError(f"{path}: {kind} {col} for track {track[order[k + 1]]} on line "
+                         f"{line[order[k + 1]]} ({col} must increase within a track)")
+
+
+def _check_lat_lon(lat, lon, cols, path, line):
+    for values, name, limit in ((lat, cols["lat"], 90), (lon, cols["lon"], 360)):
+        outside = (values < -limit) | (values > limit) if limit == 90 else \
+            (values < -180) | (values > 360)
+        if outside.any():
+            k = int(np.argmax(outside))
+            raise InputError(f"{path}: {name} {values[k]:g} on line {line[k]} is not a "
+                             f"{'latitude' if limit == 90 else 'longitude'} in degrees; are "
+                             "columns.lat and columns.lon right?")
+
+
+def _one_fix_per_time(t, pos, tolerance):
+    """Rows of the first occurrence of each distinct time (sorted by time), and per distinct
+    time whether every row there gives the same own-ship position (within ``tolerance``)."""
+    order = np.argsort(t, kind="stable")
+    ts = t[order]
+    starts = np.flatnonzero(np.r_[True, ts[1:] != ts[:-1]])
+    same = np.ones(starts.size, dtype=bool)
+    for values in pos:
+        v = values[order]
+        same &= np.maximum.reduceat(v, starts) - np.minimum.reduceat(v, starts) <= tolerance
+    return order[starts], same
+
+
+def _navigation(t, epoch, pos, rows, geo, path) -> Navigation:
+    """Own-ship fixes of ``rows`` (their times distinct), sorted by time."""
+    rows = rows[np.argsort(t[rows], kind="stable")]
+    a, b = pos[0][rows], pos[1][rows]
+    if geo:
+        return Navigation(t[rows], epoch, str(path), lat_deg=a, lon_deg=b)
+    return Navigation(t[rows], epoch, str(path), x_m=a, y_m=b)
