@@ -31,6 +31,7 @@ from tma.families import (
     load_scenario,
     scenario_module,
 )
+from tma.families.bearings2d.sources.base import GROUPS as SOURCE_GROUPS
 from tma.io.atomic import write_json_atomic
 from tma.io.dataset import Dataset, datasets_dir
 from tma.io.owned import plain_name
@@ -44,8 +45,8 @@ SWEEP_RECORD = "tma-aggregate.json"  # what an aggregate job of a multirun read
 PROBE_BYTES = 1 << 16  # more than Hydra writes of its own before the stage starts
 KNOWN_KEYS = {  # top-level keys of conf/config.yaml and conf/ingest.yaml (+key adds none)
     "dataset", "estimator", "force", "grid", "parallel", "paths", "progress", "scenario",
-    "table", "format", "input", "min_bearings", "name", "sigma_deg", "navigation", "columns",
-    "bearing", "ownship", "csv", "time", "nav", "origin"}
+    "table", "format", "input", "min_bearings", "name", "sigma_deg", "navigation",
+    *SOURCE_GROUPS}  # ingest's reading groups: columns, bearing, ownship, csv, time, nav, origin
 
 
 def fail(message: str, status: int = 2):

@@ -13,8 +13,8 @@ import pytest
 from pipeline._common import engine_requested, scenario_nodes
 from tests.conftest import compose_cfg, run_cli
 from tests.test_pipeline import GRID, _all_stages, _files
-from tma.errors import ConfigError
-from tma.parallel import Engine, close_dask_clients, dask_client
+from tma.errors import ConfigError, InputError
+from tma.parallel import Engine, close_dask_clients, dask_client, run_tasks
 from tma.simulate import simulate_datasets
 
 pytest.importorskip("distributed")
@@ -88,3 +88,15 @@ def test_slurm_preset_composes_and_its_local_twin_runs_a_sweep_one_layer_deep(tm
     logs = list(tmp_path.glob("hydra/simulate-multirun/*/*/simulate.log"))
     assert len(logs) == 2
     assert all("shards run serially inside each job" in p.read_text() for p in logs)
+
+
+def _refuse_three(task):
+    if task == 3:
+        raise InputError(f"shard {task}: bad input")
+    return task * 2
+
+
+def test_a_failing_shard_stops_the_run_with_its_own_error():
+    with pytest.raises(InputError, match="shard 3: bad input"):
+        run_tasks(_refuse_three, range(40), engine=DASK, progress=False)
+    assert run_tasks(_refuse_three, [1, 2], engine=DASK, progress=False) == [2, 4]

@@ -30,7 +30,7 @@ def validate(schema, node, where: str):
         node = OmegaConf.to_container(node, resolve=True)
     try:
         key = json.dumps(node, sort_keys=True)
-    except (TypeError, ValueError):  # not JSON (e.g. a non-string key): validate uncached
+    except (TypeError, ValueError):  # not JSON-able (e.g. a tuple key): validate uncached
         return _validate(schema, node, where)
     return copy.deepcopy(_validated(schema, key, where))
 

@@ -124,10 +124,12 @@ def _on_dask(engine: Engine, fn, tasks, bar):
     futures = client.map(_single_threaded, [fn] * len(tasks), tasks, pure=False,
                          retries=engine.retries)
     try:
-        for _ in as_completed(futures):
+        for future in as_completed(futures):
+            if future.status == "error":  # e.g. bad input in one shard: stop at once
+                future.result()
             bar.update()
-        return client.gather(futures)  # in task order; a task's own error is raised here
-    except BaseException:  # e.g. bad input in one shard: the others need not run on
+        return client.gather(futures)  # in task order
+    except BaseException:  # the shards still queued need not run on
         client.cancel(futures)
         raise
 
