@@ -16,8 +16,9 @@ from tests.families.bearings2d.recorded_geometry import (
 )
 from tma.errors import InputError
 from tma.families.bearings2d.sources import assemble as assemble_module
-from tma.families.bearings2d.sources.assemble import assemble, utc_text
+from tma.families.bearings2d.sources.assemble import assemble
 from tma.families.bearings2d.sources.base import Bearings, Navigation, Recording, source_options
+from tma.io.mcap_log import format_utc
 
 
 def _recording(labels=("T1",), nav_rows=None, nav_epoch=EPOCH_NS, obs_epoch=EPOCH_NS,
@@ -65,7 +66,7 @@ def test_own_ship_at_every_bearing_in_the_plane_of_the_first_fix():
     for i, label in enumerate(("T1", "T2")):
         np.testing.assert_array_equal(lg.bearing_deg[i], b[b.track == label].bearing_deg)
     assert lg.epoch_utc_ns == summary["epoch_utc_ns"] == EPOCH_NS + 500_000_000
-    assert summary["start_utc"] == "2025-06-01T08:00:00.500000Z"
+    assert summary["start_utc"] == "2025-06-01T08:00:00.5Z"
     assert summary["notes"][0] == "found" and "origin" in summary["notes"][-1]
 
 
@@ -203,5 +204,6 @@ def test_radians_of_unstated_units_are_refused():
     _run([one])
 
 
-def test_utc_text():
-    assert utc_text(EPOCH_NS + 1) == "2025-06-01T08:00:00.000000001Z"
+def test_start_utc_is_written_as_the_logs_write_it():
+    assert format_utc(EPOCH_NS + 1) == "2025-06-01T08:00:00.000000001Z"
+    assert format_utc(EPOCH_NS + 500_000_000) == "2025-06-01T08:00:00.5Z"

@@ -188,7 +188,7 @@ def _ownship_fixes(t_ns, lat_deg, lon_deg) -> Encoded:
     return Encoded.of(payloads)
 
 
-def _nominal_sigma(metadata: dict, where: str) -> float | None:
+def nominal_sigma(metadata: dict, where: str) -> float | None:
     if SENSOR not in metadata:
         return None
     with schema_errors(where, f"the metadata record {SENSOR}"):
@@ -196,7 +196,7 @@ def _nominal_sigma(metadata: dict, where: str) -> float | None:
         return None if sigma is None else number(sigma)
 
 
-def _origin(metadata: dict, where: str) -> tuple[float, float] | None:
+def geo_origin(metadata: dict, where: str) -> tuple[float, float] | None:
     if GEO not in metadata:
         return None
     with schema_errors(where, f"the metadata record {GEO}"):
@@ -204,7 +204,7 @@ def _origin(metadata: dict, where: str) -> tuple[float, float] | None:
         return number(geo["origin_lat_deg"]), number(geo["origin_lon_deg"])
 
 
-def _labels(metadata: dict, track_id: np.ndarray, where: str) -> np.ndarray | None:
+def track_labels(metadata: dict, track_id: np.ndarray, where: str) -> np.ndarray | None:
     """The labels of ``track_id`` from ``tma.tracks``, as an object array, or None."""
     if TRACKS not in metadata:
         return None
@@ -269,9 +269,9 @@ def read_bearings_log(path) -> BearingsLog:
         bearing[rows, cols] = np.concatenate(vals_per_msg)
     log = BearingsLog(
         t_s=t, own_x_m=np.interp(t, nav_t, nav_x), own_y_m=np.interp(t, nav_t, nav_y),
-        track_id=track_id, bearing_deg=bearing, sigma_deg=_nominal_sigma(metadata, where),
-        epoch_utc_ns=read_epoch(metadata, where), origin_deg=_origin(metadata, where),
-        track_label=_labels(metadata, track_id, where),
+        track_id=track_id, bearing_deg=bearing, sigma_deg=nominal_sigma(metadata, where),
+        epoch_utc_ns=read_epoch(metadata, where), origin_deg=geo_origin(metadata, where),
+        track_label=track_labels(metadata, track_id, where),
     )
     log.validate(where)
     return log

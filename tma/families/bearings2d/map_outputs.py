@@ -43,7 +43,7 @@ from tma.families.bearings2d.log import (  # noqa: E402
     read_bearings_log,
 )
 from tma.io.mcap_log import Channel, LogWriter, json_record  # noqa: E402
-from tma.linalg import jacobi_scaled_eigh  # noqa: E402
+from tma.linalg import scaled_inverse  # noqa: E402
 from tma.tables import save_figure  # noqa: E402
 
 log = logging.getLogger(__name__)
@@ -68,8 +68,7 @@ def theta_covariance(estimates: pd.DataFrame) -> np.ndarray:
             jtj[:, i, j] = jtj[:, j, i] = estimates[f"jtj_{i}{j}"].to_numpy(float)
     usable = (np.isfinite(estimates["range_sd_m"].to_numpy(float))
               & np.isfinite(jtj).all(axis=(1, 2)))
-    w, V, d = jacobi_scaled_eigh(np.where(usable[:, None, None], jtj, np.eye(4)))
-    cov = np.einsum("nij,nj,nkj->nik", V, 1.0 / w, V) / (d[:, :, None] * d[:, None, :])
+    cov, _ = scaled_inverse(np.where(usable[:, None, None], jtj, np.eye(4)), 0.0)
     cov *= np.deg2rad(estimates["sigma_used_deg"].to_numpy(float))[:, None, None] ** 2
     cov[~usable] = np.nan
     return cov

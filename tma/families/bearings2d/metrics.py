@@ -24,7 +24,7 @@ from scipy.stats import chi2
 from tma.angles import wrap_to_180
 from tma.families.bearings2d.model import bearing_jacobian
 from tma.families.bearings2d.status import STATUSES, kinematics_now
-from tma.linalg import jacobi_scaled_eigh
+from tma.linalg import scaled_inverse
 from tma.stats import wilson_interval
 
 THETA = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")
@@ -154,10 +154,7 @@ def crlb_theta(theta, t_s, own_x_m, own_y_m, valid, sigma_deg, rcond=1e-12) -> n
     observable, no finite bound). sigma = 0 gives 0."""
     J = bearing_jacobian(theta, t_s, own_x_m, own_y_m, valid)
     jtj = np.einsum("nki,nkj->nij", J, J)
-    w, V, d = jacobi_scaled_eigh(jtj)
-    singular = ~(w[:, 0] > rcond * w[:, -1])
-    inv_w = 1.0 / np.where(singular[:, None], 1.0, w)
-    cov = np.einsum("nij,nj,nkj->nik", V, inv_w, V) / (d[:, :, None] * d[:, None, :])
+    cov, singular = scaled_inverse(jtj, rcond)
     cov *= np.deg2rad(sigma_deg) ** 2
     cov[singular] = np.diag(np.full(4, np.inf))
     return cov

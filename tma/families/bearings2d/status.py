@@ -29,7 +29,7 @@ import numpy as np
 from scipy.special import chdtrc, ndtr  # chi-square and normal tails (light to import)
 
 from tma.angles import bearing_from_north, course_from_velocity
-from tma.linalg import jacobi_scaled_eigh
+from tma.linalg import scaled_inverse
 
 STATUSES = ("ok", "not_converged", "poor_fit", "unobservable")
 NOISELESS_RMS_DEG = 1e-4  # far above round-off, far below any real bearing sensor
@@ -133,12 +133,9 @@ def assess(theta, cost_rad2, jtj, n_bearings, converged, t_now_s, own_x_now_m, o
             rms_deg = np.rad2deg(np.sqrt(cost_rad2 / np.maximum(n_bearings, 1)))
             fit_p = np.where(rms_deg > NOISELESS_RMS_DEG, 0.0, 1.0)
 
-    finite = np.isfinite(theta).all(axis=1) & np.isfinite(jtj).all(axis=(1, 2))
-    w, V, d = jacobi_scaled_eigh(np.where(finite[:, None, None], jtj, np.eye(4)))
-    singular = ~finite | (w[:, 0] <= cfg.singular_rcond * np.abs(w[:, -1]))
-    # (J^T J)^-1 = D^-1 (V diag(1/w) V^T) D^-1, from the scaled (well-conditioned) form
-    inv_w = np.where(singular[:, None], np.nan, 1.0 / np.where(singular[:, None], 1.0, w))
-    cov = np.einsum("nij,nj,nkj->nik", V, inv_w, V) / (d[:, :, None] * d[:, None, :])
+    finite = np.isfinite(theta).all(axis=1)
+    cov, singular = scaled_inverse(np.where(finite[:, None, None], jtj, np.nan),
+                                   cfg.singular_rcond)
     cov *= sigma2[:, None, None]
     (rng, bearing, course, speed), G = kinematics_now(theta, t_now_s, own_x_now_m, own_y_now_m)
     with np.errstate(invalid="ignore"):

@@ -48,7 +48,7 @@ from tma.families.bearings2d.status import (
     robust_fit_p,
     runs_test_p,
 )
-from tma.linalg import jacobi_scaled_eigh
+from tma.linalg import scaled_inverse
 
 MAX_INT = np.iinfo(np.int64).max
 SCALES = ("sigma", "mad")
@@ -174,11 +174,7 @@ def sandwich_information(residuals, jac, scale, loss):
         psi, dpsi = u / q, (2.0 - q) / (q * q)
     A = np.einsum("nk,nki,nkj->nij", dpsi, jac, jac)
     B = np.einsum("nk,nki,nkj->nij", psi * psi, jac, jac)
-    finite = np.isfinite(B).all(axis=(1, 2))
-    w, V, d = jacobi_scaled_eigh(np.where(finite[:, None, None], B, np.eye(4)))
-    singular = ~finite | (w[:, 0] <= 1e-14 * np.abs(w[:, -1]))
-    inv_w = 1.0 / np.where(singular[:, None], 1.0, w)
-    B_inv = np.einsum("nij,nj,nkj->nik", V, inv_w, V) / (d[:, :, None] * d[:, None, :])
+    B_inv, singular = scaled_inverse(B, 1e-14)
     info = A @ B_inv @ A
     info = 0.5 * (info + np.swapaxes(info, 1, 2))
     return np.where(singular[:, None, None], np.nan, info)

@@ -52,7 +52,7 @@ from tma.families.bearings2d.estimators.base import (
     evaluate_in_blocks,
 )
 from tma.families.bearings2d.model import BearingTerms, wrap_residual
-from tma.linalg import jacobi_scaled_eigh
+from tma.linalg import scaled_inverse
 
 
 @dataclass
@@ -256,11 +256,9 @@ class ModifiedPolarEKF(BearingsEstimator):
         good &= (np.einsum("nii->ni", np.where(good[:, None, None], cov, 1.0)) > 0).all(axis=1)
         # the information sigma_f^2 cov^-1, inverted in scaled form; a covariance that is not
         # positive definite (round-off after an absurd prior) fails the track
-        w, V, d = jacobi_scaled_eigh(np.where(good[:, None, None], cov, np.eye(4)))
-        good &= w[:, 0] > 1e-14 * w[:, -1]
-        inv_w = 1.0 / np.where(good[:, None], w, 1.0)
-        info = (np.einsum("nij,nj,nkj->nik", V, inv_w, V) / (d[:, :, None] * d[:, None, :])
-                * self._sigma_rad**2)
+        info, singular = scaled_inverse(np.where(good[:, None, None], cov, np.eye(4)), 1e-14)
+        good &= ~singular
+        info *= self._sigma_rad**2
         info[~good] = np.nan
         theta[~good] = np.nan
         cost, _ = evaluate_in_blocks(BearingTerms(t, own_x, own_y, measured_rad, valid), theta)

@@ -24,6 +24,7 @@ import pymap3d
 from tma.errors import InputError
 from tma.families.bearings2d.log import BearingsLog
 from tma.families.bearings2d.sources.base import Navigation, Recording, SourceOptions
+from tma.io.mcap_log import format_utc
 
 MAX_CELLS = 1 << 26  # bearings grid cells (tracks x epochs) per log: 512 MiB of float64
 MAX_LISTED_GAPS = 20
@@ -80,7 +81,7 @@ def assemble(recordings: list[Recording], options: SourceOptions,
         gap["from_s"], gap["to_s"] = gap["from_s"] - t0, gap["to_s"] - t0
     summary = {
         "epoch_utc_ns": epoch,
-        "start_utc": None if epoch is None else utc_text(epoch),
+        "start_utc": None if epoch is None else format_utc(epoch),
         "time_origin_s": t0 if ref is None else epoch / 1e9,
         "origin_deg": None if origin is None else [origin[0], origin[1]],
         "track_labels": None if labels is None else {str(i): str(s)
@@ -95,11 +96,6 @@ def assemble(recordings: list[Recording], options: SourceOptions,
         "notes": [*dict.fromkeys(n for r in recordings for n in r.notes), *notes],
     }
     return logs, summary
-
-
-def utc_text(epoch_ns: int) -> str:
-    """ISO-8601 UTC text of a time in ns since the Unix epoch (``...Z``)."""
-    return pd.Timestamp(epoch_ns, unit="ns", tz="UTC").isoformat().replace("+00:00", "Z")
 
 
 def _time_reference(recordings, options) -> int | None:

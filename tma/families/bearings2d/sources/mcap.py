@@ -53,7 +53,7 @@ from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
 from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
 
 from tma.errors import ConfigError, InputError
-from tma.families.bearings2d.log import BEARINGS_TOPIC, _nominal_sigma
+from tma.families.bearings2d.log import BEARINGS_TOPIC, nominal_sigma
 from tma.families.bearings2d.sources import mcap_foxglove, mcap_own, mcap_ros2
 from tma.families.bearings2d.sources.base import Bearings, Navigation, Recording, SourceOptions
 from tma.io.mcap_log import (
@@ -545,5 +545,5 @@ def read_mcap(path, options: SourceOptions, need: tuple[str, ...] = ()) -> Recor
         t_ns, track, bearing, stated = parts[bearing_topic]
         bearings = Bearings(seconds(t_ns), epoch, track, bearing, file.source(bearing_topic),
                             units_stated=stated)
-    return Recording(navigation, bearings, _nominal_sigma(file.metadata, file.where),
+    return Recording(navigation, bearings, nominal_sigma(file.metadata, file.where),
                      file.notes)

@@ -16,7 +16,7 @@ import numpy as np
 
 from tma.errors import InputError
 from tma.families.bearings2d.geo import local_to_geodetic
-from tma.families.bearings2d.log import GEO, _labels, _origin
+from tma.families.bearings2d.log import GEO, geo_origin, track_labels
 from tma.io.mcap_log import float_array, int_array, number, read_epoch, schema_errors
 
 OWNSHIP = "tma.OwnshipNavigation"
@@ -42,7 +42,7 @@ def navigation(msgs, file):
         x = float_array([m["x_m"] for m in msgs.decoded])
         y = float_array([m["y_m"] for m in msgs.decoded])
     t_ns = _times_ns(t_s, file, msgs.topic)
-    origin = _origin(file.metadata, file.where)
+    origin = geo_origin(file.metadata, file.where)
     if origin is None:
         return t_ns, {"x_m": x, "y_m": y}
     file.notes.append(f"{msgs.topic}: x/y mapped to latitude/longitude at the log's origin "
@@ -72,7 +72,7 @@ def bearings(msgs, file):
         else:  # scalars, one bearing per message: converted at once
             ids, values = int_array(ids), float_array(values)
     known, index = np.unique(ids, return_inverse=True)
-    labels = _labels(file.metadata, known, file.where)
+    labels = track_labels(file.metadata, known, file.where)
     if labels is not None:
         ids = labels[index]
     return _times_ns(t_msg, file, msgs.topic), ids, values
