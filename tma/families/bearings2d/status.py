@@ -106,6 +106,13 @@ def robust_fit_p(residuals, valid, sigma_rad, c):
     return np.where(2 * m >= n, p, 0.0)
 
 
+def noiseless_fit_p(cost_rad2, n_bearings):
+    """The fit test of a declared noiseless sensor: anything beyond round-off (an RMS
+    residual above ``NOISELESS_RMS_DEG``) is a misfit (p = 0), else p = 1."""
+    rms_deg = np.rad2deg(np.sqrt(cost_rad2 / np.maximum(n_bearings, 1)))
+    return np.where(rms_deg > NOISELESS_RMS_DEG, 0.0, 1.0)
+
+
 def assess(theta, cost_rad2, jtj, n_bearings, converged, t_now_s, own_x_now_m, own_y_now_m,
            sigma_deg, runs_p, cfg, sigma2=None, fit_p=None) -> dict:
     """Status and one-sigma errors per track (see the module docstring).
@@ -129,9 +136,8 @@ def assess(theta, cost_rad2, jtj, n_bearings, converged, t_now_s, own_x_now_m, o
         if sigma_deg > 0:
             upper = chdtrc(dof, cost_rad2 / sigma2)
             fit_p = np.minimum(1.0, 2 * np.minimum(upper, 1 - upper))  # two-sided
-        else:  # declared noiseless: anything beyond round-off is a misfit
-            rms_deg = np.rad2deg(np.sqrt(cost_rad2 / np.maximum(n_bearings, 1)))
-            fit_p = np.where(rms_deg > NOISELESS_RMS_DEG, 0.0, 1.0)
+        else:
+            fit_p = noiseless_fit_p(cost_rad2, n_bearings)
 
     finite = np.isfinite(theta).all(axis=1)
     cov, singular = scaled_inverse(np.where(finite[:, None, None], jtj, np.nan),

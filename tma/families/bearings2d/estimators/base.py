@@ -68,18 +68,21 @@ class BearingsEstimator(Estimator):
         first = np.argmax(valid, axis=1)
         if valid.all():
             valid = None  # every bearing present: skip masking in the hot loops
+        self.log_sigma_deg = log.sigma_deg  # the log's nominal noise (None: unknown), for solve
         out = self.solve(t, ox, oy, measured, valid, first)
         theta = out.pop("theta")
         if "cost_rad2" in out:  # iterative estimators know F and J^T J at their solution
             cost, jtj = out.pop("cost_rad2"), out.pop("jtj")
         else:
             cost, jtj = evaluate_in_blocks(BearingTerms(t, ox, oy, measured, valid), theta)
+        # a fit with its own noise scale and fit test (robust lm) passes both on to assess
+        sigma2, fit_p = out.pop("sigma2_rad2", None), out.pop("fit_p", None)
         runs_p = None
-        if log.sigma_deg is None:
+        if log.sigma_deg is None and fit_p is None:
             residuals = bearing_residuals(theta, t, ox, oy, measured, valid)
             runs_p = runs_test_p(residuals, valid)
         trust = assess(theta, cost, jtj, n_bearings, out["converged"], t[last], ox[last],
-                       oy[last], log.sigma_deg, runs_p, self.config)
+                       oy[last], log.sigma_deg, runs_p, self.config, sigma2=sigma2, fit_p=fit_p)
         columns = {
             "x0_m": theta[:, 0], "y0_m": theta[:, 1], "vx_m_s": theta[:, 2], "vy_m_s": theta[:, 3],
             **out,
@@ -95,6 +98,8 @@ class BearingsEstimator(Estimator):
 
     def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
         """``valid``: mask or None (all present); ``first``: index of each track's first
-        bearing. Returns ``theta`` (n, 4), optionally ``cost_rad2`` and ``jtj`` at theta, and
-        estimator-specific columns."""
+        bearing; ``self.log_sigma_deg`` is the log's nominal noise. Returns ``theta`` (n, 4),
+        optionally ``cost_rad2`` and ``jtj`` at theta, ``sigma2_rad2`` and ``fit_p`` (a noise
+        scale and fit test of the estimator's own, replacing the nominal ones in the status),
+        and estimator-specific columns."""
         raise NotImplementedError

@@ -42,12 +42,7 @@ from tma.families.bearings2d.estimators.lm_kernel import (
     marquardt_robust,
 )
 from tma.families.bearings2d.model import BearingTerms, bearing_jacobian, bearing_residuals
-from tma.families.bearings2d.status import (
-    NOISELESS_RMS_DEG,
-    assess,
-    robust_fit_p,
-    runs_test_p,
-)
+from tma.families.bearings2d.status import noiseless_fit_p, robust_fit_p, runs_test_p
 from tma.linalg import scaled_inverse
 
 MAX_INT = np.iinfo(np.int64).max
@@ -186,31 +181,12 @@ class LevenbergMarquardt(BearingsEstimator):
     # present when starts > 1 / when the loss is robust (the default run adds none)
     outputs = ("start_won", "cost_robust_rad2", "n_downweighted")
 
-    def estimate(self, log) -> dict:
-        """As every bearings estimator; a robust fit then replaces the status and one-sigma
-        columns by those of its sandwich covariance and robust fit test."""
-        self._nominal_sigma_deg = log.sigma_deg
-        columns = super().estimate(log)
-        if self.config.loss == "squared":
-            return columns
-        sigma2, fit_p = columns.pop("_sigma2_rad2"), columns.pop("_fit_p")
-        theta = np.column_stack([columns[c] for c in ("x0_m", "y0_m", "vx_m_s", "vy_m_s")])
-        jtj = np.empty((theta.shape[0], 4, 4))
-        for i in range(4):
-            for j in range(i, 4):
-                jtj[:, i, j] = jtj[:, j, i] = columns[f"jtj_{i}{j}"]
-        columns.update(assess(theta, columns["cost_rad2"], jtj, columns["n_bearings"],
-                              columns["converged"], columns["t_last_s"],
-                              columns["own_x_last_m"], columns["own_y_last_m"], log.sigma_deg,
-                              None, self.config, sigma2=sigma2, fit_p=fit_p))
-        return columns
-
     def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
         cfg = self.config
         terms = BearingTerms(t, own_x, own_y, measured_rad, valid)
         starts = np.concatenate([initial_theta(cfg, t, own_x, own_y, measured_rad, first, d)
                                  for d in start_distances(cfg)])
-        sigma = getattr(self, "_nominal_sigma_deg", None)
+        sigma = self.log_sigma_deg
         if cfg.loss != "squared" and cfg.scale == "sigma" and sigma is not None and sigma > 0:
             scale = np.full(measured_rad.shape[0], np.deg2rad(sigma))
             out = self._robust(terms, starts, scale)
@@ -301,6 +277,5 @@ class LevenbergMarquardt(BearingsEstimator):
             fit_p = robust_fit_p(r, valid, np.deg2rad(sigma), TUNING[loss])
         else:  # declared noiseless: as the squared fit's test
             n = r.shape[1] if valid is None else valid.sum(axis=1)
-            rms_deg = np.rad2deg(np.sqrt(out["cost_rad2"] / np.maximum(n, 1)))
-            fit_p = np.where(rms_deg > NOISELESS_RMS_DEG, 0.0, 1.0)
-        out["_sigma2_rad2"], out["_fit_p"] = scale**2, fit_p
+            fit_p = noiseless_fit_p(out["cost_rad2"], n)
+        out["sigma2_rad2"], out["fit_p"] = scale**2, fit_p

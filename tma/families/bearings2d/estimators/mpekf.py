@@ -233,20 +233,17 @@ class ModifiedPolarEKF(BearingsEstimator):
     Config = Config
     outputs = ("n_gated",)  # bearings the innovation gate skipped (0 without a gate)
 
-    def estimate(self, log) -> dict:
-        sigma = self.config.sigma_deg if self.config.sigma_deg is not None else log.sigma_deg
+    def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
+        sigma = self.config.sigma_deg if self.config.sigma_deg is not None else self.log_sigma_deg
         if sigma is None:
             raise InputError("mpekf: the log declares no bearing noise; give the noise the "
                              "filter should assume with estimator.sigma_deg=<deg>")
-        self._sigma_rad = np.deg2rad(max(sigma, self.config.min_sigma_deg))
-        return super().estimate(log)
-
-    def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
+        sigma_rad = np.deg2rad(max(sigma, self.config.min_sigma_deg))
         n = measured_rad.shape[0]
         present = np.ones(measured_rad.shape, dtype=bool) if valid is None else valid
         last = present.shape[1] - 1 - np.argmax(present[:, ::-1], axis=1)
         y, P, u, gated = run_filter(t, own_x, own_y, measured_rad, valid, first, last,
-                                    self.config, self._sigma_rad)
+                                    self.config, sigma_rad)
         with np.errstate(divide="ignore", invalid="ignore"):
             theta, G = theta_from_mpc(y, t[last], np.column_stack([own_x[last], own_y[last]]),
                                       u[last])
@@ -258,7 +255,7 @@ class ModifiedPolarEKF(BearingsEstimator):
         # positive definite (round-off after an absurd prior) fails the track
         info, singular = scaled_inverse(np.where(good[:, None, None], cov, np.eye(4)), 1e-14)
         good &= ~singular
-        info *= self._sigma_rad**2
+        info *= sigma_rad**2
         info[~good] = np.nan
         theta[~good] = np.nan
         cost, _ = evaluate_in_blocks(BearingTerms(t, own_x, own_y, measured_rad, valid), theta)
