@@ -23,12 +23,12 @@ $(STAMP): pyproject.toml
 
 venv: $(STAMP)  ## create .venv from pyproject.toml
 
+# pipeline.table runs the three stages in one process (one start-up, one worker pool); they
+# still meet only through the files under data/
 table: $(STAMP)  ## simulate -> estimate -> aggregate every default experiment into tables/
 	@set -e; for exp in $(EXPERIMENT); do \
 	  echo "== $$exp"; \
-	  $(PY) -m pipeline.simulate experiment=$$exp $(ARGS); \
-	  $(PY) -m pipeline.estimate experiment=$$exp $(ARGS); \
-	  $(PY) -m pipeline.aggregate experiment=$$exp $(ARGS); \
+	  $(PY) -m pipeline.table experiment=$$exp $(ARGS); \
 	done
 
 # one pytest worker per core (at most 4: each builds its module fixtures); TEST_JOBS=0 runs in

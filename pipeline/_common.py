@@ -21,7 +21,7 @@ from hydra.types import RunMode
 from omegaconf import DictConfig, ListConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from tma.config import to_plain
+from tma.config import defaults, to_plain
 from tma.errors import ConfigError, TmaError
 from tma.families import (
     NAMES,
@@ -172,8 +172,7 @@ def register_estimator_keys():
         fam = family(name)
         keys = {}
         for estimator in fam.estimators:
-            keys.update(OmegaConf.to_container(OmegaConf.structured(
-                fam.estimator_class(estimator).Config)))
+            keys.update(defaults(fam.estimator_class(estimator).Config))
         keys.pop("name", None)
         store.store(group="estimator_keys", name=name, node=keys)
 

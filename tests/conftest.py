@@ -69,3 +69,42 @@ def run_stage_here(verb, *overrides, check=True):
 @pytest.fixture
 def paths(tmp_path):
     return [f"paths.data_dir={tmp_path / 'data'}", f"paths.tables_dir={tmp_path / 'tables'}"]
+
+
+def plain_messages(path, topics=None) -> list:
+    """``(channel, message, fields)`` of an MCAP file as a plain MCAP reader decodes it,
+    without tma's code: protobuf with mcap-protobuf-support (the schema embedded in the
+    file), JSON with the json module. ``fields``: a dict (repeated fields as lists)."""
+    import json
+
+    from mcap.reader import make_reader
+    from mcap_protobuf.decoder import DecoderFactory
+
+    out = []
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for _, channel, message in reader.iter_messages(topics=topics, log_time_order=True):
+            if channel.message_encoding == "json":
+                fields = json.loads(message.data)
+            else:
+                schema = reader.get_summary().schemas[channel.schema_id]
+                decoded = DecoderFactory().decoder_for("protobuf", schema)(message.data)
+                fields = {d.name: (list(getattr(decoded, d.name)) if d.is_repeated
+                                   else getattr(decoded, d.name))
+                          for d in decoded.DESCRIPTOR.fields}
+            out.append((channel, message, fields))
+    return out
+
+
+def proto_message_class(schema_name: str):
+    """protobuf's own message class of a tma schema's protobuf twin, built by protobuf from
+    the FileDescriptorSet tma embeds in its logs."""
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+    from tma.io.proto_columns import proto_schema
+
+    pool = descriptor_pool.DescriptorPool()
+    for file in descriptor_pb2.FileDescriptorSet.FromString(
+            proto_schema(schema_name).descriptor_set).file:
+        pool.Add(file)
+    return message_factory.GetMessageClass(pool.FindMessageTypeByName(schema_name))

@@ -24,6 +24,8 @@ from tma.families.radar2d.log import read_radar_log, write_radar_log
 from tma.families.ranges2d import scenario as ranges2d
 from tma.families.ranges2d.log import read_ranges_log, write_ranges_log
 from tma.io.mcap_log import LogWriter
+from tma.io.mcap_writer import Ragged
+from tma.io.proto_columns import decode_message, encode_columns, proto_schema
 
 FIELDS = ("t_s", "own_x_m", "own_y_m", "track_id", "bearing_deg")
 N_DAMAGES = 300
@@ -174,13 +176,15 @@ def test_one_bearing_per_message_with_scalar_fields(tmp_path):
 def _rewrite(src, dst, edit=lambda topic, n, msg: msg, meta=lambda name, record: record,
              crcs=True):
     """Copy an MCAP log the way another tool might write it (mcap's default Writer: chunk
-    and summary CRCs, no data-section CRC; no CRC at all if not ``crcs``). Message n's
-    decoded JSON passes through ``edit(topic, n, message)``, which returns a replacement (a
-    JSON value, or raw bytes), each metadata record through ``meta(name, record)``."""
+    and summary CRCs, no data-section CRC; no CRC at all if not ``crcs``). Message n
+    (decoded JSON on a JSON channel, its bytes on others) passes through
+    ``edit(topic, n, message)``, which returns a replacement (a JSON value, or raw bytes),
+    each metadata record through ``meta(name, record)``."""
     with open(src, "rb") as f:
         reader = make_reader(f)
         summary = reader.get_summary()
-        messages = [(c.topic, m.log_time, m.data) for _, c, m in reader.iter_messages()]
+        messages = [(c.topic, m.log_time, orjson.loads(m.data) if c.message_encoding == "json"
+                     else m.data) for _, c, m in reader.iter_messages()]
         metadata = [(r.name, r.metadata) for r in reader.iter_metadata()]
     with open(dst, "wb") as f:
         w = Writer(f, enable_crcs=crcs)
@@ -194,7 +198,7 @@ def _rewrite(src, dst, edit=lambda topic, n, msg: msg, meta=lambda name, record:
         for name, record in metadata:
             w.add_metadata(name, meta(name, record))
         for n, (topic, t, data) in enumerate(messages):
-            new = edit(topic, n, orjson.loads(data))
+            new = edit(topic, n, data)
             w.add_message(ids[topic], t, new if isinstance(new, bytes) else orjson.dumps(new), t)
         w.finish()
 
@@ -235,9 +239,43 @@ BAD_BEARING_MESSAGES = {
 
 @pytest.mark.parametrize("case", BAD_BEARING_MESSAGES)
 def test_malformed_bearing_message_is_a_clean_error(tmp_path, case):
-    write_bearings_log(tmp_path / "ok.mcap", _shard())
+    write_bearings_log(tmp_path / "ok.mcap", _shard(), encoding="json")
     _rewrite(tmp_path / "ok.mcap", tmp_path / "bad.mcap",
              _at(BEARINGS_TOPIC, 30, BAD_BEARING_MESSAGES[case]))
+    with pytest.raises(InputError, match="bad.mcap"):
+        read_bearings_log(tmp_path / "bad.mcap")
+
+
+def _proto(change):
+    """An edit of a protobuf BearingBatch: decoded, changed (a dict), encoded again."""
+    schema = proto_schema("tma.BearingBatch")
+
+    def edit(data):
+        message = change(decode_message(schema, data))
+        columns = {k: Ragged(np.asarray(v), [np.size(v)]) if np.ndim(v) else np.array([v])
+                   for k, v in message.items()}
+        return encode_columns(schema, columns)[0]
+    return edit
+
+
+BAD_PROTOBUF_BEARING_MESSAGES = {
+    "truncated": lambda m: m[:-3],
+    "cut inside a key": lambda m: m + b"\x80",
+    "a double sent as a varint": lambda m: m + b"\x08\x01",
+    "length mismatch": _proto(lambda m: {**m, "bearing_deg": m["bearing_deg"][:2]}),
+    "duplicate track": _proto(lambda m: {**m, "track_id": np.zeros_like(m["track_id"])}),
+    "NaN time": _proto(lambda m: {**m, "t_s": np.nan}),
+    "time going back": _proto(lambda m: {**m, "t_s": -1.0}),
+    "no ids": _proto(lambda m: {k: v for k, v in m.items() if k != "track_id"}),
+    "bearing in radians' place": _proto(lambda m: {**m, "bearing_deg": m["bearing_deg"] * 1e3}),
+}
+
+
+@pytest.mark.parametrize("case", BAD_PROTOBUF_BEARING_MESSAGES)
+def test_malformed_protobuf_bearing_message_is_a_clean_error(tmp_path, case):
+    write_bearings_log(tmp_path / "ok.mcap", _shard())
+    _rewrite(tmp_path / "ok.mcap", tmp_path / "bad.mcap",
+             _at(BEARINGS_TOPIC, 30, BAD_PROTOBUF_BEARING_MESSAGES[case]))
     with pytest.raises(InputError, match="bad.mcap"):
         read_bearings_log(tmp_path / "bad.mcap")
 
@@ -249,20 +287,21 @@ def test_rewritten_log_without_data_crc_reads_the_same(tmp_path):
     assert _same(read_bearings_log(tmp_path / "copy.mcap"), read_bearings_log(tmp_path / "ok.mcap"))
 
 
-def _radar(path):
-    write_radar_log(path, radar2d.simulate_shard(radar2d.Config(n_tracks=3, shard_size=3), 0)[0])
+def _radar(path, encoding="json"):
+    write_radar_log(path, radar2d.simulate_shard(radar2d.Config(n_tracks=3, shard_size=3), 0)[0],
+                    encoding=encoding)
     return read_radar_log, "/radar/plots"
 
 
-def _ranges(path):
+def _ranges(path, encoding="json"):
     cfg = ranges2d.Config(n_tracks=3, shard_size=3, mode="population")
-    write_ranges_log(path, ranges2d.simulate_shard(cfg, 0)[0])
+    write_ranges_log(path, ranges2d.simulate_shard(cfg, 0)[0], encoding=encoding)
     return read_ranges_log, "/ranging/ranges"
 
 
-def _hydrophones(path):
+def _hydrophones(path, encoding="json"):
     cfg = bearing_doppler3d.Config(n_tracks=3, shard_size=3, duration_s=10.0)
-    write_hydrophone_log(path, bearing_doppler3d.simulate_shard(cfg, 0)[0])
+    write_hydrophone_log(path, bearing_doppler3d.simulate_shard(cfg, 0)[0], encoding=encoding)
     return read_hydrophone_log, "/hydrophones/2"
 
 
@@ -276,6 +315,19 @@ def _hydrophones(path):
 def test_malformed_messages_of_other_families(tmp_path, family, change):
     read, topic = family(tmp_path / "ok.mcap")
     read(tmp_path / "ok.mcap")
+    _rewrite(tmp_path / "ok.mcap", tmp_path / "bad.mcap", _at(topic, 2, change))
+    with pytest.raises(InputError, match="bad.mcap"):
+        read(tmp_path / "bad.mcap")
+
+
+@pytest.mark.parametrize("family", [_radar, _ranges, _hydrophones])
+@pytest.mark.parametrize("change", [lambda m: m[:-3], lambda m: m + b"\x08\x01"],
+                         ids=["truncated", "a double as a varint"])
+def test_malformed_protobuf_messages_of_other_families(tmp_path, family, change):
+    read, topic = family(tmp_path / "ok.mcap", "protobuf")
+    good = read(tmp_path / "ok.mcap")
+    _rewrite(tmp_path / "ok.mcap", tmp_path / "copy.mcap")  # the same log, rewritten
+    np.testing.assert_array_equal(read(tmp_path / "copy.mcap").t_s, good.t_s)
     _rewrite(tmp_path / "ok.mcap", tmp_path / "bad.mcap", _at(topic, 2, change))
     with pytest.raises(InputError, match="bad.mcap"):
         read(tmp_path / "bad.mcap")

@@ -14,6 +14,7 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 from mcap_protobuf.decoder import DecoderFactory
 
+from tests.conftest import plain_messages
 from tma.errors import ConfigError, InputError
 from tma.families import NAMES, load_scenario
 from tma.families.bearings2d.log import (
@@ -60,16 +61,35 @@ def test_mcap_is_a_genuine_log_for_plain_readers(tmp_path):
         topics = {c.topic: c for c in summary.channels.values()}
         assert set(topics) == {"/ownship/navigation", "/sonar/bearings"}
         schema = summary.schemas[topics["/sonar/bearings"].schema_id]
-        assert schema.encoding == "jsonschema" and schema.name == "tma.BearingBatch"
-        assert "clockwise from north" in json.loads(schema.data)["description"]
-        assert "convention" in topics["/sonar/bearings"].metadata
-        msgs = list(reader.iter_messages(topics=["/sonar/bearings"]))
+        assert schema.encoding == "protobuf" and schema.name == "tma.BearingBatch"
+        assert topics["/sonar/bearings"].message_encoding == "protobuf"
+        assert "clockwise from north" in topics["/sonar/bearings"].metadata["convention"]
+        assert summary.chunk_indexes[0].compression == "lz4"
+    msgs = plain_messages(path, ["/sonar/bearings"])  # mcap-protobuf-support, not tma
     assert len(msgs) == log.t_s.size
-    first = json.loads(msgs[0][2].data)
+    first = msgs[0][2]
     assert first["track_id"] == log.track_id.tolist()
-    assert msgs[3][2].log_time == EPOCH_NS + int(log.t_s[3] * 1e9)  # UTC: epoch_utc + t_s
-    assert msgs[3][2].publish_time == msgs[3][2].log_time
-    assert json.loads(msgs[3][2].data)["t_s"] == log.t_s[3]  # payloads keep relative seconds
+    assert first["bearing_deg"] == log.bearing_deg[:, 0].tolist()  # float64, exactly
+    assert msgs[3][1].log_time == EPOCH_NS + int(log.t_s[3] * 1e9)  # UTC: epoch_utc + t_s
+    assert msgs[3][1].publish_time == msgs[3][1].log_time
+    assert msgs[3][2]["t_s"] == log.t_s[3]  # payloads keep relative seconds
+
+
+def test_a_json_log_is_read_as_the_protobuf_one(tmp_path):
+    log, _ = _small_log()
+    log.bearing_deg[1, 3:7] = np.nan
+    write_bearings_log(tmp_path / "p.mcap", log)
+    write_bearings_log(tmp_path / "j.mcap", log, encoding="json")
+    with open(tmp_path / "j.mcap", "rb") as f:
+        summary = make_reader(f).get_summary()
+    schema = next(s for s in summary.schemas.values() if s.name == "tma.BearingBatch")
+    assert schema.encoding == "jsonschema"
+    assert "clockwise from north" in json.loads(schema.data)["description"]
+    p, j = read_bearings_log(tmp_path / "p.mcap"), read_bearings_log(tmp_path / "j.mcap")
+    for key in ("t_s", "own_x_m", "own_y_m", "track_id", "bearing_deg"):
+        np.testing.assert_array_equal(getattr(p, key), getattr(j, key))
+    assert ([m[2] for m in plain_messages(tmp_path / "p.mcap")]
+            == [m[2] for m in plain_messages(tmp_path / "j.mcap")])
 
 
 def test_mcap_bytes_are_reproducible(tmp_path):
@@ -160,11 +180,10 @@ def test_a_bad_epoch_is_one_line_naming_the_key(family, bad):
 
 
 def _first_message(path):
+    _, message, fields = plain_messages(path)[0]
     with open(path, "rb") as f:
-        reader = make_reader(f)
-        _, _, message = next(reader.iter_messages(log_time_order=True))
-        records = {m.name: m.metadata for m in reader.iter_metadata()}
-    return message, records
+        records = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
+    return message, fields, records
 
 
 @pytest.mark.parametrize("family", NAMES)
@@ -176,8 +195,8 @@ def test_every_family_logs_utc_times_from_its_epoch(family, tmp_path):
     log, _ = module.simulate_shard(cfg, 0)
     module.write_log(tmp_path / "log.mcap", log)
     epoch = 1_779_012_000 * 10**9 + 250_000_000  # 10:00:00.25 UTC, counted by hand
-    message, records = _first_message(tmp_path / "log.mcap")
-    t0 = json.loads(message.data)["t_s"]
+    message, fields, records = _first_message(tmp_path / "log.mcap")
+    t0 = fields["t_s"]
     assert message.log_time == message.publish_time == epoch + round(t0 * 1e9)
     assert json.loads(records["tma.time"]["epoch_utc_ns"]) == epoch
     back = module.read_log(tmp_path / "log.mcap")
@@ -188,7 +207,7 @@ def test_every_family_logs_utc_times_from_its_epoch(family, tmp_path):
 def test_without_an_epoch_log_times_stay_relative(tmp_path):
     log, _ = _small_log()
     write_bearings_log(tmp_path / "rel.mcap", dataclasses.replace(log, epoch_utc_ns=None))
-    message, records = _first_message(tmp_path / "rel.mcap")
+    message, _, records = _first_message(tmp_path / "rel.mcap")
     assert message.log_time == 0 and "tma.time" not in records
     assert read_bearings_log(tmp_path / "rel.mcap").epoch_utc_ns is None
 
@@ -254,7 +273,7 @@ def test_geo_references_round_trip_and_the_extra_channel_is_ignored(tmp_path):
     assert list(back.track_label) == ["T1", "bravo 2", "ü"]
     np.testing.assert_array_equal(back.bearing_deg, log.bearing_deg)
     np.testing.assert_array_equal(back.own_x_m, log.own_x_m)
-    _, records = _first_message(tmp_path / "geo.mcap")
+    _, _, records = _first_message(tmp_path / "geo.mcap")
     assert {k: json.loads(v) for k, v in records[GEO].items()} == {
         "origin_lat_deg": ORIGIN[0], "origin_lon_deg": ORIGIN[1], "epoch_utc_ns": EPOCH_NS}
     write_bearings_log(tmp_path / "again.mcap", log)

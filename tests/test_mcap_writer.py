@@ -1,7 +1,8 @@
 """tma's MCAP writer against the reference, ``mcap.writer.Writer`` fed message by message with
 the same options (tma's former LogWriter): the files must be byte-identical, every CRC, index,
-statistic and summary offset included. And ``json_objects`` against ``orjson.dumps`` of each
-object, log times against ``epoch + round(t * 1e9)``."""
+statistic and summary offset included, with zstd and lz4 chunks, JSON and protobuf messages
+(each message as orjson or protobuf's own serializer writes it). And ``json_objects``
+against ``orjson.dumps`` of each object, log times against ``epoch + round(t * 1e9)``."""
 
 import io
 
@@ -13,18 +14,21 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 from mcap_protobuf.schema import register_schema as register_protobuf_schema
 
+from tests.conftest import proto_message_class
 from tma import __version__
 from tma.errors import InputError
 from tma.families.bearings2d.geo import local_to_geodetic, location_fix
 from tma.families.bearings2d.log import (
     BEARINGS_TOPIC,
     CHANNELS,
+    COMPRESSION,
     OWNSHIP_FIX_CHANNEL,
     OWNSHIP_FIX_TOPIC,
     OWNSHIP_FRAME,
     OWNSHIP_TOPIC,
     BearingsLog,
     _ownship_fixes,
+    channels,
     read_bearings_log,
     write_bearings_log,
 )
@@ -32,6 +36,7 @@ from tma.families.bearings2d.scenario import Config, simulate_shard
 from tma.io import mcap_writer
 from tma.io.mcap_log import LogWriter, check_integrity, json_record, read_log, schema_bytes
 from tma.io.mcap_writer import WIDE, Encoded, McapWriter, Ragged, json_objects
+from tma.io.proto_columns import proto_schema
 
 EPOCH_NS = 1_767_225_600 * 10**9  # 2026-01-01T00:00:00Z
 NUMPY = orjson.OPT_SERIALIZE_NUMPY
@@ -39,22 +44,28 @@ NUMPY = orjson.OPT_SERIALIZE_NUMPY
 
 # -- the reference ----------------------------------------------------------------------------
 
-def reference_bytes(channels, metadata, messages, chunk_size=1024 * 1024) -> bytes:
+COMPRESSION_TYPE = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4}
+
+
+def reference_bytes(channels, metadata, messages, chunk_size=1024 * 1024,
+                    compression="zstd") -> bytes:
     """mcap's writer with LogWriter's options. ``messages``: (topic, log time ns, payload)."""
     out = io.BytesIO()
-    w = Writer(out, chunk_size=chunk_size, compression=CompressionType.ZSTD, enable_crcs=True,
-               enable_data_crcs=True)
+    w = Writer(out, chunk_size=chunk_size, compression=COMPRESSION_TYPE[compression],
+               enable_crcs=True, enable_data_crcs=True)
     w.start(profile="", library=f"tma {__version__}")
     schema_ids, ids = {}, {}
     for ch in channels:
         if ch.schema not in schema_ids:
             schema_ids[ch.schema] = (
-                w.register_schema(name=ch.schema, encoding="jsonschema",
-                                  data=schema_bytes(ch.schema))
-                if ch.message_class is None else register_protobuf_schema(w, ch.message_class))
+                register_protobuf_schema(w, ch.message_class) if ch.message_class is not None
+                else w.register_schema(name=ch.schema, encoding="protobuf",
+                                       data=proto_schema(ch.schema).descriptor_set)
+                if ch.encoding == "protobuf"
+                else w.register_schema(name=ch.schema, encoding="jsonschema",
+                                       data=schema_bytes(ch.schema)))
         ids[ch.topic] = w.register_channel(
-            topic=ch.topic, schema_id=schema_ids[ch.schema],
-            message_encoding="json" if ch.message_class is None else "protobuf",
+            topic=ch.topic, schema_id=schema_ids[ch.schema], message_encoding=ch.encoding,
             metadata={k: str(v) for k, v in ch.metadata.items()})
     for name, record in metadata.items():
         w.add_metadata(name, {k: str(v) for k, v in record.items()})
@@ -65,22 +76,31 @@ def reference_bytes(channels, metadata, messages, chunk_size=1024 * 1024) -> byt
     return out.getvalue()
 
 
-def reference_bearings_messages(log: BearingsLog):
+def _serializer(encoding: str):
+    """One message's bytes, as orjson or as protobuf's own serializer writes it."""
+    if encoding == "json":
+        return lambda schema, message: orjson.dumps(message, option=NUMPY)
+    return lambda schema, message: proto_message_class(schema)(**{
+        k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in message.items()
+    }).SerializeToString(deterministic=True)
+
+
+def reference_bearings_messages(log: BearingsLog, encoding: str = "protobuf"):
     """The messages of ``log`` as write_bearings_log wrote them one by one before."""
-    epoch = log.epoch_utc_ns or 0
+    epoch, serialize = log.epoch_utc_ns or 0, _serializer(encoding)
     if log.origin_deg is not None:
         lat, lon = local_to_geodetic(log.own_x_m, log.own_y_m, log.origin_deg)
     for k, t in enumerate(log.t_s.tolist()):
         t_ns = epoch + int(round(t * 1e9))
-        yield OWNSHIP_TOPIC, t_ns, orjson.dumps(
-            {"t_s": t, "x_m": float(log.own_x_m[k]), "y_m": float(log.own_y_m[k])})
+        yield OWNSHIP_TOPIC, t_ns, serialize("tma.OwnshipNavigation", {
+            "t_s": t, "x_m": float(log.own_x_m[k]), "y_m": float(log.own_y_m[k])})
         if log.origin_deg is not None:
             yield OWNSHIP_FIX_TOPIC, t_ns, location_fix(
                 t_ns, OWNSHIP_FRAME, lat[k], lon[k]).SerializeToString(deterministic=True)
         has = np.isfinite(log.bearing_deg[:, k])
-        yield BEARINGS_TOPIC, t_ns, orjson.dumps(
-            {"t_s": t, "track_id": log.track_id[has],
-             "bearing_deg": np.ascontiguousarray(log.bearing_deg[has, k])}, option=NUMPY)
+        yield BEARINGS_TOPIC, t_ns, serialize("tma.BearingBatch", {
+            "t_s": t, "track_id": log.track_id[has],
+            "bearing_deg": np.ascontiguousarray(log.bearing_deg[has, k])})
 
 
 def _written_metadata(path) -> dict:
@@ -96,9 +116,10 @@ def _random_messages(rng, n, n_channels=3):
              rng.bytes(int(rng.integers(0, 300)))) for _ in range(n)]
 
 
-def _mcap_writer_bytes(messages, chunk_size, metadata, batches) -> bytes:
+def _mcap_writer_bytes(messages, chunk_size, metadata, batches, compression="zstd") -> bytes:
     out = io.BytesIO()
-    w = McapWriter(out, profile="p", library="lib", chunk_size=chunk_size)
+    w = McapWriter(out, profile="p", library="lib", chunk_size=chunk_size,
+                   compression=compression)
     json_schema = w.add_schema("tma.A", "jsonschema", b'{"type": "object"}')
     proto_schema = w.add_schema("pkg.B", "protobuf", bytes(range(256)))
     w.add_channel("/a", "json", json_schema, {"units": "m", "frame": "ü"})
@@ -116,10 +137,10 @@ def _mcap_writer_bytes(messages, chunk_size, metadata, batches) -> bytes:
     return out.getvalue()
 
 
-def _mcap_reference_bytes(messages, chunk_size, metadata) -> bytes:
+def _mcap_reference_bytes(messages, chunk_size, metadata, compression="zstd") -> bytes:
     out = io.BytesIO()
-    w = Writer(out, chunk_size=chunk_size, compression=CompressionType.ZSTD, enable_crcs=True,
-               enable_data_crcs=True)
+    w = Writer(out, chunk_size=chunk_size, compression=COMPRESSION_TYPE[compression],
+               enable_crcs=True, enable_data_crcs=True)
     w.start(profile="p", library="lib")
     json_schema = w.register_schema("tma.A", "jsonschema", b'{"type": "object"}')
     proto_schema = w.register_schema("pkg.B", "protobuf", bytes(range(256)))
@@ -143,11 +164,12 @@ def _mcap_reference_bytes(messages, chunk_size, metadata) -> bytes:
     (500, 10, 500),  # a chunk per message; one message per batch
     (2000, 1024 * 1024, 3),  # mcap's default chunk size
 ])
-def test_the_file_is_byte_identical_to_mcaps_writer(n, chunk_size, batches):
+@pytest.mark.parametrize("compression", ["zstd", "lz4"])
+def test_the_file_is_byte_identical_to_mcaps_writer(n, chunk_size, batches, compression):
     messages = _random_messages(np.random.default_rng(n + batches), n)
     metadata = {"first": {"a": "1", "ü": "ß"}, "empty": {}}
-    ours = _mcap_writer_bytes(messages, chunk_size, metadata, batches)
-    assert ours == _mcap_reference_bytes(messages, chunk_size, metadata)
+    ours = _mcap_writer_bytes(messages, chunk_size, metadata, batches, compression)
+    assert ours == _mcap_reference_bytes(messages, chunk_size, metadata, compression)
     assert check_integrity(ours) is None
     reader = make_reader(io.BytesIO(ours), validate_crcs=True)
     read = [(ch.id, m.log_time, m.data) for _, ch, m in reader.iter_messages(log_time_order=False)]
@@ -204,15 +226,17 @@ LOGS = {
 }
 
 
+@pytest.mark.parametrize("encoding", ["protobuf", "json"])
 @pytest.mark.parametrize("name", LOGS)
-def test_bearings_logs_are_byte_identical_to_the_reference(tmp_path, name):
+def test_bearings_logs_are_byte_identical_to_the_reference(tmp_path, name, encoding):
     log = LOGS[name]()
     metadata = {"tma.dataset": json_record({"family": "bearings2d", "shard": 3})}
     path = tmp_path / "log.mcap"
-    n = write_bearings_log(path, log, metadata)
-    messages = list(reference_bearings_messages(log))
-    channels = CHANNELS if log.origin_deg is None else [*CHANNELS, OWNSHIP_FIX_CHANNEL]
-    expected = reference_bytes(channels, _written_metadata(path), messages)
+    n = write_bearings_log(path, log, metadata, encoding=encoding)
+    messages = list(reference_bearings_messages(log, encoding))
+    chosen = channels(encoding) + ([] if log.origin_deg is None else [OWNSHIP_FIX_CHANNEL])
+    expected = reference_bytes(chosen, _written_metadata(path), messages,
+                               compression=COMPRESSION[encoding])
     assert n == len(messages)
     assert path.read_bytes() == expected
     back = read_bearings_log(path)
@@ -234,40 +258,47 @@ def test_the_metadata_compared_is_the_one_asked_for(tmp_path):
     assert orjson.loads(records["tma.time"]["epoch_utc_ns"]) == EPOCH_NS
 
 
-def test_write_and_write_epochs_mixed_in_any_order(tmp_path):
+@pytest.mark.parametrize("encoding, compression", [("json", "zstd"), ("protobuf", "lz4"),
+                                                   ("protobuf", "zstd")])
+def test_write_and_write_epochs_mixed_in_any_order(tmp_path, encoding, compression):
     """Single messages, batches of several topics (dicts, protobuf objects, ``Encoded``) and
     times out of order: the file is the reference's for the same sequence of messages."""
-    channels = [*CHANNELS, OWNSHIP_FIX_CHANNEL]
+    chosen = [*channels(encoding), OWNSHIP_FIX_CHANNEL]
+    serialize = _serializer(encoding)
     rng = np.random.default_rng(9)
     expected = []
-    with LogWriter(tmp_path / "mixed.mcap", channels, {"m": {"k": "v"}},
-                   epoch_utc_ns=EPOCH_NS) as w:
+    with LogWriter(tmp_path / "mixed.mcap", chosen, {"m": {"k": "v"}},
+                   epoch_utc_ns=EPOCH_NS, compression=compression) as w:
         for step in range(40):
             t = rng.uniform(-100.0, 1e5, int(rng.integers(0, 30)))
             own = {"t_s": t, "x_m": rng.normal(size=t.size), "y_m": rng.normal(size=t.size)}
             fixes = [LocationFix(latitude=v, frame_id="f") for v in rng.normal(size=t.size)]
-            bearings = [{"t_s": v, "track_id": [1, 2], "bearing_deg": [v, None]}
+            bearings = [{"t_s": v, "track_id": [1, 2], "bearing_deg": [v, np.nan]}
                         for v in t.tolist()]
             if step % 3 == 0:
                 w.write(OWNSHIP_TOPIC, t[0] if t.size else 1.5, {"t_s": 1.0})
                 expected.append((OWNSHIP_TOPIC, w.time_ns(t[0] if t.size else 1.5),
-                                 b'{"t_s":1.0}'))
-            w.write_epochs(t, {OWNSHIP_TOPIC: json_objects(own), OWNSHIP_FIX_TOPIC: fixes,
-                               BEARINGS_TOPIC: bearings})
+                                 serialize("tma.OwnshipNavigation", {"t_s": 1.0})))
+            w.write_epochs(t, {OWNSHIP_TOPIC: w.columns(OWNSHIP_TOPIC, own),
+                               OWNSHIP_FIX_TOPIC: fixes, BEARINGS_TOPIC: bearings})
             for i, v in enumerate(t.tolist()):
                 t_ns = EPOCH_NS + round(v * 1e9)
                 expected += [
-                    (OWNSHIP_TOPIC, t_ns, orjson.dumps({k: float(c[i]) for k, c in own.items()})),
+                    (OWNSHIP_TOPIC, t_ns, serialize("tma.OwnshipNavigation",
+                                                    {k: float(c[i]) for k, c in own.items()})),
                     (OWNSHIP_FIX_TOPIC, t_ns, fixes[i].SerializeToString(deterministic=True)),
-                    (BEARINGS_TOPIC, t_ns, orjson.dumps(bearings[i]))]
+                    (BEARINGS_TOPIC, t_ns, serialize("tma.BearingBatch", bearings[i]))]
         w.write_many(BEARINGS_TOPIC, [3.0], [{"t_s": 3.0}])
-        expected.append((BEARINGS_TOPIC, EPOCH_NS + 3 * 10**9, b'{"t_s":3.0}'))
+        expected.append((BEARINGS_TOPIC, EPOCH_NS + 3 * 10**9,
+                         serialize("tma.BearingBatch", {"t_s": 3.0})))
     assert w.n_messages == len(expected)
     assert list(w.metadata) == ["m", "tma.time"]
-    assert (tmp_path / "mixed.mcap").read_bytes() == reference_bytes(channels, w.metadata,
-                                                                     expected)
+    assert (tmp_path / "mixed.mcap").read_bytes() == reference_bytes(
+        chosen, w.metadata, expected, compression=compression)
     messages, _ = read_log(tmp_path / "mixed.mcap", {BEARINGS_TOPIC: "tma.BearingBatch"})
     assert len(messages[BEARINGS_TOPIC]) == sum(t == BEARINGS_TOPIC for t, _, _ in expected)
+    t_s = [m["t_s"] for m in messages[BEARINGS_TOPIC]]  # written out of order, read in order
+    assert t_s == sorted(t_s) and t_s != [m for m in t_s[:1]] * len(t_s)
 
 
 def test_ownship_fixes_are_location_fixs_bytes():

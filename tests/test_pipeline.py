@@ -76,6 +76,37 @@ def test_outputs_do_not_depend_on_n_jobs(tmp_path):
     assert any(str(k).endswith("estimates.parquet") for k in trees[0])
 
 
+def test_one_process_table_writes_what_the_three_commands_write(tmp_path):
+    """``python -m pipeline.table`` (what ``make table`` runs) against the three verbs run
+    one after the other: the same datasets, runs and tables, byte for byte; with 2 joblib
+    workers, so that runs are finished while others still compute."""
+    trees = []
+    for way in ("verbs", "table"):
+        root = tmp_path / way
+        overrides = [*GRID, f"paths.data_dir={root}", f"paths.tables_dir={root}/tables",
+                     "parallel.n_jobs=2"]
+        if way == "verbs":
+            _all_stages(overrides)
+        else:
+            proc = run_cli("table", *overrides)
+            assert [line.split(" - ")[1].split(":")[0] for line in proc.stdout.splitlines()
+                    if "stage " in line] == ["stage simulate", "stage estimate",
+                                            "stage aggregate"]
+        trees.append(_files(root))
+    assert trees[0].keys() == trees[1].keys()
+    assert [str(k) for k in trees[0] if trees[0][k] != trees[1][k]] == []
+    assert len([k for k in trees[0] if k.name == "estimates.parquet"]) == 4
+
+
+def test_a_table_whose_estimate_fails_keeps_the_dataset_and_says_one_line(tmp_path):
+    proc = run_stage_here("table", *GRID, f"paths.data_dir={tmp_path}",
+                          f"paths.tables_dir={tmp_path}/tables", "estimator=lm",
+                          "estimator.max_iter=-3", check=False)
+    assert proc.returncode == 2 and proc.stderr.count("error:") == 1, proc.stderr
+    assert "max_iter" in proc.stderr
+    assert len(list(tmp_path.glob("datasets/*/manifest.json"))) == 2  # simulate finished
+
+
 def test_rerun_reuses_shards_resumes_and_force_recomputes(paths, tmp_path):
     overrides = [*SMALL, *paths, "parallel=serial"]
     cfg = compose_cfg(overrides)

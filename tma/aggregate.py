@@ -23,7 +23,8 @@ from tma.errors import InputError
 from tma.families import family as family_of
 from tma.io.dataset import Dataset, datasets_dir
 from tma.io.owned import remove_stale_temporaries
-from tma.runs import MANIFEST, full_config, open_run, run_path, runs_dir
+from tma.parallel import in_threads
+from tma.runs import MANIFEST, full_config, open_run, run_path, runs_dir, verify_datasets
 
 
 @dataclass
@@ -39,15 +40,17 @@ def aggregate(data_dir, tables_dir, jobs, table=None, default_suffix="custom") -
     """Aggregate the runs of ``jobs`` (``(Dataset, estimator config)`` pairs) into one table
     per family: ``table`` (``<table>-<family>`` when several families), else
     ``<dataset>-<estimator>`` for a single run, else ``<family>-<default_suffix>``."""
-    by_family: dict[str, list[RunEntry]] = {}
+    verify_datasets(ds for ds, _ in jobs)
+    runs = []
     for dataset, est_cfg in jobs:
-        dataset.verify()
         est_cfg = full_config(dataset, est_cfg)  # no prepare: aggregate trains nothing
-        root = run_path(data_dir, dataset, est_cfg)
-        manifest, estimates = open_run(root)
+        runs.append((dataset, est_cfg["name"], run_path(data_dir, dataset, est_cfg)))
+    opened = in_threads(open_run, [root for _, _, root in runs])  # verified and read
+    by_family: dict[str, list[RunEntry]] = {}
+    for (dataset, estimator, root), (manifest, estimates) in zip(runs, opened, strict=True):
         remove_stale_temporaries(root, only_dead=True)
         by_family.setdefault(dataset.family, []).append(
-            RunEntry(dataset, est_cfg["name"], root, manifest, estimates.to_pandas()))
+            RunEntry(dataset, estimator, root, manifest, estimates.to_pandas()))
     written = []
     for family, entries in by_family.items():
         module = family_of(family).report

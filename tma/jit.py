@@ -4,6 +4,11 @@ Every kernel is compiled once and cached (``cache=True``), so worker processes a
 load machine code instead of recompiling (numba's first call in a process still costs ~0.5 s
 to start its compiler, each cached kernel then a few ms).
 
+A kernel is made when first used (called, or typed inside another kernel), not when its
+module is imported: numba itself (~0.2 s to import) loads only in processes that run compiled
+code, so the stages that never do (simulate, aggregate, and every command's start-up, which
+imports each estimator to register its defaults) do not pay for it.
+
 Two gaps of numba's cache are closed here:
 
 - numba invalidates a cached kernel when *its own* source file changes, not when a kernel it
@@ -12,19 +17,20 @@ Two gaps of numba's cache are closed here:
 - numba caches beside the source (``__pycache__``), else in the user-wide cache directory
   (``$XDG_CACHE_HOME/numba``, ``~/.cache/numba``), or where ``NUMBA_CACHE_DIR`` says; when
   none is writable (a read-only install and home) it refuses to decorate the function, which
-  would fail the import with a traceback. The cache then moves to a per-user temporary
-  directory, and if even that fails the kernel is compiled in every process, uncached.
+  would fail with a traceback. The cache then moves to a per-user temporary directory, and if
+  even that fails the kernel is compiled in every process, uncached.
 """
 
+import functools
 import inspect
 import os
 import tempfile
-
-import numba
-from numba.core import config
+import threading
 
 
 def _temporary_cache_dir() -> bool:
+    from numba.core import config
+
     user = getattr(os, "getuid", lambda: "user")()
     path = os.path.join(tempfile.gettempdir(), f"tma-numba-cache-{user}")
     try:
@@ -38,6 +44,8 @@ def _temporary_cache_dir() -> bool:
 
 
 def _compile(function, options):
+    import numba
+
     try:
         return numba.njit(cache=True, **options)(function)
     except RuntimeError as exc:  # numba: "cannot cache function ...: no locator available"
@@ -61,13 +69,49 @@ def _stamp_dependencies(kernel, depends):
     cache_file._source_stamp = (cache_file._source_stamp, tuple(sorted(stamps)))
 
 
+class Kernel:
+    """A kernel whose numba dispatcher is made on first use. Called from Python it calls the
+    dispatcher; inside another kernel numba types it as that dispatcher (``_numba_type_``);
+    any other attribute (``stats``, ``signatures``...) is the dispatcher's."""
+
+    def __init__(self, function, options, depends):
+        self._dispatcher = None
+        self._lock = threading.Lock()
+        self._options, self._depends = options, tuple(depends)
+        self.py_func = function
+        functools.update_wrapper(self, function)
+
+    @property
+    def dispatcher(self):
+        if self._dispatcher is None:
+            with self._lock:
+                if self._dispatcher is None:
+                    kernel = _compile(self.py_func, self._options)
+                    _stamp_dependencies(kernel, self._depends)
+                    self._dispatcher = kernel
+        return self._dispatcher
+
+    @property
+    def _numba_type_(self):
+        return self.dispatcher._numba_type_
+
+    def __call__(self, *args, **kwargs):
+        return self.dispatcher(*args, **kwargs)
+
+    def __getattr__(self, name):
+        if name.startswith("__"):  # probes of the protocol (copy, pickle...) are not numba's
+            raise AttributeError(name)
+        return getattr(self.dispatcher, name)
+
+    def __reduce__(self):  # pickled by reference, as a function is
+        return self.__qualname__
+
+
 def njit(depends=(), **options):
-    """``numba.njit(cache=True, **options)`` as a decorator, with the fallbacks above.
-    ``depends``: the compiled functions from other files this kernel calls."""
+    """``numba.njit(cache=True, **options)`` as a decorator, made on first use, with the
+    fallbacks above. ``depends``: the compiled functions from other files this kernel calls."""
 
     def decorate(function):
-        kernel = _compile(function, options)
-        _stamp_dependencies(kernel, depends)
-        return kernel
+        return Kernel(function, options, depends)
 
     return decorate

@@ -12,17 +12,18 @@ import atexit
 import ctypes
 import functools
 import logging
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
-from joblib import Parallel, delayed
 from threadpoolctl import threadpool_limits
-from tqdm.auto import tqdm
 
 from tma.errors import ConfigError
 
 log = logging.getLogger(__name__)
 M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc mallopt parameters
 ENGINES = ("joblib", "dask")
+MAX_THREADS = 4  # for in_threads: files checked or read at once
 
 
 @dataclass(frozen=True)
@@ -92,28 +93,51 @@ def _single_threaded(fn, task):
         return fn(task)
 
 
-def run_tasks(fn, tasks, *, engine=1, desc: str = "", progress: bool = True):
+def run_tasks(fn, tasks, *, engine=1, desc: str = "", progress: bool = True) -> list:
     """Apply ``fn`` to each task on ``engine`` (an ``Engine`` or a number of local joblib
     workers); return the results in task order. ``fn`` and the tasks must be picklable."""
+    return list(iter_tasks(fn, tasks, engine=engine, desc=desc, progress=progress))
+
+
+def iter_tasks(fn, tasks, *, engine=1, desc: str = "", progress: bool = True):
+    """``run_tasks``, its results yielded in task order as they come: the caller can finish
+    with the first tasks' results while the workers run the others."""
     engine, tasks = as_engine(engine), list(tasks)
-    bar = tqdm(total=len(tasks), desc=desc, unit="shard", disable=not progress or not tasks)
+    if not tasks:  # e.g. a re-run whose every shard is done: nothing to show or start
+        return
+    from tqdm.auto import tqdm  # here, as joblib below: many commands run no task
+
+    bar = tqdm(total=len(tasks), desc=desc, unit="shard", disable=not progress)
     try:
-        if engine.kind == "dask" and tasks:
-            return _on_dask(engine, fn, tasks, bar)
-        if engine.in_process or len(tasks) <= 1:
-            results = []
+        if engine.kind == "dask":
+            yield from _on_dask(engine, fn, tasks, bar)
+            return
+        if engine.in_process or len(tasks) == 1:
             for task in tasks:
-                results.append(_single_threaded(fn, task))
+                yield _single_threaded(fn, task)
                 bar.update()
-            return results
-        results = []
+            return
+        from joblib import Parallel, delayed
+
         parallel = Parallel(n_jobs=engine.n_jobs, return_as="generator")
         for result in parallel(delayed(_single_threaded)(fn, t) for t in tasks):
-            results.append(result)
             bar.update()
-        return results
+            yield result
     finally:
         bar.close()
+
+
+def in_threads(fn, items) -> list:
+    """``[fn(item) for item in items]``, a few items at a time in threads of this process:
+    for work that releases the GIL (hashing files, reading Parquet), e.g. verifying every
+    dataset of a stage. Results in item order; an exception is raised as the loop would
+    (the first in item order), once every item is done."""
+    items = list(items)
+    threads = min(MAX_THREADS, len(items), os.cpu_count() or 1)
+    if threads <= 1:
+        return [fn(item) for item in items]
+    with ThreadPoolExecutor(threads) as pool:
+        return list(pool.map(fn, items))
 
 
 def _on_dask(engine: Engine, fn, tasks, bar):

@@ -23,7 +23,6 @@ from time import perf_counter
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from tma import __version__
@@ -34,7 +33,7 @@ from tma.io.atomic import sha256_json, write_json_atomic, write_parquet_atomic
 from tma.io.dataset import Dataset, file_record, read_sealed_manifest, sealed
 from tma.io.owned import adopt_broken, locked, recover, staging_dir, swap_in
 from tma.io.shards import finished_record, mark_finished
-from tma.parallel import run_tasks
+from tma.parallel import in_threads, iter_tasks
 
 log = logging.getLogger(__name__)
 RUN_FORMAT = "tma-run"
@@ -163,6 +162,8 @@ def plan_run(data_dir, dataset: Dataset, estimator_config: dict, key: str, stage
 
 def finish_run(stage: Path, dataset: Dataset, estimator_config: dict, tasks, records) -> None:
     """Concatenate shard outputs into ``estimates.parquet`` and write the run manifest."""
+    import pyarrow.compute as pc  # here: a re-run whose runs are all done needs none of it
+
     table = pa.concat_tables(pq.read_table(t.out_path) for t in tasks)
     write_parquet_atomic(stage / ESTIMATES, table)
     shards = {Path(t.out_path).name: file_record(t.out_path, rows=r["rows"])
@@ -204,7 +205,7 @@ def _is_good(root: Path) -> bool:
     if not root.exists():
         return False
     try:
-        open_run(root)
+        verify_run(root)  # its estimates are not read: a finished run is only reused
         return True
     except TmaError as exc:
         log.warning("%s; computing the run again", exc)
@@ -214,9 +215,9 @@ def _is_good(root: Path) -> bool:
 def estimate_runs(data_dir, jobs, *, engine=2, progress=True, force=False):
     """Run every (dataset, estimator config) job, all shards in one worker pool; returns the
     run directories."""
+    verify_datasets(ds for ds, _ in jobs)
     planned = []
     for dataset, est_cfg in jobs:
-        dataset.verify()
         est_cfg = full_config(dataset, est_cfg)
         planned.append((run_path(data_dir, dataset, est_cfg), dataset, est_cfg))
     with locked([p[0] for p in planned]):  # one process per run; a second one waits
@@ -224,11 +225,20 @@ def estimate_runs(data_dir, jobs, *, engine=2, progress=True, force=False):
                                 force=force)
 
 
+def verify_datasets(datasets) -> None:
+    """``Dataset.verify`` (size and sha256 of every file) of each dataset once, however many
+    jobs read it, several at a time (hashing releases the GIL)."""
+    in_threads(Dataset.verify, {id(ds): ds for ds in datasets}.values())
+
+
 def _estimate_locked(data_dir, planned, *, engine, progress, force):
-    todo, tasks = [], []
-    for root, dataset, est_cfg in planned:
+    for root, _, _ in planned:
         recover(root)
-        if any(p[0] == root for p in todo) or (not force and _is_good(root)):
+    # finished runs are reused once their files verify, checked several at a time
+    reuse = [False] * len(planned) if force else in_threads(_is_good, [p[0] for p in planned])
+    todo, tasks = [], []
+    for (root, dataset, est_cfg), good in zip(planned, reuse, strict=True):
+        if good or any(p[0] == root for p in todo):
             continue
         stage = root.with_name(f".{root.name}.partial")
         if not force:
@@ -245,20 +255,35 @@ def _estimate_locked(data_dir, planned, *, engine, progress, force):
     groups = {}  # every estimator on the same dataset shard shares one read of the log
     for t in tasks:
         groups.setdefault((t.dataset_root, t.shard), []).append(t)
-    done = {}
-    for group, records in zip(groups.values(), run_tasks(
+    done, waiting = {}, {id(run): len(run[4]) for run in todo}  # shards still to come
+    run_of = {t.out_path: run for run in todo for t in run[4]}
+    for root, stage, dataset, est_cfg, ts in todo:
+        if not ts:  # a dataset without shards: nothing to wait for
+            finish_run(stage, dataset, est_cfg, ts, [])
+            swap_in(stage, root)
+    # each run is finished (concatenated, sealed, swapped in) as soon as its last shard is
+    # in, while the workers go on with the next runs' shards
+    for group, records in zip(groups.values(), iter_tasks(
             estimate_shard_group, list(groups.values()), engine=engine, desc="estimate",
             progress=progress), strict=True):
-        done.update({t.out_path: r for t, r in zip(group, records, strict=True)})
-    for root, stage, dataset, est_cfg, ts in todo:
-        finish_run(stage, dataset, est_cfg, ts, [done[t.out_path] for t in ts])
-        swap_in(stage, root)
+        for t, record in zip(group, records, strict=True):
+            done[t.out_path] = record
+            root, stage, dataset, est_cfg, ts = run = run_of[t.out_path]
+            waiting[id(run)] -= 1
+            if not waiting[id(run)]:
+                finish_run(stage, dataset, est_cfg, ts, [done[u.out_path] for u in ts])
+                swap_in(stage, root)
     return [p[0] for p in planned]
 
 
 def open_run(root) -> tuple[dict, "pa.Table"]:
-    """A finished run's manifest and estimates, after checking the manifest and every file
-    it lists (size and sha256)."""
+    """A finished run's manifest and estimates, after ``verify_run``."""
+    return verify_run(root), pq.read_table(Path(root) / ESTIMATES)
+
+
+def verify_run(root) -> dict:
+    """A finished run's manifest, after checking the manifest and every file it lists (size
+    and sha256)."""
     root = Path(root)
     remedy = "re-run estimate (it recomputes a damaged run)"
     if not (root / MANIFEST).exists():
@@ -273,4 +298,4 @@ def open_run(root) -> tuple[dict, "pa.Table"]:
         path = root / relpath
         if not path.is_file() or file_record(path) | {"rows": record.get("rows")} != record:
             raise IntegrityError(f"{path}: missing or different from its run manifest; {remedy}")
-    return manifest, pq.read_table(root / ESTIMATES)
+    return manifest

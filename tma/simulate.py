@@ -23,7 +23,7 @@ from tma.io.atomic import sha256_json, write_parquet_atomic
 from tma.io.dataset import Dataset, datasets_dir, file_record, shard_relpath, write_manifest
 from tma.io.owned import locked, recover, staging_dir, swap_in
 from tma.io.shards import finished_record, mark_finished, sidecar
-from tma.parallel import run_tasks
+from tma.parallel import in_threads, run_tasks
 from tma.sharding import n_shards
 
 log = logging.getLogger(__name__)
@@ -110,11 +110,15 @@ def simulate_datasets(scenario_nodes, data_dir, *, engine=2, force=False, progre
 
 
 def _simulate_locked(configs, roots, *, engine, force, progress):
-    plans, tasks = [], []
-    for (module, cfg), root in zip(configs, roots, strict=True):
+    plains = [to_plain(cfg) for _, cfg in configs]
+    for root in roots:
         recover(root)
-        plain = to_plain(cfg)
-        if any(p[0] == root for p in plans) or (not force and _is_good(root, plain)):
+    # a dataset that exists and verifies is kept; they are checked several at a time
+    kept = [False] * len(roots) if force else in_threads(
+        lambda item: _is_good(*item), list(zip(roots, plains, strict=True)))
+    plans, tasks = [], []
+    for (module, cfg), root, plain, good in zip(configs, roots, plains, kept, strict=True):
+        if good or any(p[0] == root for p in plans):
             plans.append((root, None, module, plain, None))
             continue
         if n_shards(cfg) > MAX_SHARDS:

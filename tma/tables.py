@@ -29,5 +29,11 @@ def write_markdown(path: Path, title: str, intro: str, table: str, notes: str = 
 
 
 def save_figure(fig, path: Path):
+    from matplotlib.layout_engine import PlaceHolderLayoutEngine
+
+    # ``fig.tight_layout()`` leaves a placeholder layout engine, which does nothing but makes
+    # savefig draw the whole figure once more before it draws the file: drop it
+    if isinstance(fig.get_layout_engine(), PlaceHolderLayoutEngine):
+        fig.set_layout_engine(None)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=120, metadata={"Software": None})

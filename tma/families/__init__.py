@@ -15,7 +15,7 @@ import functools
 import importlib
 from dataclasses import dataclass, field
 
-from tma.config import to_plain, validate
+from tma.config import defaults, to_plain, validate
 from tma.errors import ConfigError
 from tma.io.atomic import sha256_json
 
@@ -101,22 +101,20 @@ def register_configs():
     """Register every scenario and estimator ``Config`` dataclass's defaults with Hydra's
     ConfigStore as ``scenario/<family>`` and ``estimator/<name>``: the dataclass is the one
     source of every default (no YAML copy). The nodes are plain (untyped), so a bad value
-    reaches ``tma.config.validate`` and fails in one line naming the key."""
+    reaches ``tma.config.validate`` and fails in one line naming the key.
+
+    Every command runs this first, so it imports every scenario and estimator module: their
+    top-level imports stay light (numba, scipy, pandas and matplotlib load where they are
+    used; ``tests/test_startup.py``)."""
     from hydra.core.config_store import ConfigStore
 
     store = ConfigStore.instance()
     for name in NAMES:
         fam = family(name)
-        store.store(group="scenario", name=name, node=_defaults(fam.scenario.Config))
+        store.store(group="scenario", name=name, node=defaults(fam.scenario.Config))
         for estimator in fam.estimators:
             store.store(group="estimator", name=estimator,
-                        node=_defaults(fam.estimator_class(estimator).Config))
-
-
-def _defaults(schema) -> dict:
-    from omegaconf import OmegaConf
-
-    return OmegaConf.to_container(OmegaConf.structured(schema))
+                        node=defaults(fam.estimator_class(estimator).Config))
 
 
 def dataset_name(module, cfg) -> str:

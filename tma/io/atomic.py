@@ -10,9 +10,6 @@ import json
 import os
 from pathlib import Path
 
-import pyarrow as pa
-import pyarrow.parquet as pq
-
 
 @contextlib.contextmanager
 def atomic_path(path):
@@ -35,9 +32,11 @@ def write_json_atomic(path, obj):
         tmp.write_text(text)
 
 
-def write_parquet_atomic(path, table: pa.Table):
+def write_parquet_atomic(path, table):
     """Write a pyarrow table to Parquet atomically (zstd, no pandas metadata)."""
     with atomic_path(path) as tmp:
+        import pyarrow.parquet as pq  # here: most commands never write Parquet
+
         pq.write_table(table, tmp, compression="zstd")
 
 

@@ -18,8 +18,6 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-import pyarrow.parquet as pq
-
 from tma import __version__
 from tma.errors import InputError, IntegrityError
 from tma.io.atomic import sha256_file, sha256_json, write_json_atomic
@@ -174,4 +172,6 @@ class Dataset:
         """Truth table as pandas (verified), or None for a dataset without truth."""
         if not self.has_truth:
             return None
+        import pyarrow.parquet as pq  # here: only reports read the truth
+
         return pq.read_table(self.verified_path("truth.parquet")).to_pandas()

@@ -22,6 +22,7 @@ from tma.families.bearings2d.ingest import ingest
 from tma.families.bearings2d.log import (
     BEARINGS_TOPIC,
     CHANNELS,
+    channels,
     OWNSHIP_TOPIC,
     SENSOR,
     BearingsLog,
@@ -106,6 +107,21 @@ def test_scalar_messages_with_gps_starting_after_the_first_bearing(tmp_path):
     assert manifest["dropped_bearings"]["count"] == 0  # 0.5 s before the fixes: extrapolated
     check_against_truth(estimate(root), (manifest["epoch_utc_ns"] - EPOCH_NS) / 1e9,
                         labels={"1": "T1"})
+
+
+def test_json_and_protobuf_logs_read_the_same(tmp_path):
+    """A hand-written log in tma's JSON schema (one bearing per message, as a user's script
+    writes it) and the same log as protobuf: the same raw fixes and bearings."""
+    rec = recorded(("T1", "T2"))
+    got = [read_mcap(write_scalar_log(tmp_path / f"{encoding}.mcap", rec,
+                                      channels=channels(encoding)), NO_OPTIONS)
+           for encoding in ("json", "protobuf")]
+    for part, keys in [("navigation", ("t_s", "x_m", "y_m", "epoch_utc_ns")),
+                       ("bearings", ("t_s", "track", "bearing_deg", "epoch_utc_ns"))]:
+        for key in keys:
+            np.testing.assert_array_equal(getattr(getattr(got[0], part), key),
+                                          getattr(getattr(got[1], part), key))
+    assert got[0].bearings.bearing_deg.size == len(rec.bearings)
 
 
 def test_relative_times_of_older_logs(tmp_path):

@@ -14,6 +14,7 @@ import numpy as np
 
 from tma.errors import InputError
 from tma.io.mcap_log import (
+    COMPRESSION,
     Channel,
     LogWriter,
     float_array,
@@ -52,19 +53,24 @@ class HydrophoneLog:
         return 2 if self.model["no_doppler"] else 3
 
 
-def write_hydrophone_log(path, log: HydrophoneLog, metadata=None) -> int:
+def write_hydrophone_log(path, log: HydrophoneLog, metadata=None, encoding="protobuf") -> int:
+    """Write ``log`` as MCAP (atomically), messages in ``encoding`` (``"protobuf"`` or
+    ``"json"``); returns their number. A missing reading is NaN (JSON: null)."""
     sensors = log.model["sensors_m"]
     per = log.per_sensor
     channels = [Channel(topic(i), SCHEMA, {"sensor_xyz_m": json.dumps(s),
-                                           "units": "t_s: s; doppler_hz: Hz"})
+                                           "units": "t_s: s; doppler_hz: Hz"},
+                        encoding=encoding)
                 for i, s in enumerate(sensors)]
     meta = {**(metadata or {}), "tma.model": json_record(log.model)}
-    with LogWriter(path, channels, meta, epoch_utc_ns=log.epoch_utc_ns) as w:
+    obs = np.where(np.isfinite(log.obs), log.obs, np.nan)  # any non-finite reading: missing
+    with LogWriter(path, channels, meta, epoch_utc_ns=log.epoch_utc_ns,
+                   compression=COMPRESSION[encoding]) as w:
         for k, t in enumerate(log.t_s.tolist()):
             for i in range(len(sensors)):
                 msg = {"t_s": t, "sensor_id": i, "track_id": log.track_id}
                 for f, name in enumerate(FIELDS[:per]):
-                    msg[name] = log.obs[:, k, per * i + f]
+                    msg[name] = obs[:, k, per * i + f]
                 w.write(topic(i), t, msg)
         return w.n_messages
 

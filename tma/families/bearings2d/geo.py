@@ -9,7 +9,6 @@ them).
 """
 
 import numpy as np
-import pymap3d
 from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix
 
 SEA_LEVEL_TOL_M = 1e-6  # height above the sea at which a point counts as on it
@@ -25,6 +24,8 @@ def local_to_geodetic(x_m, y_m, origin_deg) -> tuple[np.ndarray, np.ndarray]:
     the up component is solved for: u <- u - h(x, y, u) until the height h is 0 (within a
     micrometre; 2 or 3 iterations at the ranges bearings reach). NaN for points not finite or
     farther than ``MAX_MAPPED_M`` (2000 km) from the origin."""
+    import pymap3d  # here: every command imports this module with the bearings2d log
+
     lat0, lon0 = origin_deg
     x, y = np.broadcast_arrays(np.asarray(x_m, float), np.asarray(y_m, float))
     lat, lon = np.full(x.shape, np.nan), np.full(x.shape, np.nan)

@@ -6,6 +6,7 @@ University), 10,000 Monte Carlo targets per row, the scenario of ``bearings2d.md
 numbers are data only: no estimator reads them.
 """
 
+import functools
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -105,6 +106,12 @@ class Run:
     scenario: dict
     config: dict
 
+    @functools.cached_property
+    def mismatch(self) -> str:
+        """Why its settings are not the paper's, "" when they are (``_mismatch``, checked once:
+        every row and claim asks)."""
+        return _mismatch(self)
+
 
 # scenario keys that do not change any statistic (or are the row's own setting)
 IGNORE = ("family", "n_tracks", "seed", "shard_size", "epoch_utc", "origin", "sigma_deg")
@@ -132,7 +139,7 @@ def _sqrt_ka(m: pd.DataFrame) -> dict:
 def _number(paper: Published, run: Run | None) -> dict:
     if run is None:
         return compare(paper, None)
-    reason = _mismatch(run)
+    reason = run.mismatch
     if reason:
         return not_comparable(paper, reason)
     m, estimator = run.metrics, run.estimator
@@ -235,15 +242,15 @@ def _above_claim(lm: dict, nb: dict, other: str) -> dict:
 
 def against_paper(runs: list[Run]) -> list[dict]:
     """Rows for ``tma.paper``: every published number, then the claims."""
-    by = by_setting(runs, lambda r: (r.estimator, float(r.sigma_deg)), _mismatch)
+    by = by_setting(runs, lambda r: (r.estimator, float(r.sigma_deg)), lambda r: r.mismatch)
     rows = []
     for paper in published():
         estimator, _, rest = paper.setting.partition(", sigma ")
         rows.append(_number(paper, by.get((estimator, float(rest.split()[0])))))
-    comparable = {k: r for k, r in by.items() if not _mismatch(r)}
+    comparable = {k: r for k, r in by.items() if not r.mismatch}
     lm = {s: r for (e, s), r in comparable.items() if e == "lm"}
     nb = {s: r for (e, s), r in comparable.items() if e == "nbearings"}
-    other = next((m for m in map(_mismatch, runs) if m), "")  # why runs were left out
+    other = next((r.mismatch for r in runs if r.mismatch), "")  # why runs were left out
 
     def missing(key, text, needs):
         return claim(FAMILY, CLAIMS[key], "lm", text, "-", None, None,

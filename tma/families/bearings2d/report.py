@@ -244,9 +244,11 @@ def _report_without_truth(entry, tables_dir, name: str) -> list[Path]:
 def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
     """Metrics per track into each run dir; the comparison table for simulated datasets, with
     its section against the paper, and a per-track report for each dataset without truth."""
-    rows, written, runs = [], [], []
+    rows, written, runs, truths = [], [], [], {}
     for entry in entries:
-        truth = entry.dataset.read_truth()
+        if id(entry.dataset) not in truths:  # read (and checked) once per dataset
+            truths[id(entry.dataset)] = entry.dataset.read_truth()
+        truth = truths[id(entry.dataset)]
         if truth is None:
             name = table_name if len(entries) == 1 else f"{entry.dataset.name}-{entry.estimator}"
             written += _report_without_truth(entry, tables_dir, name)

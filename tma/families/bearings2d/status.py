@@ -26,21 +26,28 @@ which is never an ``ok`` track.
 """
 
 import numpy as np
-from scipy.special import chdtrc, ndtr  # chi-square and normal tails (light to import)
 
 from tma.angles import bearing_from_north, course_from_velocity
 from tma.linalg import scaled_inverse
+
+# scipy.special (the chi-square and normal tails) is imported by the functions that use it:
+# every command imports this module (with the estimators, to register their defaults), few
+# compute a status
 
 STATUSES = ("ok", "not_converged", "poor_fit", "unobservable")
 NOISELESS_RMS_DEG = 1e-4  # far above round-off, far below any real bearing sensor
 
 
-def kinematics_now(theta, t_s, own_x_m, own_y_m):
+def kinematics_now(theta, t_s, own_x_m, own_y_m, jacobian=True):
     """Range (m), bearing (rad), course (rad), speed (m/s) at times ``t_s`` from own-ship,
-    and their Jacobian with respect to theta, ``(n, 4, 4)`` (rows in that order)."""
+    and their Jacobian with respect to theta, ``(n, 4, 4)`` (rows in that order; None when
+    not ``jacobian``)."""
     x0, y0, vx, vy = theta.T
     dx, dy = x0 + vx * t_s - own_x_m, y0 + vy * t_s - own_y_m
     rng, speed = np.hypot(dx, dy), np.hypot(vx, vy)
+    now = (rng, bearing_from_north(dx, dy), course_from_velocity(vx, vy), speed)
+    if not jacobian:
+        return now, None
     with np.errstate(divide="ignore", invalid="ignore"):
         G = np.zeros((theta.shape[0], 4, 4))
         G[:, 0, :2] = np.column_stack([dx, dy]) / rng[:, None]
@@ -48,12 +55,14 @@ def kinematics_now(theta, t_s, own_x_m, own_y_m):
         G[:, :2, 2:] = G[:, :2, :2] * t_s[:, None, None]  # position now = p0 + v t
         G[:, 2, 2:] = np.column_stack([vy, -vx]) / (speed**2)[:, None]
         G[:, 3, 2:] = np.column_stack([vx, vy]) / speed[:, None]
-    return (rng, bearing_from_north(dx, dy), course_from_velocity(vx, vy), speed), G
+    return now, G
 
 
 def runs_test_p(residuals, valid):
     """Two-sided p-value of the Wald-Wolfowitz runs test on the signs of each row's valid
     residuals (normal approximation; exact when every sign is the same)."""
+    from scipy.special import ndtr
+
     n_rows, K = residuals.shape
     valid = np.ones_like(residuals, dtype=bool) if valid is None else valid
     positive = residuals > 0
@@ -75,6 +84,8 @@ def runs_test_p(residuals, valid):
 
 def truncated_moments(c):
     """Mean and variance of Z^2 for Z ~ N(0, 1) given |Z| <= c, and P(|Z| <= c)."""
+    from scipy.special import ndtr
+
     p = 2 * ndtr(c) - 1
     phi = np.exp(-0.5 * c * c) / np.sqrt(2 * np.pi)
     m1 = (p - 2 * c * phi) / p
@@ -91,6 +102,8 @@ def robust_fit_p(residuals, valid, sigma_rad, c):
     chi-square a chi2(nu) with those moments (nu reduced by the 4 fitted parameters). So
     outliers do not fail the test, while a misfit of the kept bearings (a manoeuvre, a wrong
     sigma) still does. A fit keeping fewer than half the bearings has p = 0."""
+    from scipy.special import chdtrc
+
     u = residuals / sigma_rad
     inlier = np.abs(u) <= c
     if valid is not None:
@@ -124,6 +137,8 @@ def assess(theta, cost_rad2, jtj, n_bearings, converged, t_now_s, own_x_now_m, o
     jtj^-1 sigma2) and ``fit_p`` (``robust_fit_p``), which then replace the above. Returns
     output columns.
     """
+    from scipy.special import chdtrc
+
     n = theta.shape[0]
     dof = np.maximum(n_bearings - 4, 1)
     if fit_p is not None:

@@ -12,6 +12,7 @@ import numpy as np
 
 from tma.errors import InputError
 from tma.io.mcap_log import (
+    COMPRESSION,
     Channel,
     LogWriter,
     float_array,
@@ -27,8 +28,13 @@ from tma.io.mcap_log import (
 
 PLOTS_TOPIC = "/radar/plots"
 SCHEMAS = {PLOTS_TOPIC: "tma.PlotBatch"}
-CHANNELS = [Channel(PLOTS_TOPIC, SCHEMAS[PLOTS_TOPIC],
-                    {"units": "t_s: s; x_m, y_m: m", "frame": "local plane, x east, y north"})]
+
+
+def channels(encoding: str = "protobuf") -> list[Channel]:
+    """The plots channel, messages in ``encoding`` (``"protobuf"`` or ``"json"``)."""
+    return [Channel(PLOTS_TOPIC, SCHEMAS[PLOTS_TOPIC],
+                    {"units": "t_s: s; x_m, y_m: m", "frame": "local plane, x east, y north"},
+                    encoding=encoding)]
 
 
 @dataclass
@@ -62,9 +68,11 @@ class RadarLog:
                              f"for {noise} noise")
 
 
-def write_radar_log(path, log: RadarLog, metadata=None) -> int:
+def write_radar_log(path, log: RadarLog, metadata=None, encoding="protobuf") -> int:
+    """Write ``log`` as MCAP (atomically), messages in ``encoding``; returns their number."""
     meta = {**(metadata or {}), "tma.sensor": json_record(log.sensor)}
-    with LogWriter(path, CHANNELS, meta, epoch_utc_ns=log.epoch_utc_ns) as w:
+    with LogWriter(path, channels(encoding), meta, epoch_utc_ns=log.epoch_utc_ns,
+                   compression=COMPRESSION[encoding]) as w:
         for k, t in enumerate(log.t_s.tolist()):
             w.write(PLOTS_TOPIC, t, {"t_s": t, "track_id": log.track_id,
                                      "x_m": log.plots_m[:, k, 0], "y_m": log.plots_m[:, k, 1]})

@@ -12,6 +12,7 @@ import numpy as np
 
 from tma.errors import InputError
 from tma.io.mcap_log import (
+    COMPRESSION,
     Channel,
     LogWriter,
     float_array,
@@ -28,9 +29,13 @@ from tma.io.mcap_log import (
 
 RANGES_TOPIC = "/ranging/ranges"
 SCHEMAS = {RANGES_TOPIC: "tma.RangeBatch"}
-CHANNELS = [Channel(RANGES_TOPIC, SCHEMAS[RANGES_TOPIC],
+
+
+def channels(encoding: str = "protobuf") -> list[Channel]:
+    """The ranges channel, messages in ``encoding`` (``"protobuf"`` or ``"json"``)."""
+    return [Channel(RANGES_TOPIC, SCHEMAS[RANGES_TOPIC],
                     {"units": "t_s: s; range_m, landmark_*_m: m",
-                     "frame": "local plane, x east, y north"})]
+                     "frame": "local plane, x east, y north"}, encoding=encoding)]
 
 
 @dataclass
@@ -77,10 +82,12 @@ def _pair(value) -> bool:
         is_number(v) for v in value)
 
 
-def write_ranges_log(path, log: RangesLog, metadata=None) -> int:
+def write_ranges_log(path, log: RangesLog, metadata=None, encoding="protobuf") -> int:
+    """Write ``log`` as MCAP (atomically), messages in ``encoding``; returns their number."""
     meta = {**(metadata or {}),
             "tma.model": json_record(log.model)}
-    with LogWriter(path, CHANNELS, meta, epoch_utc_ns=log.epoch_utc_ns) as w:
+    with LogWriter(path, channels(encoding), meta, epoch_utc_ns=log.epoch_utc_ns,
+                   compression=COMPRESSION[encoding]) as w:
         for k, t in enumerate(log.t_s.tolist()):
             for i, (lx, ly) in enumerate(log.landmarks_m.tolist()):
                 w.write(RANGES_TOPIC, t, {

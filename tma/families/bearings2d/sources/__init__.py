@@ -4,15 +4,14 @@ Source kinds: ``csv`` (CSV/TSV tables, ``csv_table.py``), ``nmea`` (NMEA 0183 ow
 navigation, ``nmea.py``), ``mcap`` (ROS 2, Foxglove or tma's own schema, ``mcap.py``). The kind
 is the ``format`` option or, under ``auto``, told from the file: the MCAP magic bytes or a
 first line starting with ``$`` (NMEA), else the extension (.csv/.tsv/.txt: CSV; .nmea/.nmea0183
-/.log: NMEA; .mcap: MCAP).
+/.log: NMEA; .mcap: MCAP). Each reader is imported when a file of its kind is read (pandas for
+CSV, the MCAP stack), not by every command that imports the reading options of ``base.py``.
 """
 
 from pathlib import Path
 
 from tma.errors import ConfigError, InputError
 from tma.families.bearings2d.sources.base import Recording, SourceOptions
-from tma.families.bearings2d.sources.csv_table import read_csv_table
-from tma.families.bearings2d.sources.nmea import is_nmea, read_nmea
 
 KINDS = ("csv", "nmea", "mcap")
 EXTENSIONS = {".csv": "csv", ".tsv": "csv", ".txt": "csv", ".nmea": "nmea", ".nmea0183": "nmea",
@@ -38,6 +37,8 @@ def source_kind(path, fmt="auto", option: str | None = "format") -> str:
         raise InputError(f"{path}: a directory, not a log file") from None
     if head.startswith(MCAP_MAGIC):
         return "mcap"
+    from tma.families.bearings2d.sources.nmea import is_nmea
+
     if is_nmea(head):
         return "nmea"
     kind = EXTENSIONS.get(path.suffix.lower())
@@ -55,13 +56,17 @@ def read_source(path, kind: str, options: SourceOptions, *, navigation: bool,
     CSV reader then looks only for those columns). One Recording per own-ship (several only
     when a table's tracks report different own-ship positions)."""
     if kind == "csv":
+        from tma.families.bearings2d.sources.csv_table import read_csv_table
+
         return read_csv_table(path, options, navigation=navigation, bearings=bearings)
     if kind == "nmea":
         if bearings:
             raise InputError(f"{path}: NMEA holds own-ship navigation only: give it as "
                              "navigation=FILE and the bearings as input=")
+        from tma.families.bearings2d.sources.nmea import read_nmea
+
         return [read_nmea(path)]
-    from tma.families.bearings2d.sources.mcap import read_mcap  # the MCAP stack, when needed
+    from tma.families.bearings2d.sources.mcap import read_mcap
 
     need = (("navigation",) if navigation else ()) + (("bearings",) if bearings else ())
     return [read_mcap(path, options, need=need)]

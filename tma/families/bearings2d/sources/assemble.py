@@ -18,8 +18,6 @@
 """
 
 import numpy as np
-import pandas as pd
-import pymap3d
 
 from tma.errors import InputError
 from tma.families.bearings2d.log import BearingsLog
@@ -143,6 +141,8 @@ def _local_plane(recordings, navs, options):
         lon0 = float(recordings[first].navigation.lon_deg[0])
         notes.append(f"local plane origin at the first own-ship fix {lat0:.7f}, {lon0:.7f} "
                      "(origin.lat/origin.lon)")
+    import pymap3d  # latitude/longitude navigation only
+
     positions = []
     for r in recordings:
         east, north, _ = pymap3d.geodetic2enu(r.navigation.lat_deg, r.navigation.lon_deg, 0.0,
@@ -156,6 +156,8 @@ def _track_ids(tracks: list[np.ndarray]):
     are named by text: ids are then 0..n-1 in sorted label order."""
     if not any(t.dtype == object for t in tracks):
         return [np.asarray(t, dtype=np.int64) for t in tracks], None
+    import pandas as pd  # text labels only: a log of numbered tracks is read without pandas
+
     codes, names = [], []
     for t in tracks:
         code, uniques = pd.factorize(np.asarray(t).astype(str).astype(object))

@@ -57,7 +57,7 @@ from tma.families.bearings2d.log import BEARINGS_TOPIC, nominal_sigma
 from tma.families.bearings2d.sources import mcap_foxglove, mcap_own, mcap_ros2
 from tma.families.bearings2d.sources.base import Bearings, Navigation, Recording, SourceOptions
 from tma.io.mcap_log import (
-    JsonDecoderFactory,
+    TmaDecoderFactory,
     check_integrity,
     float_array,
     format_utc,
@@ -179,7 +179,7 @@ class McapFile:
 
     def _decoder(self, channel):
         schema = self._summary.schemas.get(channel.schema_id)
-        for factory in (JsonDecoderFactory(), Ros2DecoderFactory(), ProtobufDecoderFactory()):
+        for factory in (TmaDecoderFactory(), Ros2DecoderFactory(), ProtobufDecoderFactory()):
             try:
                 decoder = factory.decoder_for(channel.message_encoding, schema)
             except Exception as exc:

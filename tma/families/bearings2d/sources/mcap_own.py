@@ -1,4 +1,4 @@
-"""tma's own schema in a bearing log (JSON channels, ``tma/families/bearings2d/log.py``).
+"""tma's own schema in a bearing log (JSON or protobuf, ``tma/families/bearings2d/log.py``).
 
 - own-ship ``tma.OwnshipNavigation``: ``{t_s, x_m, y_m}`` (s; x east, y north in m);
 - bearings ``tma.BearingBatch``: ``{t_s, track_id, bearing_deg}``, arrays (one message per
@@ -60,7 +60,8 @@ def bearings(msgs, file):
         t_msg = np.array([number(m["t_s"]) for m in obs])
         ids = [m["track_id"] for m in obs]
         values = [m["bearing_deg"] for m in obs]
-        if any(type(v) is list for v in ids) or any(type(v) is list for v in values):
+        arrays = (list, np.ndarray)  # JSON arrays; protobuf messages' numpy arrays
+        if any(type(v) in arrays for v in ids) or any(type(v) in arrays for v in values):
             ids = [int_array(v) for v in ids]  # arrays: one message per epoch
             values = [float_array(v) for v in values]
             sizes = np.array([v.size for v in ids])

@@ -12,7 +12,6 @@ fixed by the first batch and raised only when a later draw would otherwise overf
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import ndtri  # the normal quantile (light to import)
 
 from tma.config import require
 
@@ -122,6 +121,8 @@ class SamplingBudget:
         """``draw(k, rng) -> (points, log_weight)``; returns the moments and whether the
         accuracy target was reached (always True for a fixed count). The first ``keep``
         draws are kept in ``moments.kept`` (for plots)."""
+        from scipy.special import ndtri  # the normal quantile; imported by samplers only
+
         z = ndtri(0.5 + self.confidence / 2)
         moments = RatioMoments()
         total = self.n_samples if self.n_samples else self.max_samples

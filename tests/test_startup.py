@@ -1,0 +1,154 @@
+"""What every command pays before it does anything: ``import pipeline.<verb>`` (Hydra's
+config registry built from every family's dataclasses) loads no module that the stage does not
+need, so that a re-run with nothing to compute, and each joblib worker, starts quickly. Checked
+in fresh processes by the modules loaded, never by a timing. The light stand-ins for scipy.stats
+give its numbers exactly, and compiled kernels are made when first used."""
+
+import importlib.util
+import json
+import os
+import pickle
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+HEAVY = ("pandas", "matplotlib", "scipy.stats", "scipy.special", "numba", "joblib",
+         "pymap3d", "tqdm")
+
+
+def _loaded(code: str) -> set[str]:
+    """The heavy modules loaded (of ``HEAVY``) after running ``code`` in a fresh process."""
+    probe = f"{code}\nimport json, sys\nprint(json.dumps(sorted(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", probe], cwd=REPO, capture_output=True,
+                         text=True, check=True)
+    modules = set(json.loads(out.stdout.splitlines()[-1]))
+    return {name for name in HEAVY if name in modules}
+
+
+@pytest.mark.parametrize("verb", ["simulate", "estimate", "ingest"])
+def test_a_command_imports_nothing_heavy_it_does_not_need(verb):
+    """Registering every estimator's defaults imports every estimator module: none may load
+    numba, scipy, pandas or matplotlib at import (they load where they are used)."""
+    assert _loaded(f"import pipeline.{verb}") == set()
+
+
+def test_aggregate_imports_neither_scipy_stats_nor_the_compiler():
+    assert _loaded("import pipeline.aggregate\nimport tma.families.bearings2d.report") <= {
+        "pandas", "matplotlib", "scipy.special"}
+
+
+def test_every_estimator_and_report_module_imports_without_scipy_stats_or_numba():
+    code = """
+from tma.families import NAMES, family
+for name in NAMES:
+    fam = family(name)
+    fam.scenario, fam.report
+    for estimator in fam.estimators:
+        fam.estimator_class(estimator)
+"""
+    assert not _loaded(code) & {"scipy.stats", "numba", "joblib"}
+
+
+def test_the_scipy_special_stand_ins_are_scipy_stats_exactly():
+    from scipy.stats import chi2, norm
+
+    from tma.families.bearing_doppler3d.metrics import nees_band
+    from tma.families.bearings2d.metrics import NEES_95
+
+    assert NEES_95 == float(chi2.ppf(0.95, 4))
+    for n_paths in (1, 7, 100, 10_000):
+        for level in (0.9, 0.95, 0.99):
+            expected = (chi2.ppf((1 - level) / 2, 6 * n_paths) / n_paths,
+                        chi2.ppf((1 + level) / 2, 6 * n_paths) / n_paths)
+            assert nees_band(n_paths, level=level) == expected
+    from scipy.special import ndtri
+
+    for confidence in np.linspace(0.01, 0.99, 99):
+        assert ndtri(0.5 + confidence / 2) == norm.ppf(0.5 + confidence / 2)
+
+
+KERNELS = """
+from tma.jit import njit
+
+@njit()
+def twice(x):
+    return 2.0 * x
+
+@njit()
+def quadruple(x):
+    return twice(twice(x))  # a kernel calling another before either was made
+"""
+
+
+def test_a_kernel_is_made_when_first_used(tmp_path, monkeypatch):
+    """Decorating loads no numba; the first call makes the kernel, inner kernels included,
+    and a kernel pickles by reference like a function."""
+    (tmp_path / "kernels_probe.py").write_text(KERNELS)
+    code = (f"import sys; sys.path.insert(0, {str(tmp_path)!r})\nimport kernels_probe\n"
+            "assert 'numba' not in sys.modules\n"
+            "assert kernels_probe.quadruple(1.5) == 6.0\n"
+            "assert 'numba' in sys.modules\n"
+            "assert kernels_probe.twice.signatures  # the dispatcher's, once made\n")
+    subprocess.run([sys.executable, "-c", code], cwd=REPO, check=True, env={
+        **os.environ, "PYTHONPATH": str(REPO), "NUMBA_CACHE_DIR": str(tmp_path / "cache")})
+    spec = importlib.util.spec_from_file_location("kernels_probe", tmp_path / "kernels_probe.py")
+    module = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, "kernels_probe", module)
+    spec.loader.exec_module(module)
+    assert pickle.loads(pickle.dumps(module.twice)) is module.twice
+    assert "numba" not in _loaded(f"import sys; sys.path.insert(0, {str(tmp_path)!r})\n"
+                                  "import pickle, kernels_probe\n"
+                                  "pickle.loads(pickle.dumps(kernels_probe.twice))")
+
+
+def test_save_figure_writes_the_bytes_savefig_writes(tmp_path):
+    """``save_figure`` drops the placeholder engine ``tight_layout`` leaves (one draw less):
+    the file is the same."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from tma.tables import save_figure
+
+    def figure():
+        fig, axes = plt.subplots(1, 2, figsize=(6, 3), sharey=True)
+        for i, ax in enumerate(axes):
+            ax.plot([0, 1, 2], [i, 2 * i, 1], marker="o", label=f"line {i}")
+            ax.set_title(f"panel {i}")
+            ax.set_xlabel("sigma (deg)")
+        axes[0].legend()
+        fig.suptitle("title")
+        fig.tight_layout()
+        return fig
+
+    fig = figure()
+    fig.savefig(tmp_path / "plain.png", format="png", dpi=120, metadata={"Software": None})
+    plt.close(fig)
+    fig = figure()
+    save_figure(fig, tmp_path / "saved.png")
+    plt.close(fig)
+    assert (tmp_path / "saved.png").read_bytes() == (tmp_path / "plain.png").read_bytes()
+
+
+def test_in_threads_keeps_item_order_and_raises_the_first_failure_in_item_order():
+    """What every stage verifies (datasets, runs) is checked several files at a time: the
+    results and the error must be those of the plain loop."""
+    import time
+
+    from tma.parallel import in_threads
+
+    def check(i):
+        time.sleep(0.02 * (5 - i))  # later items finish first
+        if i in (2, 4):
+            raise ValueError(f"item {i}")
+        return i * i
+
+    assert in_threads(check, [0, 1, 3]) == [0, 1, 9]
+    with pytest.raises(ValueError, match="item 2"):
+        in_threads(check, range(5))
+    assert in_threads(check, []) == []
