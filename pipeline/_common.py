@@ -35,7 +35,7 @@ from tma.families.bearings2d.sources.base import GROUPS as SOURCE_GROUPS
 from tma.io.atomic import write_json_atomic
 from tma.io.dataset import Dataset, datasets_dir
 from tma.io.owned import plain_name
-from tma.parallel import Engine, keep_freed_memory
+from tma.parallel import Engine, keep_freed_memory, quick_exit
 
 CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
 log = logging.getLogger("tma")
@@ -186,6 +186,7 @@ def run_stage(fn, cfg: DictConfig):
     one line naming the file that holds its traceback, exit status 1."""
     global _stage_hydra
     keep_freed_memory()  # the main process runs vectorised work too (training, serial shards)
+    quick_exit()
     logging.raiseExceptions = False  # a full disk must not turn log writes into tracebacks
     _stage_hydra = HydraConfig.get() if HydraConfig.initialized() else None
     try:

@@ -105,6 +105,32 @@ def test_parquet_round_trip(tmp_path):
     assert pq.read_table(tmp_path / "truth.parquet").equals(truth)
 
 
+def test_verified_bytes_are_read_as_the_file_is(tmp_path):
+    """A dataset file whose sha256 was checked is parsed from the bytes checked (no second
+    read) and without its own CRCs, which that sha256 already covers; the log is the same."""
+    from tma.io.atomic import VerifiedPath, sha256_file
+    from tma.io.dataset import Dataset, write_manifest
+    from tma.io.mcap_log import check_integrity
+
+    log, _ = _small_log()
+    shard = tmp_path / "log" / "shard-00000.mcap"
+    shard.parent.mkdir()
+    write_bearings_log(shard, log)
+    write_manifest(tmp_path, family="bearings2d", source="simulate", config={},
+                   shards={"log/shard-00000.mcap": {"sha256": sha256_file(shard),
+                                                    "bytes": shard.stat().st_size}}, files={})
+    verified = Dataset.open(tmp_path).verified_path("log/shard-00000.mcap")
+    assert isinstance(verified, VerifiedPath) and verified.data == shard.read_bytes()
+    ours, plain = read_bearings_log(verified), read_bearings_log(shard)
+    for f in dataclasses.fields(ours):
+        a, b = getattr(ours, f.name), getattr(plain, f.name)
+        assert np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b, f.name
+    damaged = bytearray(verified.data)
+    damaged[20] ^= 0xFF  # inside the data section: its CRC no longer holds
+    assert "CRC" in check_integrity(bytes(damaged))
+    assert check_integrity(bytes(damaged), crcs=False) is None  # what the sha256 refuses
+
+
 def test_truncated_and_non_mcap_files_are_rejected(tmp_path):
     log, _ = _small_log()
     path = tmp_path / "log.mcap"

@@ -157,6 +157,46 @@ def test_tampered_dataset_is_refused(paths, tmp_path):
         estimate_stage(cfg)
 
 
+def test_a_truncated_shard_stops_estimate_before_any_work(paths, tmp_path):
+    """Before a stage starts, every file of its datasets is checked to be there at its size
+    (no reading); a shard cut short fails there, before a worker starts or a run is made."""
+    cfg = compose_cfg([*SMALL, *paths, "parallel=serial"])
+    simulate_stage(cfg)
+    shard = next((tmp_path / "data" / "datasets").glob("*/log/shard-00002.mcap"))
+    shard.write_bytes(shard.read_bytes()[:-100])
+    with pytest.raises(IntegrityError, match="truncated or replaced"):
+        estimate_stage(cfg)
+    assert not (tmp_path / "data" / "runs").exists()
+
+
+def test_each_stage_checks_the_sha256_of_what_it_reads(paths, tmp_path):
+    """The sha256 of a file is checked where its bytes are read: aggregate reads the truth
+    (refused when edited) and not the logs, whose results are the finished runs."""
+    cfg = compose_cfg([*SMALL, *paths, "parallel=serial"])
+    simulate_stage(cfg)
+    estimate_stage(cfg)
+    dataset = next((tmp_path / "data" / "datasets").glob("*/manifest.json")).parent
+    for name in ("log/shard-00001.mcap", "truth.parquet"):
+        data = bytearray((dataset / name).read_bytes())
+        data[len(data) // 2] ^= 0xFF  # same size: only the hash tells
+        (dataset / name).write_bytes(bytes(data))
+    with pytest.raises(IntegrityError, match="truth.parquet: sha256 .* does not match"):
+        aggregate_stage(cfg)
+    with pytest.raises(IntegrityError, match="shard-00001.mcap: sha256 .* does not match"):
+        estimate_stage(compose_cfg([*SMALL, *paths, "parallel=serial", "force=true"]))
+
+
+def test_the_table_command_loads_the_report_while_the_workers_estimate():
+    import sys
+
+    from pipeline.table import prefetch_report
+
+    thread = prefetch_report(compose_cfg(["scenario=ranges2d"]))
+    thread.join()
+    assert "tma.families.ranges2d.report" in sys.modules
+    assert prefetch_report(compose_cfg(["scenario.family=nosuch"])) is None
+
+
 def test_cli_sweep_and_joblib_launcher(tmp_path):
     common = [f"paths.data_dir={tmp_path}", "scenario.n_tracks=30", "scenario.shard_size=15",
               "progress=false"]

@@ -29,16 +29,88 @@ def _loaded(code: str) -> set[str]:
     return {name for name in HEAVY if name in modules}
 
 
-@pytest.mark.parametrize("verb", ["simulate", "estimate", "ingest"])
+@pytest.mark.parametrize("verb", ["simulate", "estimate", "ingest", "aggregate", "table"])
 def test_a_command_imports_nothing_heavy_it_does_not_need(verb):
     """Registering every estimator's defaults imports every estimator module: none may load
     numba, scipy, pandas or matplotlib at import (they load where they are used)."""
     assert _loaded(f"import pipeline.{verb}") == set()
 
 
+def test_a_worker_simulates_and_estimates_a_shard_without_pandas(tmp_path):
+    """A worker writes Parquet (truth, shard estimates) but never needs pandas, which
+    pyarrow would import on its first ``pa.array`` or ``pq.read_table`` (0.26 s a worker)."""
+    code = f"""
+import os
+from tma.config import to_plain
+from tma.families import build_estimator
+from tma.families.bearings2d.scenario import Config
+from tma.io.dataset import write_manifest
+from tma.runs import ShardTask, estimate_shard_group
+from tma.simulate import ShardTask as SimulateTask, simulate_group
+
+root = r"{tmp_path}"
+config = to_plain(Config(n_tracks=20, shard_size=20))
+record, = simulate_group([SimulateTask(root, config, 0)])
+shard = "log/shard-00000.mcap"
+write_manifest(root, family="bearings2d", source="simulate", config=config, name="{tmp_path.name}",
+               shards={{shard: {{"sha256": record["sha256"],
+                                "bytes": os.path.getsize(os.path.join(root, shard))}}}},
+               files={{}})
+tasks = [ShardTask(root, shard, to_plain(build_estimator({{"name": n}}).config),
+                   f"{{root}}/{{n}}.parquet", "key", root) for n in ("lm", "nbearings")]
+assert [r["rows"] for r in estimate_shard_group(tasks)] == [20, 20]
+"""
+    assert "pandas" not in _loaded(code)
+
+
 def test_aggregate_imports_neither_scipy_stats_nor_the_compiler():
     assert _loaded("import pipeline.aggregate\nimport tma.families.bearings2d.report") <= {
         "pandas", "matplotlib", "scipy.special"}
+
+
+def test_registered_defaults_are_omegaconfs_exactly():
+    """Every command registers each dataclass's defaults, read off an instance instead of
+    OmegaConf's structured node (8 ms each): the same values, of the same types."""
+    from omegaconf import OmegaConf
+
+    from tma.config import defaults
+    from tma.families import NAMES, family
+
+    schemas = [family(n).scenario.Config for n in NAMES] + [
+        family(n).estimator_class(e).Config for n in NAMES for e in family(n).estimators]
+    for schema in schemas:
+        expected = OmegaConf.to_container(OmegaConf.structured(schema))
+        assert repr(defaults(schema)) == repr(expected), schema.__module__
+
+
+def test_defaults_of_a_dataclass_without_every_default_are_omegaconfs():
+    from dataclasses import dataclass, field
+
+    from tma.config import defaults
+
+    @dataclass
+    class Partial:
+        name: str
+        sizes: tuple = (1, 2)
+        nested: dict = field(default_factory=lambda: {"a": [1.5]})
+
+    assert defaults(Partial) == {"name": "???", "sizes": [1, 2], "nested": {"a": [1.5]}}
+
+
+def test_a_process_skips_the_collections_of_its_shutdown():
+    """``quick_exit``: at exit every object is frozen out of the collector's reach (an atexit
+    handler registered before it runs after it and sees them frozen); the output is flushed."""
+    code = """
+import atexit, gc
+atexit.register(lambda: print("frozen", gc.get_freeze_count() > 0, flush=True))
+from tma.parallel import quick_exit
+quick_exit()
+quick_exit()  # once per process
+print("done")
+"""
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True,
+                         text=True, check=True)
+    assert out.stdout.split("\n")[:2] == ["done", "frozen True"]
 
 
 def test_every_estimator_and_report_module_imports_without_scipy_stats_or_numba():

@@ -11,20 +11,21 @@ import json
 import operator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import pandas as pd
 import pyarrow as pa
-import pyarrow.compute as pc
-import pyarrow.dataset as pds
-import pyarrow.fs as pafs
 import pyarrow.parquet as pq
+
+if TYPE_CHECKING:  # pandas (0.2 s) and pyarrow.dataset load where used, not at start-up
+    import pandas as pd
+    import pyarrow.dataset as pds
 
 from tma.errors import InputError
 from tma.families import family as family_of
 from tma.io.dataset import Dataset, datasets_dir
 from tma.io.owned import remove_stale_temporaries
 from tma.parallel import in_threads
-from tma.runs import MANIFEST, full_config, open_run, run_path, runs_dir, verify_datasets
+from tma.runs import MANIFEST, check_datasets, full_config, open_run, run_path, runs_dir
 
 
 @dataclass
@@ -33,14 +34,14 @@ class RunEntry:
     estimator: str
     run_root: Path
     manifest: dict
-    estimates: pd.DataFrame
+    estimates: "pd.DataFrame"
 
 
 def aggregate(data_dir, tables_dir, jobs, table=None, default_suffix="custom") -> list[Path]:
     """Aggregate the runs of ``jobs`` (``(Dataset, estimator config)`` pairs) into one table
     per family: ``table`` (``<table>-<family>`` when several families), else
     ``<dataset>-<estimator>`` for a single run, else ``<family>-<default_suffix>``."""
-    verify_datasets(ds for ds, _ in jobs)
+    check_datasets(ds for ds, _ in jobs)
     runs = []
     for dataset, est_cfg in jobs:
         est_cfg = full_config(dataset, est_cfg)  # no prepare: aggregate trains nothing
@@ -97,7 +98,7 @@ def _constant_type(values: list) -> pa.DataType:
         return pa.string()
 
 
-def metrics_dataset(data_dir="data", name="metrics", family=None) -> pds.Dataset:
+def metrics_dataset(data_dir="data", name="metrics", family=None) -> "pds.Dataset":
     """Every run's ``<name>.parquet`` (``metrics``, written by aggregate) under
     ``<data_dir>/runs/`` as one ``pyarrow.dataset``, nothing loaded yet. Besides the file's
     own columns each row carries its run's ``family``, ``dataset``, ``estimator`` and ``run``
@@ -111,6 +112,10 @@ def metrics_dataset(data_dir="data", name="metrics", family=None) -> pds.Dataset
     Runs of several families share one schema (their columns' union, null where absent);
     a column whose types disagree between files fails: give ``family``.
     """
+    import pyarrow.compute as pc
+    import pyarrow.dataset as pds
+    import pyarrow.fs as pafs
+
     constants, paths = [], []
     root = runs_dir(data_dir)
     for path in sorted(root.glob(f"*/*/{name}.parquet")):

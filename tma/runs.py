@@ -23,12 +23,12 @@ from time import perf_counter
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.parquet as pq
 
 from tma import __version__
 from tma.config import to_plain
 from tma.errors import ConfigError, InputError, IntegrityError, TmaError
 from tma.families import build_estimator, estimator_class, scenario_module
+from tma.io import arrow
 from tma.io.atomic import sha256_json, write_json_atomic, write_parquet_atomic
 from tma.io.dataset import Dataset, file_record, read_sealed_manifest, sealed
 from tma.io.owned import adopt_broken, locked, recover, staging_dir, swap_in
@@ -71,7 +71,7 @@ def columns_to_table(track_id, columns: dict) -> pa.Table:
     (track_id, step), and per-track columns repeat on each of their rows."""
     steps = {c.shape[1] for c in columns.values() if np.ndim(c) == 2}
     if not steps:
-        return pa.table({"track_id": track_id, **columns})
+        return arrow.table({"track_id": track_id, **columns})
     if len(steps) > 1:
         raise ValueError(f"per-step columns disagree on the number of steps: {steps}")
     n_steps = steps.pop()
@@ -79,7 +79,7 @@ def columns_to_table(track_id, columns: dict) -> pa.Table:
             "step": np.tile(np.arange(n_steps, dtype=np.int64), track_id.size)}
     for name, col in columns.items():
         long[name] = np.ravel(col) if np.ndim(col) == 2 else np.repeat(col, n_steps)
-    return pa.table(long)
+    return arrow.table(long)
 
 
 def extra_path(shard_out: Path, name: str) -> Path:
@@ -133,7 +133,7 @@ def estimate_shard(task: ShardTask, log) -> dict:
         raise RuntimeError(f"estimator '{estimator.name}' returned side tables "
                            f"{sorted(extras)}, declared {sorted(estimator.side_tables)}")
     for name, table in extras.items():
-        write_parquet_atomic(extra_path(out, name), pa.table(table))
+        write_parquet_atomic(extra_path(out, name), arrow.table(table))
     write_parquet_atomic(out, columns_to_table(log.track_id, columns))
     epochs = int(log.t_s.size)
     return mark_finished(out, task.key, rows=int(log.n_tracks), epochs=epochs, seconds=seconds,
@@ -164,14 +164,14 @@ def finish_run(stage: Path, dataset: Dataset, estimator_config: dict, tasks, rec
     """Concatenate shard outputs into ``estimates.parquet`` and write the run manifest."""
     import pyarrow.compute as pc  # here: a re-run whose runs are all done needs none of it
 
-    table = pa.concat_tables(pq.read_table(t.out_path) for t in tasks)
+    table = pa.concat_tables(arrow.read_table(t.out_path) for t in tasks)
     write_parquet_atomic(stage / ESTIMATES, table)
     shards = {Path(t.out_path).name: file_record(t.out_path, rows=r["rows"])
               for t, r in zip(tasks, records, strict=True)}
     files = {ESTIMATES: file_record(stage / ESTIMATES, rows=table.num_rows)}
     for name in sorted({n for r in records for n in r.get("extras", [])}):
         parts = [extra_path(Path(t.out_path), name) for t in tasks]
-        extra = pa.concat_tables(pq.read_table(p) for p in parts if p.exists())
+        extra = pa.concat_tables(arrow.read_table(p) for p in parts if p.exists())
         write_parquet_atomic(stage / f"{name}.parquet", extra)
         files[f"{name}.parquet"] = file_record(stage / f"{name}.parquet", rows=extra.num_rows)
     columns = table.column_names
@@ -215,7 +215,7 @@ def _is_good(root: Path) -> bool:
 def estimate_runs(data_dir, jobs, *, engine=2, progress=True, force=False):
     """Run every (dataset, estimator config) job, all shards in one worker pool; returns the
     run directories."""
-    verify_datasets(ds for ds, _ in jobs)
+    check_datasets(ds for ds, _ in jobs)
     planned = []
     for dataset, est_cfg in jobs:
         est_cfg = full_config(dataset, est_cfg)
@@ -225,10 +225,13 @@ def estimate_runs(data_dir, jobs, *, engine=2, progress=True, force=False):
                                 force=force)
 
 
-def verify_datasets(datasets) -> None:
-    """``Dataset.verify`` (size and sha256 of every file) of each dataset once, however many
-    jobs read it, several at a time (hashing releases the GIL)."""
-    in_threads(Dataset.verify, {id(ds): ds for ds in datasets}.values())
+def check_datasets(datasets) -> None:
+    """``Dataset.check_files`` of each dataset once, however many jobs read it: a missing or
+    truncated file stops the stage before it starts. Each file's sha256 is checked where its
+    bytes are read (an estimate worker its shard, a report the truth), so no stage reads a
+    dataset twice and every byte read is verified."""
+    for dataset in {id(ds): ds for ds in datasets}.values():
+        dataset.check_files()
 
 
 def _estimate_locked(data_dir, planned, *, engine, progress, force):
@@ -278,7 +281,7 @@ def _estimate_locked(data_dir, planned, *, engine, progress, force):
 
 def open_run(root) -> tuple[dict, "pa.Table"]:
     """A finished run's manifest and estimates, after ``verify_run``."""
-    return verify_run(root), pq.read_table(Path(root) / ESTIMATES)
+    return verify_run(root), arrow.read_table(Path(root) / ESTIMATES)
 
 
 def verify_run(root) -> dict:

@@ -13,12 +13,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pyarrow as pa
-import pyarrow.parquet as pq
 
 from tma import __version__
 from tma.config import to_plain
 from tma.errors import ConfigError, TmaError
 from tma.families import dataset_name, load_scenario
+from tma.io import arrow
 from tma.io.atomic import sha256_json, write_parquet_atomic
 from tma.io.dataset import Dataset, datasets_dir, file_record, shard_relpath, write_manifest
 from tma.io.owned import locked, recover, staging_dir, swap_in
@@ -150,7 +150,7 @@ def _simulate_locked(configs, roots, *, engine, force, progress):
         }
         files = {}
         if any(r["truth_rows"] for r in records):
-            truth = pa.concat_tables(pq.read_table(t.truth_path) for t in shard_tasks)
+            truth = pa.concat_tables(arrow.read_table(t.truth_path) for t in shard_tasks)
             write_parquet_atomic(stage / "truth.parquet", truth)
             files["truth.parquet"] = file_record(stage / "truth.parquet", rows=truth.num_rows)
         write_manifest(stage, family=module.FAMILY, source="simulate", config=plain,

@@ -33,16 +33,38 @@ def write_json_atomic(path, obj):
 
 
 def write_parquet_atomic(path, table):
-    """Write a pyarrow table to Parquet atomically (zstd, no pandas metadata)."""
-    with atomic_path(path) as tmp:
-        import pyarrow.parquet as pq  # here: most commands never write Parquet
+    """Write a pyarrow table to Parquet atomically (zstd, no pandas metadata).
 
-        pq.write_table(table, tmp, compression="zstd")
+    Floating-point columns are stored plain, not dictionary-encoded: their values hardly
+    repeat, so the writer built a dictionary only to give it up past its size limit, which
+    made writing estimates 3x slower and the file 20 % larger. Other columns (ids, counts,
+    flags, status strings) keep the dictionary, which shrinks them."""
+    import pyarrow as pa  # here: most commands never write Parquet
+    import pyarrow.parquet as pq
+
+    dictionary = [field.name for field in table.schema if not pa.types.is_floating(field.type)]
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp, compression="zstd", use_dictionary=dictionary)
 
 
 def write_text_atomic(path, text: str):
     with atomic_path(path) as tmp:
         tmp.write_text(text)
+
+
+class VerifiedPath(type(Path())):
+    """A file's path with its bytes, whose sha256 was just checked against a manifest
+    (``Dataset.verified_path``). A reader parses these very bytes instead of reading the
+    file again, and skips the file's own checksums (an MCAP's CRCs): tma wrote those bytes
+    with correct ones, and the sha256 says these are the bytes it wrote."""
+
+    data: bytes
+
+    @classmethod
+    def of(cls, path, data: bytes) -> "VerifiedPath":
+        verified = cls(path)
+        verified.data = data
+        return verified
 
 
 def sha256_file(path, chunk_bytes=1 << 20) -> str:

@@ -14,13 +14,15 @@ edited value (a relabelled sigma, a forged content hash) is refused rather than 
 Every stage that uses a dataset verifies it first (``Dataset.verify``).
 """
 
+import hashlib
 import json
 from dataclasses import dataclass
 from pathlib import Path
 
 from tma import __version__
 from tma.errors import InputError, IntegrityError
-from tma.io.atomic import sha256_file, sha256_json, write_json_atomic
+from tma.io import arrow
+from tma.io.atomic import VerifiedPath, sha256_file, sha256_json, write_json_atomic
 
 FORMAT = "tma-dataset"
 FORMAT_VERSION = 2
@@ -123,9 +125,21 @@ class Dataset:
 
     def verify(self) -> "Dataset":
         """Check every listed file: present, of its recorded size and sha256."""
-        for relpath in [*self.shard_paths, *sorted(self.manifest["files"])]:
-            self.verified_path(relpath)
+        for relpath in self.listed_paths:
+            self._verify_file(relpath)
         return self
+
+    def check_files(self) -> "Dataset":
+        """Check every listed file is present with its recorded size, reading none of them:
+        what a stage does before it starts. The sha256 of a file is checked by whoever reads
+        its bytes (``verified_path``: each estimate worker its shard, reports the truth)."""
+        for relpath in self.listed_paths:
+            self._checked_size(relpath)
+        return self
+
+    @property
+    def listed_paths(self) -> list[str]:
+        return [*self.shard_paths, *sorted(self.manifest["files"])]
 
     @property
     def name(self) -> str:
@@ -147,8 +161,7 @@ class Dataset:
     def has_truth(self) -> bool:
         return "truth.parquet" in self.manifest["files"]
 
-    def verified_path(self, relpath: str) -> Path:
-        """Path of a dataset file after checking its sha256 against the manifest."""
+    def _checked_size(self, relpath: str) -> tuple[Path, dict]:
         record = self.manifest["shards"].get(relpath) or self.manifest["files"].get(relpath)
         if record is None:
             raise InputError(f"{self.root}: '{relpath}' is not listed in the manifest")
@@ -159,19 +172,31 @@ class Dataset:
         if size != record["bytes"]:
             raise IntegrityError(f"{path}: {size} bytes, the manifest records {record['bytes']} "
                                  f"(truncated or replaced); {_RECREATE}")
-        actual = sha256_file(path)
+        return path, record
+
+    def verified_path(self, relpath: str) -> VerifiedPath:
+        """Path of a dataset file after checking its size and sha256 against the manifest,
+        with the bytes checked (``VerifiedPath``: a reader parses those, not a second read)."""
+        path, record = self._checked_size(relpath)
+        data = path.read_bytes()
+        self._check_sha256(path, record, hashlib.sha256(data).hexdigest())
+        return VerifiedPath.of(path, data)
+
+    def _verify_file(self, relpath: str) -> None:
+        path, record = self._checked_size(relpath)
+        self._check_sha256(path, record, sha256_file(path))  # streamed: nothing kept
+
+    @staticmethod
+    def _check_sha256(path: Path, record: dict, actual: str) -> None:
         if actual != record["sha256"]:
             raise IntegrityError(
                 f"{path}: sha256 {actual[:12]}... does not match the manifest "
                 f"({record['sha256'][:12]}...); the dataset was modified or damaged: "
                 f"{_RECREATE}"
             )
-        return path
 
     def read_truth(self):
         """Truth table as pandas (verified), or None for a dataset without truth."""
         if not self.has_truth:
             return None
-        import pyarrow.parquet as pq  # here: only reports read the truth
-
-        return pq.read_table(self.verified_path("truth.parquet")).to_pandas()
+        return arrow.read_table(self.verified_path("truth.parquet")).to_pandas()

@@ -40,7 +40,7 @@ from mcap_protobuf.schema import build_file_descriptor_set
 
 from tma import __version__
 from tma.errors import ConfigError, InputError
-from tma.io.atomic import atomic_path
+from tma.io.atomic import VerifiedPath, atomic_path
 from tma.io.mcap_writer import CHUNK_SIZE, MAGIC, Encoded, McapWriter, interleave, json_objects
 from tma.io.proto_columns import decode_message, encode_columns, encode_message, proto_schema
 
@@ -434,14 +434,15 @@ _DATA_END = struct.Struct("<BQI")  # opcode, length, data_section_crc
 _FOOTER_OPCODE, _DATA_END_OPCODE = 0x02, 0x0F
 
 
-def check_integrity(data: bytes) -> str | None:
+def check_integrity(data: bytes, crcs: bool = True) -> str | None:
     """Why ``data`` is not an intact MCAP file with a summary section, or None.
 
     Checks the magic at both ends, that the Footer and the DataEnd (the record just before
-    the summary) are where and what they must be, the Footer's ``summary_crc`` (summary
-    section + the Footer's other fields) and the DataEnd's ``data_section_crc`` (the magic,
-    header, chunks, message indexes, metadata: everything before DataEnd). A CRC of 0 means
-    "not computed" and is skipped. Chunk CRCs are checked by mcap as chunks are read.
+    the summary) are where and what they must be, and (``crcs``) the Footer's
+    ``summary_crc`` (summary section + the Footer's other fields) and the DataEnd's
+    ``data_section_crc`` (the magic, header, chunks, message indexes, metadata: everything
+    before DataEnd). A CRC of 0 means "not computed" and is skipped. Chunk CRCs are checked
+    by mcap as chunks are read.
     """
     view = memoryview(data)
     if not data.startswith(MAGIC):
@@ -457,13 +458,14 @@ def check_integrity(data: bytes) -> str | None:
     data_end_at = summary_start - _DATA_END.size
     if not len(MAGIC) <= data_end_at < summary_start <= footer_at:
         return "damaged footer: summary offset out of range"
-    if summary_crc and summary_crc != zlib.crc32(view[footer_at:footer_at + _FOOTER.size - 4],
-                                                 zlib.crc32(view[summary_start:footer_at])):
+    if crcs and summary_crc and summary_crc != zlib.crc32(
+            view[footer_at:footer_at + _FOOTER.size - 4],
+            zlib.crc32(view[summary_start:footer_at])):
         return "summary section or footer fails its CRC check (damaged)"
     opcode, length, data_crc = _DATA_END.unpack_from(data, data_end_at)
     if (opcode, length) != (_DATA_END_OPCODE, 4):
         return "damaged: no DataEnd record before the summary section"
-    if data_crc and data_crc != zlib.crc32(view[:data_end_at]):
+    if crcs and data_crc and data_crc != zlib.crc32(view[:data_end_at]):
         return "data section fails its CRC check (damaged)"
     return None
 
@@ -478,18 +480,20 @@ def read_log(path, expected: dict[str, str], nonempty: bool = False):
     ``check_integrity``), for missing topics or mismatched schemas, for a message that is
     not a JSON object and for message counts that contradict the summary's statistics.
     """
-    path = Path(path)
-    try:
-        data = path.read_bytes()  # logs are shards of modest size: check what we parse
+    # bytes checked against a dataset manifest: their CRCs are right, the sha256 says so
+    crcs = not isinstance(path, VerifiedPath)
+    try:  # logs are shards of modest size: check what we parse
+        data = Path(path).read_bytes() if crcs else path.data
     except FileNotFoundError:
         raise InputError(f"{path}: no such file") from None
     except OSError as exc:
         raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    problem = check_integrity(data)
+    path = Path(path)
+    problem = check_integrity(data, crcs)
     if problem:
         raise InputError(f"{path}: not a valid MCAP log ({problem})")
     try:
-        messages, metadata = _read_records(BytesIO(data), expected, str(path))
+        messages, metadata = _read_records(BytesIO(data), expected, str(path), crcs)
     except InputError:
         raise
     except Exception as exc:
@@ -504,8 +508,8 @@ def read_log(path, expected: dict[str, str], nonempty: bool = False):
     return messages, metadata
 
 
-def _read_records(stream, expected: dict[str, str], where: str):
-    reader = SeekingReader(stream, validate_crcs=True, decoder_factories=[TmaDecoderFactory()])
+def _read_records(stream, expected: dict[str, str], where: str, crcs: bool = True):
+    reader = SeekingReader(stream, validate_crcs=crcs, decoder_factories=[TmaDecoderFactory()])
     summary = reader.get_summary()
     found = {ch.topic: summary.schemas.get(ch.schema_id) for ch in summary.channels.values()}
     missing = [t for t in expected if t not in found]
@@ -531,7 +535,7 @@ def _read_records(stream, expected: dict[str, str], where: str):
     scan = reader
     if not summary.chunk_indexes:  # mcap would scan the file without checking chunk CRCs
         stream.seek(0)
-        scan = NonSeekingReader(stream, validate_crcs=True,
+        scan = NonSeekingReader(stream, validate_crcs=crcs,
                                 decoder_factories=[TmaDecoderFactory()])
     times = {t: [] for t in expected}
     # in file order (mcap's log-time order costs a heap operation per message); sorted below

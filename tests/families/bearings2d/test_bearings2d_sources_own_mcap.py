@@ -22,10 +22,10 @@ from tma.families.bearings2d.ingest import ingest
 from tma.families.bearings2d.log import (
     BEARINGS_TOPIC,
     CHANNELS,
-    channels,
     OWNSHIP_TOPIC,
     SENSOR,
     BearingsLog,
+    channels,
     write_bearings_log,
 )
 from tma.families.bearings2d.sources.base import source_options

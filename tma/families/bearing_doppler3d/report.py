@@ -12,7 +12,6 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 import pyarrow as pa  # noqa: E402
-import pyarrow.parquet as pq  # noqa: E402
 
 from tma.families import estimator_class  # noqa: E402
 from tma.families.bearing_doppler3d import paper  # noqa: E402
@@ -26,6 +25,7 @@ from tma.families.bearing_doppler3d.metrics import (  # noqa: E402
     per_step,
 )
 from tma.families.bearing_doppler3d.model import STATE_NAMES  # noqa: E402
+from tma.io import arrow  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
 from tma.paper import write_against_paper  # noqa: E402
 from tma.tables import markdown_table, save_figure, write_csv, write_markdown  # noqa: E402
@@ -59,7 +59,7 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
         divergent = (paths["status"] == "divergent").to_numpy()
         keep = ~divergent
         steps = per_step(err, est, t, keep, K)
-        covariance = pq.read_table(e.run_root / "covariance.parquet").to_pandas()
+        covariance = arrow.read_table(e.run_root / "covariance.parquet").to_pandas()
         path_nees, stored = nees(err, covariance, np.unique(est["track_id"]))
         nees_steps = pd.DataFrame({"step": stored, "t_s": t[stored],
                                    "nees_mean": np.nanmean(path_nees[keep], axis=0)})

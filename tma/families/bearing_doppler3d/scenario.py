@@ -12,7 +12,6 @@ truth and angle noise) from ``SeedSequence(seed, spawn_key=(shard,))``.
 from dataclasses import dataclass, field
 
 import numpy as np
-import pyarrow as pa
 
 from tma.config import require
 from tma.families.bearing_doppler3d.log import (
@@ -21,6 +20,7 @@ from tma.families.bearing_doppler3d.log import (
     write_hydrophone_log,
 )
 from tma.families.bearing_doppler3d.model import STATE_NAMES, AuvModel, model_record
+from tma.io import arrow
 from tma.io.mcap_log import config_epoch_ns
 from tma.sharding import shard_rng, shard_track_ids
 
@@ -151,7 +151,7 @@ def from_raw(cfg: Config, shard_index: int, raw):
              "t_s": np.tile(t, n)}
     for i, name in enumerate(STATE_NAMES):
         table[name] = truth[..., i].ravel()
-    return log, pa.table(table)
+    return log, arrow.table(table)
 
 
 def simulate_shard(cfg: Config, shard_index: int):

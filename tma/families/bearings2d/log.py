@@ -182,11 +182,14 @@ def write_bearings_log(path, log: BearingsLog, metadata=None, encoding="protobuf
                                                              own_lon[k])
             bearing = np.ascontiguousarray(log.bearing_deg[:, k].T)  # (epochs, tracks)
             has = np.isfinite(bearing)  # a contact missing at an epoch is left out
-            counts = has.sum(1)
-            ids = np.broadcast_to(log.track_id, has.shape)[has]
+            if has.all():  # the common case: every contact at every epoch, nothing to pick
+                counts = np.full(t.size, log.n_tracks)
+                ids, values = np.tile(log.track_id, t.size), bearing.ravel()
+            else:
+                counts = has.sum(1)
+                ids, values = np.broadcast_to(log.track_id, has.shape)[has], bearing[has]
             messages[BEARINGS_TOPIC] = w.columns(BEARINGS_TOPIC, {
-                "t_s": t, "track_id": Ragged(ids, counts),
-                "bearing_deg": Ragged(bearing[has], counts)})
+                "t_s": t, "track_id": Ragged(ids, counts), "bearing_deg": Ragged(values, counts)})
             w.write_epochs(t, messages)
         return w.n_messages
 

@@ -19,11 +19,11 @@ those at a larger one (common random numbers along the outlier axis too).
 from dataclasses import dataclass, field
 
 import numpy as np
-import pyarrow as pa
 
 from tma.angles import bearing_from_north, wrap_to_pi
 from tma.config import require
 from tma.families.bearings2d.log import BearingsLog, read_bearings_log, write_bearings_log
+from tma.io import arrow
 from tma.io.mcap_log import config_epoch_ns
 from tma.path import LegPath
 from tma.sharding import shard_rng, shard_track_ids
@@ -189,7 +189,7 @@ def simulate_shard(cfg: Config, shard_index: int):
         epoch_utc_ns=config_epoch_ns(cfg.epoch_utc, f"scenario '{FAMILY}'"),
         origin_deg=None if origin.lat is None else (origin.lat, origin.lon),
     )
-    truth = pa.table({
+    truth = arrow.table({
         "track_id": track_id,
         "x0_m": x0, "y0_m": y0, "vx_m_s": vx, "vy_m_s": vy,
         "distance0_m": distance,

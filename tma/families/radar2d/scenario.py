@@ -10,11 +10,11 @@ bearing noise at a radar at ``radar_xy_m``, converted to Cartesian plots).
 from dataclasses import dataclass, field
 
 import numpy as np
-import pyarrow as pa
 
 from tma.config import require
 from tma.errors import ConfigError
 from tma.families.radar2d.log import RadarLog, read_radar_log, write_radar_log
+from tma.io import arrow
 from tma.io.mcap_log import config_epoch_ns
 from tma.path import LegPath
 from tma.sharding import shard_rng, shard_track_ids
@@ -119,7 +119,7 @@ def simulate_shard(cfg: Config, shard_index: int):
     log = RadarLog(t, track_id, plots, sensor_metadata(cfg),
                    config_epoch_ns(cfg.epoch_utc, f"scenario '{FAMILY}'"))
     course = path.course(t)
-    truth = pa.table({
+    truth = arrow.table({
         "track_id": np.repeat(track_id, t.size), "step": np.tile(np.arange(t.size), n),
         "t_s": np.tile(t, n), "x_m": np.tile(x, n), "y_m": np.tile(y, n),
         "vx_m_s": np.tile(cfg.speed_m_s * np.sin(course), n),

@@ -17,7 +17,6 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 import pyarrow as pa  # noqa: E402
-import pyarrow.parquet as pq  # noqa: E402
 from scipy.special import ndtri  # noqa: E402  (norm.ppf; scipy.stats takes 0.5 s to import)
 
 from tma.errors import ConfigError  # noqa: E402
@@ -26,6 +25,7 @@ from tma.families.ranges2d import paper  # noqa: E402
 from tma.families.ranges2d.estimators.base import STATUSES  # noqa: E402
 from tma.families.ranges2d.log import read_ranges_log  # noqa: E402
 from tma.families.ranges2d.model import RangeModel  # noqa: E402
+from tma.io import arrow  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
 from tma.paper import write_against_paper  # noqa: E402
 from tma.tables import markdown_table, save_figure, write_csv, write_markdown  # noqa: E402
@@ -109,7 +109,7 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
             runs.append(paper.Run(e.estimator, metrics, e.dataset.manifest["config"],
                                   e.manifest["config"]))
         if (e.run_root / "samples.parquet").exists():
-            samples[e.estimator] = pq.read_table(e.run_root / "samples.parquet").to_pandas()
+            samples[e.estimator] = arrow.read_table(e.run_root / "samples.parquet").to_pandas()
     table = pd.DataFrame(rows, columns=COLUMNS)
     tables_dir = Path(tables_dir)
     paths = [tables_dir / f"{table_name}.{ext}" for ext in ("csv", "md", "png")]

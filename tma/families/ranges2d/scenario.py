@@ -12,10 +12,10 @@ See ``../shared/specs/ranges2d.md``. Two modes:
 from dataclasses import dataclass, field
 
 import numpy as np
-import pyarrow as pa
 
 from tma.config import require
 from tma.families.ranges2d.log import RangesLog, read_ranges_log, write_ranges_log
+from tma.io import arrow
 from tma.io.mcap_log import config_epoch_ns
 from tma.sharding import shard_rng, shard_track_ids
 
@@ -100,7 +100,7 @@ def simulate_shard(cfg: Config, shard_index: int):
     ranges = np.abs(dist[:, :, None] + noise)  # a range is non-negative
     log = RangesLog(np.arange(cfg.n_pairs, dtype=float), landmarks, track_id, ranges, model,
                     epoch)
-    truth = pa.table({"track_id": track_id, "x_m": pos[:, 0], "y_m": pos[:, 1]})
+    truth = arrow.table({"track_id": track_id, "x_m": pos[:, 0], "y_m": pos[:, 1]})
     return log, truth
 
 
