@@ -125,6 +125,8 @@ def test_verified_bytes_are_read_as_the_file_is(tmp_path):
     for f in dataclasses.fields(ours):
         a, b = getattr(ours, f.name), getattr(plain, f.name)
         assert np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b, f.name
+    derived = verified.parent / verified.name  # no bytes of its own: read as any path
+    assert derived.data is None and read_bearings_log(derived).track_id.size == log.n_tracks
     damaged = bytearray(verified.data)
     damaged[20] ^= 0xFF  # inside the data section: its CRC no longer holds
     assert "CRC" in check_integrity(bytes(damaged))

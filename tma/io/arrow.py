@@ -55,5 +55,5 @@ def read_table(path) -> pa.Table:
     gives the same table."""
     import pyarrow.parquet as pq
 
-    return pq.ParquetFile(pa.BufferReader(path.data) if isinstance(path, VerifiedPath)
-                          else path).read()
+    verified = isinstance(path, VerifiedPath) and path.data is not None
+    return pq.ParquetFile(pa.BufferReader(path.data) if verified else path).read()

@@ -56,9 +56,10 @@ class VerifiedPath(type(Path())):
     """A file's path with its bytes, whose sha256 was just checked against a manifest
     (``Dataset.verified_path``). A reader parses these very bytes instead of reading the
     file again, and skips the file's own checksums (an MCAP's CRCs): tma wrote those bytes
-    with correct ones, and the sha256 says these are the bytes it wrote."""
+    with correct ones, and the sha256 says these are the bytes it wrote. A path derived from
+    it (``parent``, ``/``) has no bytes (``data`` None) and is read as any path."""
 
-    data: bytes
+    data: bytes | None = None
 
     @classmethod
     def of(cls, path, data: bytes) -> "VerifiedPath":
