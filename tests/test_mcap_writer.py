@@ -253,7 +253,9 @@ def test_the_metadata_compared_is_the_one_asked_for(tmp_path):
     log = _simulated_geo_log()
     write_bearings_log(tmp_path / "log.mcap", log, {"tma.dataset": {"shard": "3"}})
     records = _written_metadata(tmp_path / "log.mcap")
-    assert list(records) == ["tma.dataset", "tma.sensor", "tma.tracks", "tma.geo", "tma.time"]
+    assert list(records) == ["tma.dataset", "tma.sensor", "tma.target", "tma.tracks", "tma.geo",
+                             "tma.time"]
+    assert records["tma.target"] == {"accel_psd_m2_s3": "0.0"}  # a simulation's targets
     assert records["tma.dataset"] == {"shard": "3"}
     assert orjson.loads(records["tma.time"]["epoch_utc_ns"]) == EPOCH_NS
 

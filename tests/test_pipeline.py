@@ -16,7 +16,8 @@ from tma.errors import IntegrityError
 EXPECTED_COLUMNS = (
     "estimator,sigma_deg,n_tracks,ref1,ref1_lo,ref1_hi,ref2,ref2_lo,ref2_hi,ref3,ref3_lo,"
     "ref3_hi,ref4,ref4_lo,ref4_hi,sqrt_ka_mean,sqrt_ka_median,nf_median,iter_median,n_converged,"
-    "n_ok,n_not_converged,n_poor_fit,n_unobservable,consistent,consistent_lo,consistent_hi"
+    "n_ok,n_not_converged,n_poor_fit,n_unobservable,n_manoeuvring,n_approximate,consistent,"
+    "consistent_lo,consistent_hi"
 )
 GRID = ["experiment=bearings2d_table", "scenario.n_tracks=60", "scenario.shard_size=25",
         "scenario.sigma_deg=[0.0,0.5]", "progress=false"]

@@ -18,7 +18,8 @@ no bearing at an epoch.
 Optional references, as metadata records: ``tma.time`` (UTC of t = 0; log times are then
 absolute), ``tma.geo`` (the local plane's WGS84 origin; the log then also carries own-ship as
 ``foxglove.LocationFix`` on ``/ownship/location_fix`` for Foxglove's Map panel, which tma's
-readers skip) and ``tma.tracks`` (the contacts' text labels).
+readers skip), ``tma.tracks`` (the contacts' text labels), ``tma.sensor`` (the nominal
+bearing noise) and ``tma.target`` (how the targets move, when known: a simulation).
 """
 
 from dataclasses import dataclass
@@ -47,6 +48,7 @@ from tma.io.mcap_writer import Encoded, Ragged
 OWNSHIP_TOPIC = "/ownship/navigation"
 BEARINGS_TOPIC = "/sonar/bearings"
 SENSOR = "tma.sensor"  # metadata record: {"sigma_deg": nominal bearing noise}, when known
+TARGET = "tma.target"  # metadata record: {"accel_psd_m2_s3": the targets' motion}, when known
 GEO = "tma.geo"  # metadata record: {origin_lat_deg, origin_lon_deg, epoch_utc_ns}, when known
 TRACKS = "tma.tracks"  # metadata record: {"track_id": [...], "label": [...]}, when labelled
 OWNSHIP_FIX_TOPIC = "/ownship/location_fix"  # foxglove.LocationFix, only with an origin
@@ -90,6 +92,10 @@ class BearingsLog:
     are east/north metres from it); None when the source had no geographic reference.
     track_label: (n_tracks,) the source's names for the contacts (text ids such as ``T1``);
     None when the names are the integer ``track_id``s themselves.
+    accel_psd_m2_s3: the targets' declared motion, the power spectral density of their
+    random acceleration per axis (m^2/s^3; 0: constant velocity), as a simulation knows it;
+    None when not declared (a recording: the estimators then test for manoeuvres and
+    assume real-ship motion). Stored in the metadata record ``tma.target``.
     """
 
     t_s: np.ndarray
@@ -101,6 +107,7 @@ class BearingsLog:
     epoch_utc_ns: int | None = None
     origin_deg: tuple[float, float] | None = None
     track_label: np.ndarray | None = None
+    accel_psd_m2_s3: float | None = None
 
     @property
     def n_tracks(self) -> int:
@@ -130,6 +137,10 @@ class BearingsLog:
         if self.sigma_deg is not None and not 0 <= self.sigma_deg < 90:
             raise InputError(f"{where}: nominal bearing noise sigma_deg {self.sigma_deg!r} is "
                              "not in [0, 90) degrees")
+        q = self.accel_psd_m2_s3
+        if q is not None and not 0 <= q < 1e6:
+            raise InputError(f"{where}: the targets' declared accel_psd_m2_s3 {q!r} is not in "
+                             "[0, 1e6) m^2/s^3")
         if self.epoch_utc_ns is not None and not 0 <= self.epoch_utc_ns < MAX_EPOCH_NS:
             raise InputError(f"{where}: epoch_utc_ns {self.epoch_utc_ns!r} is not a UTC time "
                              "between 1970 and 2200 in ns")
@@ -156,6 +167,8 @@ def write_bearings_log(path, log: BearingsLog, metadata=None, encoding="protobuf
     metadata, chosen = dict(metadata or {}), channels(encoding)
     if log.sigma_deg is not None:
         metadata[SENSOR] = json_record({"sigma_deg": log.sigma_deg})
+    if log.accel_psd_m2_s3 is not None:
+        metadata[TARGET] = json_record({"accel_psd_m2_s3": log.accel_psd_m2_s3})
     if log.track_label is not None:
         metadata[TRACKS] = json_record({"track_id": log.track_id,
                                         "label": [str(s) for s in log.track_label]})
@@ -212,6 +225,13 @@ def nominal_sigma(metadata: dict, where: str) -> float | None:
     with schema_errors(where, f"the metadata record {SENSOR}"):
         sigma = read_json_record(metadata, SENSOR, where)["sigma_deg"]
         return None if sigma is None else number(sigma)
+
+
+def declared_motion(metadata: dict, where: str) -> float | None:
+    if TARGET not in metadata:
+        return None
+    with schema_errors(where, f"the metadata record {TARGET}"):
+        return number(read_json_record(metadata, TARGET, where)["accel_psd_m2_s3"])
 
 
 def geo_origin(metadata: dict, where: str) -> tuple[float, float] | None:
@@ -294,6 +314,7 @@ def read_bearings_log(path) -> BearingsLog:
         track_id=track_id, bearing_deg=bearing, sigma_deg=nominal_sigma(metadata, where),
         epoch_utc_ns=read_epoch(metadata, where), origin_deg=geo_origin(metadata, where),
         track_label=track_labels(metadata, track_id, where),
+        accel_psd_m2_s3=declared_motion(metadata, where),
     )
     log.validate(where)
     return log

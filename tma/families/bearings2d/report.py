@@ -46,10 +46,11 @@ region (bearing and distance at the end of the observation, course, speed; Ref1 
 strictest), with the 95 % Wilson interval. sqrt(Ka) = sqrt(F(theta_hat)/n) in degrees: a
 good maximum-likelihood fit gives sqrt(Ka) close to sigma. Nf: evaluations of F, Iter:
 accepted LM steps (medians; direct estimators have none). Status: tracks per verdict
-(ok / not_converged / poor_fit / unobservable, see the README). Consistent: share of the ok
-tracks whose normalised error (theta_hat - theta)^T Sigma^-1 (theta_hat - theta), Sigma =
-(J^T J)^-1 sigma^2, lies below the chi-square(4) 95 % point; about 95 % for honest one-sigma
-errors. Every number is read from the run files under `data/runs/`."""
+(ok / not_converged / poor_fit / unobservable / manoeuvring / approximate, see the README).
+Consistent: share of the ok tracks whose normalised error (theta_hat - theta)^T Sigma^-1
+(theta_hat - theta), Sigma = (J^T J)^-1 sigma^2, lies below the chi-square(4) 95 % point;
+about 95 % for honest one-sigma errors. Every number is read from the run files under
+`data/runs/`."""
 
 log = logging.getLogger(__name__)
 
@@ -85,7 +86,7 @@ def write_table(rows: list[dict], tables_dir, name="bearings2d") -> list[Path]:
         "sqrt(Ka) median (deg)": table["sqrt_ka_median"].map(_num),
         "Nf median": table["nf_median"].map(lambda x: _num(x, "{:g}")),
         "Iter median": table["iter_median"].map(lambda x: _num(x, "{:g}")),
-        "status ok / not_conv / poor_fit / unobs": [
+        "status ok / not_conv / poor_fit / unobs / manoeuv / approx": [
             " / ".join(str(v) for v in r) for r in table[[f"n_{s}" for s in STATUSES]].to_numpy()],
         "consistent (ok)": [_pct(*v) if pd.notna(v[0]) else "-" for v in
                             table[["consistent", "consistent_lo", "consistent_hi"]].to_numpy()],
@@ -117,25 +118,48 @@ def write_table(rows: list[dict], tables_dir, name="bearings2d") -> list[Path]:
 
 REPORT_COLUMNS = ["range_now_m", "range_sd_m", "bearing_now_deg", "bearing_sd_deg",
                   "course_deg", "course_sd_deg", "speed_m_s", "speed_sd_m_s", "sigma_used_deg",
-                  "fit_p_value", "status"]
+                  "fit_p_value", "motion_p_value", "accel_psd_m2_s3", "leg_start_s", "status"]
+
+
+def _poor_fit_note(row) -> str:
+    """Why the residuals are not the declared noise, by which way the test failed."""
+    ratio = row.sqrt_ka_deg / row.sigma_used_deg if row.sigma_used_deg > 0 else np.inf
+    if ratio < 1:
+        why = "far smaller than the declared noise: every bearing in radians, or sigma overstated?"
+    else:
+        why = ("larger than the declared noise: outliers, sigma_deg understated, or some "
+               "bearings in radians?")
+    return (f"residual RMS {row.sqrt_ka_deg:.3g} deg against sigma {row.sigma_used_deg:.3g} deg "
+            f"(chi-square p = {row.fit_p_value:.1e}): {why}")
 
 
 def status_note(report: pd.DataFrame) -> list[str]:
-    """Why a track is not ok, in words (empty for ok tracks)."""
+    """Why a track is not ok, in words (empty for ok tracks), naming the test that decided."""
     notes = []
     for row in report.itertuples(index=False):
-        note = {
-            "poor_fit": f"residual RMS {row.sqrt_ka_deg:.3g} deg vs sigma "
-                        f"{row.sigma_used_deg:.3g} deg (p = {row.fit_p_value:.1e}): outliers, a "
-                        "manoeuvring target, or bearings not in degrees?",
-            "not_converged": "the estimator stopped before converging (max_iter or lambda_max)",
-            "unobservable": f"range sd {row.range_sd_m / row.range_now_m:.0%} of the range: "
-                            "not observable from this geometry (no own-ship manoeuvre? target "
-                            "too far?)",
-            "ok": "",
-        }[row.status]
+        status = row.status
+        if status == "poor_fit":
+            note = (_poor_fit_note(row) if np.isfinite(row.fit_p_value) and
+                    row.sigma_used_deg > 0 else
+                    f"the residuals are not noise (p = {row.fit_p_value:.1e})")
+        elif status == "manoeuvring":
+            note = (f"the residuals drift (trend test p = {row.motion_p_value:.1e}): the "
+                    "target did not move as assumed (a manoeuvre?); `estimator=last_leg` "
+                    "solves its last leg")
+        elif status == "not_converged":
+            note = "the estimator stopped before converging (max_iter or lambda_max)"
+        elif status == "unobservable":
+            note = (f"range sd {row.range_sd_m / row.range_now_m:.0%} of the range: not "
+                    "determined from this geometry (no own-ship manoeuvre? target too far? "
+                    "too much target motion?)")
+        elif status == "approximate":
+            note = ("the estimator's one-sigma errors are not honest here: it is biased "
+                    "(nbearings) or assumes a constant-velocity target while this log's "
+                    "targets are not known to move so; use lm")
+        else:
+            note = ""
         if pd.isna(row.range_sd_m):
-            note = "; ".join(filter(None, [note if row.status != "unobservable" else "",
+            note = "; ".join(filter(None, [note if status != "unobservable" else "",
                                            "J^T J is singular: no uncertainty can be given"]))
         notes.append(note)
     return notes
@@ -150,8 +174,15 @@ def track_report(estimates: pd.DataFrame, time_origin_s=0.0, epoch_utc_ns=None,
     ``time_now_utc``: ISO-8601 UTC of the last bearing (``epoch_utc_ns``: UTC of t = 0; else
     blank); ``x_now_m``, ``y_now_m`` (local plane, m) with ``x_sd_m``, ``y_sd_m``;
     ``lat_now_deg``, ``lon_now_deg`` (WGS84, from ``origin_deg`` = (lat, lon) of the local
-    plane's origin; NaN without one)."""
+    plane's origin; NaN without one); ``leg_start_s`` (and ``leg_start_utc``): from when the
+    solution holds (its first bearing, or the end of the last manoeuvre ``last_leg`` found).
+    """
     e = estimates
+
+    def utc(seconds):
+        return ([None] * len(seconds) if epoch_utc_ns is None else
+                [format_utc(epoch_utc_ns + round(v * 1e9)) for v in seconds.tolist()])
+
     t = e["t_last_s"].to_numpy()
     x_now = (e["x0_m"] + e["vx_m_s"] * t).to_numpy()
     y_now = (e["y0_m"] + e["vy_m_s"] * t).to_numpy()
@@ -164,15 +195,16 @@ def track_report(estimates: pd.DataFrame, time_origin_s=0.0, epoch_utc_ns=None,
         "label": [(labels or {}).get(i, str(i)) for i in ids],
         "n_bearings": e["n_bearings"],
         "t_now_s": t + time_origin_s,
-        "time_now_utc": ([None] * t.size if epoch_utc_ns is None else
-                         [format_utc(epoch_utc_ns + round(v * 1e9)) for v in t.tolist()]),
+        "time_now_utc": utc(t),
         "x_now_m": x_now, "x_sd_m": np.sqrt(cov[:, 0, 0]),
         "y_now_m": y_now, "y_sd_m": np.sqrt(cov[:, 1, 1]),
         "lat_now_deg": lat, "lon_now_deg": lon,
         **{c: e[c] for c in REPORT_COLUMNS},
+        "leg_start_utc": utc(e["leg_start_s"].to_numpy()),
         "sqrt_ka_deg": np.rad2deg(np.sqrt(e["cost_rad2"] / e["n_bearings"])),
         "converged": e["converged"].astype(bool),
     })
+    report["leg_start_s"] += time_origin_s
     report["note"] = status_note(report)
     return report
 
@@ -202,12 +234,16 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str)
         "course (deg)": pm("course_deg", "course_sd_deg", ".1f"),
         "speed (m/s)": pm("speed_m_s", "speed_sd_m_s", ".2f"),
         "sqrt(Ka) (deg)": report["sqrt_ka_deg"].map("{:.3g}".format),
+        "holds from": (report["leg_start_s"].map("t = {:.1f} s".format)
+                       if report["leg_start_utc"].isna().all() else report["leg_start_utc"]),
         "status": report["status"],
         "why": report["note"],
     })
     intro = (f"Estimates per track of `{source}` (no ground truth). 'now' is each track's last "
-             "bearing epoch; ± is one standard deviation from (J^T J)^-1 sigma^2, sigma as in "
-             "column sigma_used_deg of the CSV (nominal, or estimated from the residuals). "
+             "bearing epoch; ± is one standard deviation (sigma as in column sigma_used_deg "
+             "of the CSV: nominal, or estimated from the residuals), which includes the "
+             "target's own motion (accel_psd_m2_s3: a nearly-constant-velocity target) for "
+             "`lm`; 'holds from' is the first bearing the solution rests on. "
              "Trust only `ok` tracks; 'why' says what is wrong with the others. The CSV also "
              "holds the position now in local metres (x east, y north) with its one-sigma "
              f"errors; `{name}-<track>.png` shows each contact on a plan (the first "

@@ -1,4 +1,5 @@
-"""Scenario ``bearings2d``: a constant-velocity target observed by a manoeuvring own-ship.
+"""Scenario ``bearings2d``: a constant-velocity target observed by a manoeuvring own-ship;
+with ``target.*``, targets that manoeuvre or wander like ships (``target_motion.py``).
 
 See ``../shared/specs/bearings2d.md``. x east, y north (m); bearings clockwise from north,
 degrees in config and log. Each shard draws its targets and its noise from
@@ -14,6 +15,14 @@ every bearing whatever ``prob`` (a bearing is replaced when its uniform draw is 
 ``prob``): the targets and noise do not change with ``prob`` (``prob`` = 0 leaves a dataset
 byte for byte as without the option) and the outliers at a smaller ``prob`` are a subset of
 those at a larger one (common random numbers along the outlier axis too).
+
+Every log declares the targets' motion model it was made with (``BearingsLog.
+accel_psd_m2_s3``: 0 for constant velocity) unless the targets manoeuvre or
+``target.declared`` is false: estimators then treat it as a recording. Targets that move
+(``target.moving``) have as truth their state at the last bearing: ``x0_m``... ``vy_m_s``
+are the straight line through it, ``course_deg``, ``speed_m_s`` their values then, and the
+truth adds ``manoeuvring`` and the last manoeuvre's ``manoeuvre_start_s``,
+``manoeuvre_end_s``, ``course_change_deg`` (signed, > 0 right) and ``speed_change_rel``.
 """
 
 from dataclasses import dataclass, field
@@ -22,7 +31,9 @@ import numpy as np
 
 from tma.angles import bearing_from_north, wrap_to_pi
 from tma.config import require
+from tma.families.bearings2d import target_motion
 from tma.families.bearings2d.log import BearingsLog, read_bearings_log, write_bearings_log
+from tma.families.bearings2d.target_motion import TargetConfig
 from tma.io import arrow
 from tma.io.mcap_log import config_epoch_ns
 from tma.path import LegPath
@@ -30,6 +41,7 @@ from tma.sharding import shard_rng, shard_track_ids
 
 FAMILY = "bearings2d"
 OUTLIER_STREAM = 1  # spawn-key element of the outlier stream under the shard's (shard,)
+MANOEUVRE, WANDER = target_motion.MANOEUVRE_STREAM, target_motion.WANDER_STREAM
 
 
 @dataclass
@@ -104,9 +116,11 @@ class Config:
     epoch_utc: str = "2026-01-01T00:00:00Z"  # UTC of t = 0 (ISO-8601 with zone): MCAP log times
     origin: OriginConfig = field(default_factory=OriginConfig)
     outliers: OutlierConfig = field(default_factory=OutlierConfig)
+    target: TargetConfig = field(default_factory=TargetConfig)  # manoeuvres and wander
 
     def __post_init__(self):
         where = "scenario 'bearings2d'"
+        target_motion.check(self.target, where)
         config_epoch_ns(self.epoch_utc, where)
         lat, lon = self.origin.lat, self.origin.lon
         require((lat is None) == (lon is None), where,
@@ -143,7 +157,11 @@ class Config:
 
 def label(cfg: Config) -> str:
     outliers = f"-out{cfg.outliers.prob:g}" if cfg.outliers.prob > 0 else ""
-    return f"sigma{cfg.sigma_deg:g}{outliers}-n{cfg.n_tracks}"
+    target = cfg.target
+    motion = "".join([f"-q{target.accel_psd_m2_s3:g}" if target.accel_psd_m2_s3 > 0 else "",
+                      f"-man{target.manoeuvres.prob:g}" if target.manoeuvres.prob > 0 else "",
+                      "" if target.declared else "-undeclared"])
+    return f"sigma{cfg.sigma_deg:g}{outliers}{motion}-n{cfg.n_tracks}"
 
 
 def observer_path(cfg: Config) -> LegPath:
@@ -175,9 +193,16 @@ def simulate_shard(cfg: Config, shard_index: int):
     p0 = np.deg2rad(pop.initial_bearing_deg)
     x0, y0 = own_x[0] + distance * np.sin(p0), own_y[0] + distance * np.cos(p0)
     vx, vy = speed * np.sin(course), speed * np.cos(course)
-    true_bearing = bearing_from_north(
-        x0[:, None] + vx[:, None] * t - own_x, y0[:, None] + vy[:, None] * t - own_y
-    )
+    moving = cfg.target.moving
+    if moving:
+        x, y, v_end, last = target_motion.target_paths(
+            cfg.target, x0, y0, course, speed, t, motion_rng(cfg, shard_index, MANOEUVRE),
+            motion_rng(cfg, shard_index, WANDER))
+        true_bearing = bearing_from_north(x - own_x, y - own_y)
+    else:
+        true_bearing = bearing_from_north(
+            x0[:, None] + vx[:, None] * t - own_x, y0[:, None] + vy[:, None] * t - own_y
+        )
     measured = wrap_to_pi(true_bearing + np.deg2rad(cfg.sigma_deg) * noise)
     if cfg.outliers.prob > 0:
         measured = with_outliers(measured, cfg, shard_index)
@@ -188,14 +213,26 @@ def simulate_shard(cfg: Config, shard_index: int):
         bearing_deg=np.rad2deg(measured) % 360.0, sigma_deg=cfg.sigma_deg,
         epoch_utc_ns=config_epoch_ns(cfg.epoch_utc, f"scenario '{FAMILY}'"),
         origin_deg=None if origin.lat is None else (origin.lat, origin.lon),
+        accel_psd_m2_s3=cfg.target.declared_psd(),
     )
+    columns = {"track_id": track_id, "x0_m": x0, "y0_m": y0, "vx_m_s": vx, "vy_m_s": vy}
+    if moving:  # the state at the last bearing, as the straight line through it
+        vx, vy = v_end[:, 0], v_end[:, 1]
+        columns = {"track_id": track_id, "x0_m": x[:, -1] - vx * t[-1],
+                   "y0_m": y[:, -1] - vy * t[-1], "vx_m_s": vx, "vy_m_s": vy}
+        course, speed = np.arctan2(vx, vy) % (2 * np.pi), np.hypot(vx, vy)
     truth = arrow.table({
-        "track_id": track_id,
-        "x0_m": x0, "y0_m": y0, "vx_m_s": vx, "vy_m_s": vy,
+        **columns,
         "distance0_m": distance,
         "course_deg": np.rad2deg(course), "speed_m_s": speed,
+        **({"manoeuvring": ~np.isnan(last["manoeuvre_start_s"]), **last} if moving else {}),
     })
     return log, truth
+
+
+def motion_rng(cfg: Config, shard_index: int, stream: int) -> np.random.Generator:
+    """The shard's manoeuvre or wander stream (``target_motion``)."""
+    return np.random.default_rng(np.random.SeedSequence(cfg.seed, spawn_key=(shard_index, stream)))
 
 
 def outlier_rng(cfg: Config, shard_index: int) -> np.random.Generator:

@@ -2,39 +2,55 @@
 
 The covariance of theta = (x0, y0, vx, vy) is the Gauss-Newton one, (J^T J)^-1 sigma^2, with
 sigma the nominal bearing noise when the log declares it, else the residual estimate
-sigma^2 = F / (n - 4). It is propagated to range, bearing, course and speed at each track's
-last bearing ("now") by their Jacobians (delta method). ``status``, first rule that applies:
+sigma^2 = F / (n - 4); for a nearly-constant-velocity fit (``ncv``) it is the smoother's at
+the last bearing, which adds the target's own motion. It is propagated to range, bearing,
+course and speed at each track's last bearing ("now") by their Jacobians (delta method).
+``status``, first rule that applies:
 
 - ``not_converged``: the estimator stopped for any reason other than its F tolerance;
+- ``manoeuvring``: the residual sequence has a slow systematic pattern that its noise does
+  not explain: the target did not move as the motion model says (a manoeuvre; or the
+  own-ship navigation or the bearing bias drifted). ``trend_test_p`` on the model's
+  normalised innovations (recursive residuals) rejects at ``motion_alpha``; run where the
+  log does not declare its targets' motion (a recording) or sigma, or with
+  ``motion_test=on``;
 - ``poor_fit``: the residuals do not look like the declared noise: with sigma known
-  (> 0), F / sigma^2 fails a two-sided chi-square(n - 4) test at level ``fit_alpha``: too
-  large (outliers, a manoeuvring target, some bearings in radians) or far too small (every
-  bearing in radians, an overstated sigma); for a robust fit (``lm`` loss huber|cauchy),
-  ``robust_fit_p``: the same two-sided test on the bearings within c sigma only, referred
-  to the truncated normal, so that outliers alone do not fail it (measured: 5.5-7 %
-  rejected at level 0.05 with and without 5 % outliers); with sigma declared 0
-  (noiseless), a residual RMS above ``NOISELESS_RMS_DEG``; with sigma unknown, the
-  Wald-Wolfowitz runs test on the residual signs rejects randomness at ``fit_alpha``
-  (systematic misfit);
+  (> 0), F / sigma^2 (for an NCV fit, the sum of its squared normalised innovations) fails
+  a two-sided chi-square test at level ``fit_alpha``: too large (outliers, a sigma
+  understated, some bearings in radians) or far too small (every bearing in radians, an
+  overstated sigma); for a robust fit (``lm`` loss huber|cauchy), ``robust_fit_p``: the
+  same two-sided test on the bearings within c sigma only, referred to the truncated
+  normal, so that outliers alone do not fail it (measured: 5.5-7 % rejected at level 0.05
+  with and without 5 % outliers); with sigma declared 0 (noiseless), a residual RMS above
+  ``NOISELESS_RMS_DEG``; with sigma unknown there is no noise to test against (for a
+  robust fit, the Wald-Wolfowitz runs test on the residual signs);
 - ``unobservable``: J^T J is numerically singular (scaled by its diagonal, smallest over
   largest eigenvalue <= ``singular_rcond``), or range_sd / range > ``max_range_rel_sd``
-  (range is not determined: no own-ship manoeuvre, a target too far away);
-- ``ok`` otherwise.
+  (range is not determined well enough to use: no own-ship manoeuvre, a target too far
+  away, too much unmodelled target motion);
+- ``approximate``: the fit passed every test, but its one-sigma errors are not honest by
+  construction: the estimator is biased (``nbearings``), or it assumes a constant-velocity
+  target where the log's targets are not known to move so (``accel_psd`` > 0);
+- ``ok`` otherwise: the estimate and its one-sigma errors can be used.
 
 The ``_sd`` columns are blank only where J^T J is singular (no uncertainty can be given),
 which is never an ``ok`` track.
 """
 
+import math
+
 import numpy as np
 
 from tma.angles import bearing_from_north, course_from_velocity
+from tma.jit import njit
 from tma.linalg import scaled_inverse
 
 # scipy.special (the chi-square and normal tails) is imported by the functions that use it:
 # every command imports this module (with the estimators, to register their defaults), few
 # compute a status
 
-STATUSES = ("ok", "not_converged", "poor_fit", "unobservable")
+# (in the order of the tables' columns; the rules' order is in the module docstring)
+STATUSES = ("ok", "not_converged", "poor_fit", "unobservable", "manoeuvring", "approximate")
 NOISELESS_RMS_DEG = 1e-4  # far above round-off, far below any real bearing sensor
 
 
@@ -82,6 +98,87 @@ def runs_test_p(residuals, valid):
     return np.where(one_sign, np.minimum(1.0, 2 * 0.5**n), p)
 
 
+@njit(error_model="numpy")
+def _trend_sums(e, t, m, out):
+    """Per row of ``e`` (n, K; NaN where absent): the squares of e explained by the first
+    ``m`` cosines cos(pi j u), u = (t - t_first) / (t_last - t_first) over its present
+    entries (least squares), the sum of squares and the count, into ``out`` (n, 3)."""
+    n, K = e.shape
+    G, b, L, y, c = (np.empty((m, m)), np.empty(m), np.empty((m, m)), np.empty(m),
+                     np.empty(m))
+    for i in range(n):
+        lo, hi, count, total = -1, -1, 0, 0.0
+        for k in range(K):
+            if e[i, k] == e[i, k]:
+                if lo < 0:
+                    lo = k
+                hi = k
+                count += 1
+                total += e[i, k] * e[i, k]
+        out[i, 1], out[i, 2] = total, count
+        if count <= m or t[hi] <= t[lo]:
+            out[i, 0] = np.nan
+            continue
+        G[:, :] = 0.0
+        b[:] = 0.0
+        span = t[hi] - t[lo]
+        for k in range(lo, hi + 1):
+            if e[i, k] == e[i, k]:
+                u = math.pi * (t[k] - t[lo]) / span
+                for j in range(m):
+                    c[j] = math.cos(j * u)
+                for j in range(m):
+                    b[j] += c[j] * e[i, k]
+                    for l in range(j + 1):
+                        G[j, l] += c[j] * c[l]
+        singular = False  # Cholesky of G (lower triangle), then G^-1 b
+        for j in range(m):
+            for l in range(j + 1):
+                s = G[j, l]
+                for r in range(l):
+                    s -= L[j, r] * L[l, r]
+                if j == l:
+                    if not s > 1e-12 * G[j, j]:
+                        singular = True
+                        break
+                    L[j, j] = math.sqrt(s)
+                else:
+                    L[j, l] = s / L[l, l]
+            if singular:
+                break
+        if singular:
+            out[i, 0] = np.nan
+            continue
+        explained = 0.0
+        for j in range(m):
+            s = b[j]
+            for r in range(j):
+                s -= L[j, r] * y[r]
+            y[j] = s / L[j, j]
+            explained += y[j] * y[j]
+        out[i, 0] = explained
+
+
+def trend_test_p(innovations, t_s, terms):
+    """p-value of the smooth-trend test on each row of normalised innovations (n, K) (NaN
+    where none): the generalised likelihood ratio of a bias made of the first ``terms``
+    cosines in time (a constant, a drift, a bend...) against none, in its F form,
+    F = (S_b / m) / ((S - S_b) / (N - m)) ~ F(m, N - m) with S the sum of squares, S_b the
+    part the cosines explain and N the innovations: scale-free, so it asks only whether
+    the residual sequence has a systematic slow pattern, whatever the noise level (that is
+    the chi-square's question), and an isolated outlier, spread over all frequencies, hardly
+    moves it. NaN where fewer than ``terms`` + 1 innovations."""
+    from scipy.special import fdtrc
+
+    e = np.ascontiguousarray(innovations, dtype=float)
+    sums = np.empty((e.shape[0], 3))
+    _trend_sums(e, np.ascontiguousarray(t_s, dtype=float), int(terms), sums)
+    explained, total, count = sums.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        F = (explained / terms) / (np.maximum(total - explained, 0.0) / (count - terms))
+        return np.where(np.isfinite(explained), fdtrc(terms, count - terms, F), np.nan)
+
+
 def truncated_moments(c):
     """Mean and variance of Z^2 for Z ~ N(0, 1) given |Z| <= c, and P(|Z| <= c)."""
     from scipy.special import ndtr
@@ -126,34 +223,31 @@ def noiseless_fit_p(cost_rad2, n_bearings):
     return np.where(rms_deg > NOISELESS_RMS_DEG, 0.0, 1.0)
 
 
-def assess(theta, cost_rad2, jtj, n_bearings, converged, t_now_s, own_x_now_m, own_y_now_m,
-           sigma_deg, runs_p, cfg, sigma2=None, fit_p=None) -> dict:
-    """Status and one-sigma errors per track (see the module docstring).
-
-    ``sigma_deg``: the nominal bearing noise or None (then estimated from the residuals);
-    ``runs_p``: runs-test p-values (used only when sigma is None); ``cfg`` holds
-    ``singular_rcond``, ``fit_alpha``, ``max_range_rel_sd``. A robust fit passes its own
-    per-track ``sigma2`` (rad^2, with ``jtj`` its sandwich information: covariance =
-    jtj^-1 sigma2) and ``fit_p`` (``robust_fit_p``), which then replace the above. Returns
-    output columns.
-    """
+def noise_fit(cost_rad2, dof, sigma_deg):
+    """sigma^2 (rad^2) per track and the p-value of the two-sided chi-square(dof) test of
+    the fit ``cost_rad2`` (sum of squared residuals, rad^2) against the nominal noise
+    ``sigma_deg``; sigma unknown (None): F / dof and no test (NaN); sigma 0 (noiseless):
+    ``noiseless_fit_p``."""
     from scipy.special import chdtrc
 
-    n = theta.shape[0]
-    dof = np.maximum(n_bearings - 4, 1)
-    if fit_p is not None:
-        sigma2 = np.broadcast_to(np.asarray(sigma2, dtype=float), (n,))
-    elif sigma_deg is None:
-        sigma2 = cost_rad2 / dof
-        fit_p = runs_p
-    else:
-        sigma2 = np.full(n, np.deg2rad(sigma_deg) ** 2)
-        if sigma_deg > 0:
-            upper = chdtrc(dof, cost_rad2 / sigma2)
-            fit_p = np.minimum(1.0, 2 * np.minimum(upper, 1 - upper))  # two-sided
-        else:
-            fit_p = noiseless_fit_p(cost_rad2, n_bearings)
+    n = cost_rad2.shape[0]
+    if sigma_deg is None:
+        return cost_rad2 / np.maximum(dof, 1), np.full(n, np.nan)
+    sigma2 = np.full(n, np.deg2rad(sigma_deg) ** 2)
+    if sigma_deg == 0:
+        return sigma2, noiseless_fit_p(cost_rad2, dof + 4)
+    upper = chdtrc(np.maximum(dof, 1), cost_rad2 / sigma2)
+    return sigma2, np.minimum(1.0, 2 * np.minimum(upper, 1 - upper))
 
+
+def assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t_now_s, own_x_now_m,
+           own_y_now_m, cfg) -> dict:
+    """Status and one-sigma errors per track (see the module docstring).
+
+    The covariance of theta is jtj^-1 sigma2 (``sigma2`` rad^2 per track); ``fit_p``: the
+    noise test's p-value (NaN: none); ``motion_p``: the trend test's (NaN: not run);
+    ``approximate``: bool per track; ``cfg`` holds ``singular_rcond``, ``fit_alpha``,
+    ``motion_alpha``, ``max_range_rel_sd``. Returns output columns."""
     finite = np.isfinite(theta).all(axis=1)
     cov, singular = scaled_inverse(np.where(finite[:, None, None], jtj, np.nan),
                                    cfg.singular_rcond)
@@ -162,10 +256,11 @@ def assess(theta, cost_rad2, jtj, n_bearings, converged, t_now_s, own_x_now_m, o
     with np.errstate(invalid="ignore"):
         sd = np.sqrt(np.einsum("nij,njk,nik->ni", G, cov, G))
         poorly_fit = fit_p < cfg.fit_alpha
+        drifting = motion_p < cfg.motion_alpha
         vague = ~(sd[:, 0] <= cfg.max_range_rel_sd * rng)  # a NaN sd counts as vague
-
-    status = np.select([~converged, poorly_fit, singular | vague],
-                       ["not_converged", "poor_fit", "unobservable"], "ok")
+    status = np.select([~converged, drifting, poorly_fit, singular | vague, approximate],
+                       ["not_converged", "manoeuvring", "poor_fit", "unobservable",
+                        "approximate"], "ok")
     return {
         "range_now_m": rng, "range_sd_m": sd[:, 0],
         "bearing_now_deg": np.rad2deg(bearing) % 360.0, "bearing_sd_deg": np.rad2deg(sd[:, 1]),

@@ -8,9 +8,12 @@ import numpy as np
 from tma.config import require
 from tma.errors import InputError
 from tma.estimator import Estimator
+from tma.families.bearings2d import ncv
 from tma.families.bearings2d.log import BearingsLog
-from tma.families.bearings2d.model import BearingTerms, bearing_residuals
-from tma.families.bearings2d.status import assess, runs_test_p
+from tma.families.bearings2d.model import BearingTerms
+from tma.families.bearings2d.ncv import RECORDED_ACCEL_PSD
+from tma.families.bearings2d.status import assess, noise_fit, trend_test_p
+from tma.linalg import scaled_inverse
 
 BLOCK_TRACKS = 64
 
@@ -25,15 +28,27 @@ def evaluate_in_blocks(terms: BearingTerms, theta, block=BLOCK_TRACKS):
     return cost, jtj
 
 
+MOTION_TESTS = ("auto", "on", "off")
+
+
 @dataclass
 class BearingsConfig:
-    """Settings every bearings-only estimator shares: what it needs, and how its per-track
-    ``status`` is decided (``tma.families.bearings2d.status``)."""
+    """Settings every bearings-only estimator shares: what it needs, the targets' motion it
+    assumes, and how its per-track ``status`` is decided (``tma.families.bearings2d.status``)."""
 
     min_bearings: int = 5
-    max_range_rel_sd: float = 0.5  # unobservable above this range sd / range
-    fit_alpha: float = 1e-3  # poor_fit below this p-value (chi-square, or runs test)
+    max_range_rel_sd: float = 0.2  # unobservable above this range sd / range
+    fit_alpha: float = 1e-3  # poor_fit below this p-value of the noise test
     singular_rcond: float = 1e-12  # J^T J scaled eigenvalue ratio at or below: singular
+    # the targets' random acceleration, power spectral density per axis (m^2/s^3); 0:
+    # constant velocity; null: the log's declared one, else (a recording) real-ship motion
+    # (ncv.RECORDED_ACCEL_PSD)
+    accel_psd_m2_s3: float | None = None
+    # the trend test of the residual sequence (status manoeuvring): auto runs it on a log
+    # that declares its targets' motion or its noise not (a recording), on|off always|never
+    motion_test: str = "auto"
+    motion_alpha: float = 1e-3  # manoeuvring below this p-value of the trend test
+    motion_terms: int = 8  # cosines of the trend test's smooth bias (1: a constant bias)
 
     def __post_init__(self):
         w = f"estimator '{getattr(self, 'name', '?')}'"
@@ -41,26 +56,45 @@ class BearingsConfig:
         require(self.max_range_rel_sd > 0, w, "max_range_rel_sd must be positive")
         require(0 < self.fit_alpha < 1, w, "fit_alpha must lie in (0, 1)")
         require(0 < self.singular_rcond < 1, w, "singular_rcond must lie in (0, 1)")
+        q = self.accel_psd_m2_s3
+        require(q is None or 0 <= q < 1e6, w,
+                f"accel_psd_m2_s3 must be null or in [0, 1e6) m^2/s^3, got {q}")
+        require(self.motion_test in MOTION_TESTS, w,
+                f"motion_test must be one of {', '.join(MOTION_TESTS)}, got {self.motion_test!r}")
+        require(0 < self.motion_alpha < 1, w, "motion_alpha must lie in (0, 1)")
+        require(1 <= self.motion_terms <= 64, w,
+                f"motion_terms must lie in [1, 64], got {self.motion_terms}")
 
 
 class BearingsEstimator(Estimator):
     """Base of estimators over ``bearings2d`` logs; subclasses implement ``solve``. Every
     output carries per track its kinematics now (at the last bearing), their one-sigma
-    errors and a ``status`` (see ``bearings_status``)."""
+    errors, a ``status`` (see ``status.py``), from when the solution holds
+    (``leg_start_s``), the target motion it assumed (``accel_psd_m2_s3``) and the trend
+    test's p-value (``motion_p_value``, NaN where not run).
+
+    ``models_motion``: the estimator can follow a nearly-constant-velocity target: with
+    q = ``accel_psd_m2_s3`` > 0 its constant-velocity fit is refined to the NCV maximum a
+    posteriori state (``ncv.smooth``), whose covariance includes the target's own motion.
+    One that cannot reports ``approximate`` there, as does one whose errors are not honest
+    by construction (``honest_errors`` False)."""
 
     family = "bearings2d"
+    models_motion = False
+    honest_errors = True
 
     def estimate(self, log: BearingsLog) -> dict:
         """Estimate theta for every track of ``log``; returns output columns by name."""
+        cfg = self.config
         t, ox, oy = log.t_s, log.own_x_m, log.own_y_m
         measured = np.deg2rad(log.bearing_deg)
         valid = np.isfinite(measured)
         n_bearings = valid.sum(axis=1)
-        few = n_bearings < self.config.min_bearings
+        few = n_bearings < cfg.min_bearings
         if np.any(few):
             ids = ", ".join(str(i) for i in log.track_id[few][:10])
             raise InputError(
-                f"{self.name}: tracks {ids} have fewer than {self.config.min_bearings} bearings "
+                f"{self.name}: tracks {ids} have fewer than {cfg.min_bearings} bearings "
                 f"(min {n_bearings.min()}); 4 parameters (x0, y0, vx, vy) need more"
             )
         measured = np.where(valid, measured, 0.0)
@@ -69,20 +103,44 @@ class BearingsEstimator(Estimator):
         if valid.all():
             valid = None  # every bearing present: skip masking in the hot loops
         self.log_sigma_deg = log.sigma_deg  # the log's nominal noise (None: unknown), for solve
+        q = cfg.accel_psd_m2_s3
+        if q is None:
+            q = RECORDED_ACCEL_PSD if log.accel_psd_m2_s3 is None else log.accel_psd_m2_s3
+        self.accel_psd = q  # the targets' motion the outputs assume, for solve
+        undeclared = log.accel_psd_m2_s3 is None or log.sigma_deg is None
+        test = cfg.motion_test == "on" or (cfg.motion_test == "auto" and undeclared)
         out = self.solve(t, ox, oy, measured, valid, first)
         theta = out.pop("theta")
         if "cost_rad2" in out:  # iterative estimators know F and J^T J at their solution
             cost, jtj = out.pop("cost_rad2"), out.pop("jtj")
         else:
             cost, jtj = evaluate_in_blocks(BearingTerms(t, ox, oy, measured, valid), theta)
-        # a fit with its own noise scale and fit test (robust lm) passes both on to assess
+        # a fit with its own noise scale and fit test (robust lm) passes both on, and the
+        # bearings it kept
         sigma2, fit_p = out.pop("sigma2_rad2", None), out.pop("fit_p", None)
-        runs_p = None
-        if log.sigma_deg is None and fit_p is None:
-            residuals = bearing_residuals(theta, t, ox, oy, measured, valid)
-            runs_p = runs_test_p(residuals, valid)
-        trust = assess(theta, cost, jtj, n_bearings, out["converged"], t[last], ox[last],
-                       oy[last], log.sigma_deg, runs_p, self.config, sigma2=sigma2, fit_p=fit_p)
+        own_fit_test = fit_p is not None
+        use = out.pop("inliers", valid)
+        if fit_p is None:
+            sigma2, fit_p = noise_fit(cost, n_bearings - 4, log.sigma_deg)
+        sigma2 = np.broadcast_to(np.asarray(sigma2, dtype=float), theta.shape[:1])
+        n = theta.shape[0]
+        motion_p = np.full(n, np.nan)
+        approximate = np.full(n, not self.honest_errors)
+        follows = q > 0 and self.models_motion
+        if follows or test:
+            sigma_rad = (np.full(n, np.nan) if log.sigma_deg is None and follows
+                         else np.sqrt(sigma2))
+            fit = ncv.smooth(t, ox, oy, measured, use, first, last, theta, q if follows else 0.0,
+                             sigma_rad, iterate=follows)
+            if test:
+                motion_p = trend_test_p(fit["innovations"], t, cfg.motion_terms)
+            if follows:
+                theta, cost, jtj, sigma2, fit_p = self._followed(fit, log.sigma_deg, fit_p,
+                                                                 own_fit_test)
+        approximate |= q > 0 and not self.models_motion
+        trust = assess(theta, jtj, sigma2, fit_p, motion_p, out["converged"], approximate,
+                       t[last], ox[last], oy[last], cfg)
+        leg_start = out.pop("leg_start_s", t[first])
         columns = {
             "x0_m": theta[:, 0], "y0_m": theta[:, 1], "vx_m_s": theta[:, 2], "vy_m_s": theta[:, 3],
             **out,
@@ -90,12 +148,14 @@ class BearingsEstimator(Estimator):
             "n_bearings": n_bearings.astype(np.int64),
             "t_last_s": t[last], "own_x_last_m": ox[last], "own_y_last_m": oy[last],
             **trust,
+            "leg_start_s": leg_start,
+            "accel_psd_m2_s3": np.full(n, float(q) if self.models_motion else 0.0),
+            "motion_p_value": motion_p,
         }
         for i in range(4):
             for j in range(i, 4):
                 columns[f"jtj_{i}{j}"] = jtj[:, i, j]
         return columns
-
     def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
         """``valid``: mask or None (all present); ``first``: index of each track's first
         bearing; ``self.log_sigma_deg`` is the log's nominal noise. Returns ``theta`` (n, 4),
@@ -103,3 +163,23 @@ class BearingsEstimator(Estimator):
         scale and fit test of the estimator's own, replacing the nominal ones in the status),
         and estimator-specific columns."""
         raise NotImplementedError
+
+    @staticmethod
+    def _followed(fit, sigma_deg, fit_p, own_fit_test):
+        """theta, F, J^T J, sigma^2 and the noise test of the NCV state ``fit``
+        (``ncv.smooth``): J^T J is the information sigma^2 C^-1 of its covariance C (so that
+        C is what every reader computes as J^T J^-1 sigma^2); the noise test is the
+        two-sided chi-square of its normalised innovations when sigma is known, unless the
+        estimator tests the fit itself (``own_fit_test``: robust lm)."""
+        from scipy.special import chdtrc
+
+        sigma2 = fit["sigma2"]
+        info, singular = scaled_inverse(fit["cov_theta"], 1e-14)
+        info *= sigma2[:, None, None]
+        if not own_fit_test and sigma_deg is not None and sigma_deg > 0:
+            e2 = fit["innovations"] ** 2
+            count = np.sum(np.isfinite(e2), axis=1)
+            upper = chdtrc(np.maximum(count, 1), np.nansum(e2, axis=1))
+            fit_p = np.where(count > 0, np.minimum(1.0, 2 * np.minimum(upper, 1 - upper)),
+                             np.nan)
+        return fit["theta"], fit["cost_rad2"], info, sigma2, fit_p

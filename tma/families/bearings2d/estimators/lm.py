@@ -178,6 +178,7 @@ def sandwich_information(residuals, jac, scale, loss):
 class LevenbergMarquardt(BearingsEstimator):
     name = "lm"
     Config = Config
+    models_motion = True  # a target that is not at constant velocity: the NCV MAP state
     # present when starts > 1 / when the loss is robust (the default run adds none)
     outputs = ("start_won", "cost_robust_rad2", "n_downweighted")
 
@@ -271,6 +272,7 @@ class LevenbergMarquardt(BearingsEstimator):
         out["jtj"] = sandwich_information(r, jac, scale, loss)
         beyond = np.abs(r) > TUNING[loss] * scale[:, None]
         out["n_downweighted"] = (beyond if valid is None else beyond & valid).sum(axis=1)
+        out["inliers"] = ~beyond if valid is None else valid & ~beyond  # for a motion fit
         if sigma is None:
             fit_p = runs_test_p(r, valid)
         elif sigma > 0:

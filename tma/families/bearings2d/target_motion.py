@@ -1,0 +1,195 @@
+"""How simulated ``bearings2d`` targets move when they do not hold course and speed: random
+manoeuvres (course and speed changes at random times, at ship-like turn rates and
+accelerations) and nearly-constant-velocity wander (white random acceleration), either or
+both on top of the scenario's constant-velocity target.
+
+Manoeuvres (``ManoeuvreConfig``): a share ``prob`` of the targets manoeuvre ``count`` times.
+Manoeuvre j starts at a time drawn uniform over [``start_frac``, ``end_frac``] of the
+observation (sorted; one that would start before the previous has ended starts when it
+ends), turns by an angle uniform in [``course_change_min_deg``, ``course_change_max_deg``],
+left or right alike, at a rate uniform in [``turn_rate_min_deg_s``,
+``turn_rate_max_deg_s``], and changes speed by a factor uniform in [1 - ``speed_change_rel``,
+1 + ``speed_change_rel``] at ``accel_m_s2``; it ends when both are done. Course and speed
+are then piecewise linear in time, and positions their integral (3-point Gauss-Legendre per
+bearing interval: exact on a straight or turning stretch, millimetres at a kink).
+
+Wander (``accel_psd_m2_s3`` = q > 0): per axis, position and velocity deviations driven by
+white acceleration of spectral density q, drawn exactly on the bearing epochs (the
+discrete model of ``ncv.py``: Q = q [[T^3/3, T^2/2], [T^2/2, T]]), added to the path.
+
+Draws come from the shard's own child streams ``SeedSequence(seed, spawn_key=(shard,
+MANOEUVRE_STREAM))`` and ``(shard, WANDER_STREAM)``, the manoeuvres drawn for every target
+whatever ``prob``: the targets and noise of a dataset do not change with these options (off,
+a dataset's bearings are as without them), a manoeuvre of a target is the same at every
+``prob`` that makes it manoeuvre, and the wander at two q differs by its scale alone.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tma.config import require
+
+MANOEUVRE_STREAM, WANDER_STREAM = 2, 3  # spawn-key elements under the shard's (shard,)
+GAUSS_NODES = (0.5 - np.sqrt(15) / 10, 0.5, 0.5 + np.sqrt(15) / 10)  # on [0, 1]
+GAUSS_WEIGHTS = (5 / 18, 8 / 18, 5 / 18)
+
+
+@dataclass
+class ManoeuvreConfig:
+    """Course and speed changes (module docstring); ``prob`` 0: none."""
+
+    prob: float = 0.0  # share of the targets that manoeuvre
+    count: int = 1  # manoeuvres of each manoeuvring target
+    start_frac: float = 0.3  # manoeuvres start within [start_frac, end_frac] of the observation
+    end_frac: float = 0.8
+    course_change_min_deg: float = 20.0  # turn angle, left or right alike
+    course_change_max_deg: float = 120.0
+    turn_rate_min_deg_s: float = 0.2  # ships turn at 0.2-1 deg/s, small craft up to 3
+    turn_rate_max_deg_s: float = 1.0
+    speed_change_rel: float = 0.3  # speed factor uniform in [1 - this, 1 + this]
+    accel_m_s2: float = 0.05  # while changing speed (merchant ships 0.01-0.05)
+
+
+@dataclass
+class TargetConfig:
+    """How the targets move beyond constant velocity, and whether the log says so."""
+
+    accel_psd_m2_s3: float = 0.0  # wander: random acceleration spectral density per axis
+    manoeuvres: ManoeuvreConfig = field(default_factory=ManoeuvreConfig)
+    # the log declares the targets' motion (accel_psd) when it is a motion model (no
+    # manoeuvres): estimators then assume it; false: as a recording, which declares none
+    declared: bool = True
+
+    @property
+    def moving(self) -> bool:
+        """Whether the targets do anything but hold course and speed."""
+        return self.accel_psd_m2_s3 > 0 or self.manoeuvres.prob > 0
+
+    def declared_psd(self) -> float | None:
+        """What the log declares of the targets' motion (``BearingsLog.accel_psd_m2_s3``)."""
+        return self.accel_psd_m2_s3 if self.declared and self.manoeuvres.prob == 0 else None
+
+
+def check(cfg: TargetConfig, where: str):
+    m = cfg.manoeuvres
+    require(0 <= cfg.accel_psd_m2_s3 < 1e3, where,
+            f"target.accel_psd_m2_s3 must lie in [0, 1e3) m^2/s^3, got {cfg.accel_psd_m2_s3}")
+    require(0 <= m.prob <= 1, where, f"target.manoeuvres.prob must lie in [0, 1], got {m.prob}")
+    require(1 <= m.count <= 100, where,
+            f"target.manoeuvres.count must lie in [1, 100], got {m.count}")
+    require(0 <= m.start_frac <= m.end_frac <= 1, where,
+            "target.manoeuvres needs 0 <= start_frac <= end_frac <= 1")
+    require(0 <= m.course_change_min_deg <= m.course_change_max_deg <= 360, where,
+            "target.manoeuvres needs 0 <= course_change_min_deg <= course_change_max_deg <= 360")
+    require(0 < m.turn_rate_min_deg_s <= m.turn_rate_max_deg_s <= 90, where,
+            "target.manoeuvres needs 0 < turn_rate_min_deg_s <= turn_rate_max_deg_s <= 90")
+    require(0 <= m.speed_change_rel < 1, where,
+            f"target.manoeuvres.speed_change_rel must lie in [0, 1), got {m.speed_change_rel}")
+    require(0 < m.accel_m_s2 <= 100, where,
+            f"target.manoeuvres.accel_m_s2 must lie in (0, 100], got {m.accel_m_s2}")
+
+
+def _ramp(t, start, duration):
+    """clip(t - start, 0, duration) / duration (0 before, 1 after; 1 for a zero duration),
+    ``t`` (..., K) against per-track ``start``, ``duration`` (n,)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = (t - start[:, None]) / duration[:, None]
+    return np.where(duration[:, None] > 0, np.clip(x, 0.0, 1.0), (t >= start[:, None]) * 1.0)
+
+
+def manoeuvre_plan(cfg: ManoeuvreConfig, duration_s, speed0, rng):
+    """Per target (n = ``speed0.size``): start, turn (rad, signed: > 0 right), turn duration,
+    speed change (m/s) and its duration of each manoeuvre, arrays (count, n), and whether
+    the target manoeuvres (n,)."""
+    n = speed0.size
+    manoeuvres = rng.random(n) < cfg.prob
+    times = np.sort(rng.uniform(cfg.start_frac, cfg.end_frac, (cfg.count, n)), axis=0)
+    times *= duration_s
+    angle = np.deg2rad(rng.uniform(cfg.course_change_min_deg, cfg.course_change_max_deg,
+                                   (cfg.count, n)))
+    turn = np.where(rng.random((cfg.count, n)) < 0.5, -angle, angle)
+    rate = np.deg2rad(rng.uniform(cfg.turn_rate_min_deg_s, cfg.turn_rate_max_deg_s,
+                                  (cfg.count, n)))
+    factor = rng.uniform(1 - cfg.speed_change_rel, 1 + cfg.speed_change_rel, (cfg.count, n))
+    start = np.empty((cfg.count, n))
+    turn_s, dv, dv_s = np.abs(turn) / rate, np.empty((cfg.count, n)), np.empty((cfg.count, n))
+    speed, end = speed0.copy(), np.zeros(n)
+    for j in range(cfg.count):
+        start[j] = np.maximum(times[j], end)
+        dv[j] = speed * (factor[j] - 1)
+        dv_s[j] = np.abs(dv[j]) / cfg.accel_m_s2
+        speed = speed + dv[j]
+        end = start[j] + np.maximum(turn_s[j], dv_s[j])
+    off = ~manoeuvres
+    turn[:, off], dv[:, off] = 0.0, 0.0
+    return {"start": start, "turn": turn, "turn_s": turn_s, "dv": dv, "dv_s": dv_s,
+            "manoeuvres": manoeuvres}
+
+
+def course_speed(plan, course0, speed0, t):
+    """Course (rad) and speed (m/s) at times ``t`` (..., K) per target (n, K)."""
+    course = np.broadcast_to(course0[:, None], (course0.size, t.shape[-1])).copy()
+    speed = np.broadcast_to(speed0[:, None], course.shape).copy()
+    for j in range(plan["start"].shape[0]):
+        course += plan["turn"][j][:, None] * _ramp(t, plan["start"][j], plan["turn_s"][j])
+        speed += plan["dv"][j][:, None] * _ramp(t, plan["start"][j], plan["dv_s"][j])
+    return course, speed
+
+
+def wander(q, t, n, rng):
+    """Position and velocity deviations (x, y, vx, vy), each (n, K), of white random
+    acceleration with spectral density ``q`` per axis, zero at t[0]."""
+    T = np.diff(t)
+    l11 = np.sqrt(q * T**3 / 3)
+    l21 = np.divide(q * T**2 / 2, l11, out=np.zeros_like(T), where=l11 > 0)
+    l22 = np.sqrt(np.maximum(q * T - l21**2, 0.0))
+    u = rng.standard_normal((2, 2, n, T.size))  # (axis, position/velocity, track, step)
+    out = []
+    for axis in range(2):
+        w_p = l11 * u[axis, 0]
+        w_v = l21 * u[axis, 0] + l22 * u[axis, 1]
+        v = np.concatenate([np.zeros((n, 1)), np.cumsum(w_v, axis=1)], axis=1)
+        p = np.concatenate([np.zeros((n, 1)), np.cumsum(T * v[:, :-1] + w_p, axis=1)], axis=1)
+        out.append((p, v))
+    (px, vx), (py, vy) = out
+    return px, py, vx, vy
+
+
+def target_paths(cfg: TargetConfig, x0, y0, course0, speed0, t, manoeuvre_rng, wander_rng):
+    """Positions (n, K) of the targets at the bearing times ``t`` and their velocity at the
+    last one (n, 2), and per target its last manoeuvre (start, end s; turn deg, speed
+    factor; NaN where none)."""
+    n = x0.size
+    duration = float(t[-1] - t[0])
+    plan = manoeuvre_plan(cfg.manoeuvres, duration, speed0, manoeuvre_rng)
+    if plan["manoeuvres"].any():
+        # velocity at the Gauss nodes of every bearing interval, integrated
+        dt = np.diff(t)
+        nodes = t[:-1, None] + dt[:, None] * np.array(GAUSS_NODES)  # (K - 1, 3)
+        course, speed = course_speed(plan, course0, speed0, nodes.ravel())
+        w = (dt[:, None] * np.array(GAUSS_WEIGHTS)).ravel()
+        step_x = (speed * np.sin(course) * w).reshape(n, -1, 3).sum(axis=2)
+        step_y = (speed * np.cos(course) * w).reshape(n, -1, 3).sum(axis=2)
+        x = x0[:, None] + np.concatenate([np.zeros((n, 1)), np.cumsum(step_x, axis=1)], axis=1)
+        y = y0[:, None] + np.concatenate([np.zeros((n, 1)), np.cumsum(step_y, axis=1)], axis=1)
+        c_end, s_end = course_speed(plan, course0, speed0, t[-1:])
+        v_end = np.column_stack([s_end[:, 0] * np.sin(c_end[:, 0]),
+                                 s_end[:, 0] * np.cos(c_end[:, 0])])
+    else:
+        v0 = np.column_stack([speed0 * np.sin(course0), speed0 * np.cos(course0)])
+        x = x0[:, None] + v0[:, :1] * (t - t[0])
+        y = y0[:, None] + v0[:, 1:] * (t - t[0])
+        v_end = v0
+    if cfg.accel_psd_m2_s3 > 0:
+        px, py, vx, vy = wander(cfg.accel_psd_m2_s3, t, n, wander_rng)
+        x, y = x + px, y + py
+        v_end = v_end + np.column_stack([vx[:, -1], vy[:, -1]])
+    on = plan["manoeuvres"]
+    last_start = np.where(on, plan["start"][-1], np.nan)
+    last_end = last_start + np.maximum(plan["turn_s"][-1], plan["dv_s"][-1])
+    speed_before = speed0 + plan["dv"][:-1].sum(axis=0)
+    last = {"manoeuvre_start_s": last_start, "manoeuvre_end_s": last_end,
+            "course_change_deg": np.where(on, np.rad2deg(plan["turn"][-1]), np.nan),
+            "speed_change_rel": np.where(on, plan["dv"][-1] / speed_before, np.nan)}
+    return x, y, v_end, last
