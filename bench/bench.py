@@ -51,7 +51,7 @@ from tma.parallel import keep_freed_memory
 
 REPO = Path(__file__).resolve().parents[1]
 THETA = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")
-SECTIONS = ("lm", "stages", "ranges2d", "filters3d", "cmnf", "compile", "cluster")
+SECTIONS = ("lm", "stages", "ranges2d", "filters3d", "cmnf", "compile", "real_motion", "cluster")
 
 
 def timed(function, *args):
@@ -423,6 +423,37 @@ def bench_compile():
         print(f"    {label:68s} {cold_s:>6s} / {warm.rsplit(' ', 1)[1]:>5s}")
 
 
+def bench_real_motion():
+    """Issue 20, item 6: bearings-only TMA on real ship motion (the Solent AIS cases of
+    tests/data/ais), ingested and estimated as the README says, against the AIS truth."""
+    import logging
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from tests.families.bearings2d.real_motion import CRITERIA, criteria, run_cases
+
+    logging.disable(logging.WARNING)  # each non-ok track's note
+    print("(g) real ship motion: 30 Solent AIS own-ship/target pairs (tests/data/ais), bearings "
+          "every 5 s, 0.5 deg noise")
+    print(f"    targets: of the ok, within 3 sd >= {CRITERIA['ok_within_3_sd']:.0%}; steady ok "
+          f">= {CRITERIA['steady_ok']:.0%}; ok off by <= {CRITERIA['max_ok_range_error']:.0%} "
+          f"in range, <= {CRITERIA['max_ok_course_error_deg']:g} deg in course")
+    runs = [("lm (README default: sigma estimated)", {"name": "lm"}, None),
+            ("lm, ingest sigma_deg=0.5", {"name": "lm"}, 0.5),
+            ("last_leg, sigma estimated", {"name": "last_leg"}, None),
+            ("lm at constant velocity, no trend test (before)",
+             {"name": "lm", "accel_psd_m2_s3": 0.0, "motion_test": "off"}, 0.5)]
+    with tempfile.TemporaryDirectory() as workdir:
+        for i, (label, estimator, sigma) in enumerate(runs):
+            f = criteria(run_cases(Path(workdir) / str(i), estimator, sigma))
+            print(f"    {label}:")
+            print(f"      ok {f['ok']}/{f['cases']}, within 3 sd {f['ok_within_3_sd']:.0%}; "
+                  f"steady ok {f['steady_ok']:.0%} of {f['steady']}; largest ok error: range "
+                  f"{f['max_ok_range_error']:.0%}, course {f['max_ok_course_error_deg']:.1f} "
+                  f"deg; manoeuvring ({f['manoeuvring']}) ok {f['manoeuvring_ok']}, flagged or "
+                  f"within 3 sd {f['manoeuvring_flagged_or_within_3_sd']:.0%}")
+    logging.disable(logging.NOTSET)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--tracks", type=int, default=2000)
@@ -452,6 +483,8 @@ def main():
         bench_cmnf_memory(args.cmnf_paths)
     if wanted("compile"):
         bench_compile()
+    if wanted("real_motion"):
+        bench_real_motion()
     if wanted("cluster"):
         from cluster import bench_cluster  # bench/cluster.py (run as a script); tma[dask]
 

@@ -8,4 +8,5 @@ FAMILY = Family("bearings2d", estimators={
     "nbearings": "tma.families.bearings2d.estimators.nbearings:NBearings",
     "iv": "tma.families.bearings2d.estimators.iv:InstrumentalVariable",
     "mpekf": "tma.families.bearings2d.estimators.mpekf:ModifiedPolarEKF",
+    "last_leg": "tma.families.bearings2d.estimators.last_leg:LastLeg",
 })

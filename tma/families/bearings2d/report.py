@@ -16,7 +16,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 import pyarrow as pa  # noqa: E402
 
-from tma.families.bearings2d import benchmark, paper  # noqa: E402
+from tma.families.bearings2d import benchmark, manoeuvre_table, paper  # noqa: E402
 from tma.families.bearings2d.geo import local_to_geodetic  # noqa: E402
 from tma.families.bearings2d.map_outputs import (  # noqa: E402
     MAX_PLOTS,
@@ -299,6 +299,8 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
                               entry.dataset.manifest["config"], entry.manifest["config"]))
     if rows and benchmark.is_benchmark(table_name):  # estimators x sigma against the CRLB
         written += benchmark.write_benchmark(entries, tables_dir, table_name)
+    elif rows and manoeuvre_table.is_manoeuvre_table(table_name):  # targets that manoeuvre
+        written += manoeuvre_table.write_manoeuvre_table(entries, tables_dir, table_name)
     elif rows:
         written += write_table(rows, tables_dir, table_name)
         written += write_paper_section(runs, Path(tables_dir) / f"{table_name}.md")

@@ -119,7 +119,10 @@ class BearingsEstimator(Estimator):
         # bearings it kept
         sigma2, fit_p = out.pop("sigma2_rad2", None), out.pop("fit_p", None)
         own_fit_test = fit_p is not None
-        use = out.pop("inliers", valid)
+        used = out.pop("bearings_used", None)  # a fit of part of each track (last_leg)
+        if used is not None:
+            n_bearings, valid = used.sum(axis=1), used
+        use = out.pop("inliers", valid)  # and of those, the ones a robust fit kept
         if fit_p is None:
             sigma2, fit_p = noise_fit(cost, n_bearings - 4, log.sigma_deg)
         sigma2 = np.broadcast_to(np.asarray(sigma2, dtype=float), theta.shape[:1])

@@ -1,0 +1,140 @@
+"""Manoeuvring targets (issue 20, items 2, 3 and 5): flagged by the trend test, re-solved
+on their last leg by ``last_leg``; estimators that cannot give honest errors say so."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tma.families import build_estimator
+from tma.families.bearings2d.metrics import NEES_95, track_metrics
+from tma.families.bearings2d.report import track_report
+from tma.families.bearings2d.scenario import (
+    Config,
+    LegConfig,
+    ObserverConfig,
+    PopulationConfig,
+    simulate_shard,
+)
+from tma.families.bearings2d.target_motion import ManoeuvreConfig, TargetConfig
+
+# close targets (5-12 km) turning 60-120 deg in the first half, own-ship zig-zagging
+# throughout: the manoeuvres show in the bearings and the last legs are observable
+ZIGZAG = ObserverConfig(legs=[
+    LegConfig(course_deg=0.0, duration_s=150.0),
+    *[LegConfig(course_deg=c, duration_s=150.0) for c in (60.0, 300.0) * 5]])
+
+
+def _manoeuvring(n=300, prob=1.0, seed=21, observer=ZIGZAG, sigma=0.5):
+    target = TargetConfig(manoeuvres=ManoeuvreConfig(
+        prob=prob, start_frac=0.2, end_frac=0.45, course_change_min_deg=60.0,
+        course_change_max_deg=120.0, turn_rate_min_deg_s=0.5, turn_rate_max_deg_s=1.0))
+    cfg = Config(n_tracks=n, shard_size=n, sigma_deg=sigma, seed=seed, observer=observer,
+                 population=PopulationConfig(distance_min_m=5000.0, distance_max_m=12000.0),
+                 target=target)
+    log, truth = simulate_shard(cfg, 0)
+    return log, truth.to_pandas()
+
+
+def _estimate(log, name, **params):
+    out = build_estimator({"name": name, **params}).estimate(log)
+    return pd.DataFrame({"track_id": log.track_id,
+                         **{k: v for k, v in out.items() if np.ndim(v) == 1}})
+
+
+def test_manoeuvres_are_flagged_and_named_in_the_note():
+    log, truth = _manoeuvring()
+    est = _estimate(log, "lm")
+    assert np.mean(est.status == "manoeuvring") >= 0.9, est.status.value_counts()
+    assert (est.loc[est.status == "manoeuvring", "motion_p_value"] < 1e-3).all()
+    notes = track_report(est).query("status == 'manoeuvring'")["note"]
+    assert notes.str.contains("trend test p = ").all() and notes.str.contains("last_leg").all()
+
+
+def test_the_last_leg_is_found_and_its_errors_are_honest():
+    log, truth = _manoeuvring()
+    est = _estimate(log, "last_leg")
+    found = est.n_rounds > 0
+    assert found.mean() >= 0.9
+    # the leg starts after the manoeuvre began, and at most a few minutes after it ended
+    start = est.loc[found, "leg_start_s"].to_numpy()
+    began = truth.loc[found, "manoeuvre_start_s"].to_numpy()
+    ended = truth.loc[found, "manoeuvre_end_s"].to_numpy()
+    assert np.mean((start >= began) & (start <= ended + 300)) >= 0.85
+    m = track_metrics(est, truth)
+    ok = m.status == "ok"
+    assert ok.mean() >= 0.6, est.status.value_counts()
+    assert np.mean(m.nees[ok] <= NEES_95) >= 0.85
+    assert (est.loc[found, "n_bearings"] < log.t_s.size).all()  # the leg's bearings only
+
+
+def test_a_last_leg_without_own_ship_manoeuvre_is_unobservable():
+    """Own-ship zig-zags until 600 s, then holds its course: a target that manoeuvres
+    after that has a last leg whose range the bearings cannot give."""
+    straight_after = ObserverConfig(legs=[
+        LegConfig(course_deg=0.0, duration_s=150.0),
+        *[LegConfig(course_deg=c, duration_s=150.0) for c in (60.0, 300.0, 60.0)],
+        LegConfig(course_deg=0.0, duration_s=600.0)])
+    target = TargetConfig(manoeuvres=ManoeuvreConfig(
+        prob=1.0, start_frac=0.6, end_frac=0.65, course_change_min_deg=80.0,
+        course_change_max_deg=120.0, turn_rate_min_deg_s=1.0, turn_rate_max_deg_s=2.0))
+    cfg = Config(n_tracks=100, shard_size=100, sigma_deg=0.5, seed=3, observer=straight_after,
+                 population=PopulationConfig(distance_min_m=5000.0, distance_max_m=10000.0),
+                 target=target)
+    log, _ = simulate_shard(cfg, 0)
+    est = _estimate(log, "last_leg")
+    found = est.n_rounds > 0
+    assert found.mean() >= 0.8
+    assert np.mean(est.loc[found, "status"] == "unobservable") >= 0.9
+
+
+def test_a_steady_target_is_one_leg():
+    log, _ = _manoeuvring(n=100, prob=0.0, seed=5)
+    lm, leg = _estimate(log, "lm"), _estimate(log, "last_leg")
+    steady = leg.n_rounds == 0
+    assert steady.mean() >= 0.98
+    for column in ("x0_m", "range_sd_m", "status", "leg_start_s"):
+        np.testing.assert_array_equal(lm.loc[steady, column], leg.loc[steady, column])
+    assert (leg.leg_start_s == 0).all()
+
+
+@pytest.mark.parametrize("name", ["iv", "mpekf"])
+def test_constant_velocity_estimators_are_approximate_where_targets_may_wander(name):
+    """On a log that declares no motion (a recording) iv and mpekf cannot include the
+    target's own motion in their errors: never ok, approximate (or flagged)."""
+    log, _ = _manoeuvring(n=100, prob=0.0, seed=6)
+    log.accel_psd_m2_s3 = None
+    est = _estimate(log, name)
+    assert (est.status != "ok").all()
+    assert np.mean(est.status == "approximate") >= 0.9
+    log.accel_psd_m2_s3 = 0.0  # declared constant velocity: their errors are honest again
+    assert np.mean(_estimate(log, name).status == "ok") >= 0.95
+
+
+def test_nbearings_is_never_ok():
+    log, _ = _manoeuvring(n=100, prob=0.0, seed=7, sigma=0.1)
+    log.accel_psd_m2_s3 = 0.0
+    est = _estimate(log, "nbearings")
+    assert "ok" not in set(est.status)
+    assert np.mean(est.status == "approximate") >= 0.5
+
+
+@pytest.mark.parametrize("sigma", [0.1, 0.5, 1.0])
+def test_mpekf_errors_are_consistent(sigma):
+    """Its covariance (the batch one plus its distance from the batch optimum): 93-97 % of
+    ok tracks within the chi-square(4) 95 % point (the filter's own: 71-87 %)."""
+    cfg = Config(n_tracks=1500, shard_size=1500, sigma_deg=sigma, seed=31)
+    log, truth = simulate_shard(cfg, 0)
+    m = track_metrics(_estimate(log, "mpekf"), truth.to_pandas())
+    ok = m.status == "ok"
+    assert ok.mean() >= 0.98
+    assert 0.93 <= np.mean(m.nees[ok] <= NEES_95) <= 0.97
+
+
+def test_motion_test_modes():
+    log, _ = _manoeuvring(n=60, prob=1.0, seed=8)
+    log.accel_psd_m2_s3 = 0.0  # declared (wrongly) constant velocity: auto does not test
+    assert np.isnan(_estimate(log, "lm")["motion_p_value"]).all()
+    assert (_estimate(log, "lm", motion_test="on")["status"] == "manoeuvring").mean() > 0.8
+    log.accel_psd_m2_s3 = None
+    assert np.isnan(_estimate(log, "lm", motion_test="off")["motion_p_value"]).all()
+    assert np.isfinite(_estimate(log, "lm")["motion_p_value"]).all()

@@ -1,0 +1,128 @@
+"""Targets that move like ships (``target_motion.py``): manoeuvre paths against the exact
+arcs of ``tma.path``, wander against its covariance (Monte Carlo), the truth at the last
+bearing, reproducibility and common random numbers."""
+
+import numpy as np
+import pytest
+
+from tma.angles import bearing_from_north
+from tma.families.bearings2d.scenario import Config, simulate_shard
+from tma.families.bearings2d.target_motion import (
+    ManoeuvreConfig,
+    TargetConfig,
+    course_speed,
+    manoeuvre_plan,
+    target_paths,
+    wander,
+)
+from tma.path import LegPath
+
+
+class _Fixed:
+    """A generator whose draws make one turn of ``angle`` deg at ``rate`` deg/s starting at
+    ``start`` (fraction of the observation), speed unchanged."""
+
+    def __init__(self, start, angle, rate):
+        self.values = iter([np.array([0.0]), np.array([[start]]), np.array([[abs(angle)]]),
+                            np.array([[1.0 if angle > 0 else 0.0]]), np.array([[rate]]),
+                            np.array([[1.0]])])
+
+    def random(self, *_):
+        return next(self.values)
+
+    def uniform(self, low, high, size):
+        return next(self.values)
+
+
+def test_a_turn_follows_the_exact_arc():
+    """A 90 deg right turn at 0.5 deg/s after 300 s, at 8 m/s from course 45 deg: every
+    position within 5 mm of the closed-form path (straight, arc, straight)."""
+    t = np.arange(0.0, 1201.0, 2.0)
+    cfg = TargetConfig(manoeuvres=ManoeuvreConfig(prob=1.0))
+    rng = _Fixed(start=0.25, angle=90.0, rate=0.5)
+    start = np.array([100.0]), np.array([-200.0])
+    x, y, v_end, last = target_paths(cfg, *start, np.deg2rad([45.0]), np.array([8.0]), t,
+                                     rng, np.random.default_rng(0))
+    exact = LegPath(100.0, -200.0, 8.0, [
+        {"course_deg": 45.0, "duration_s": 300.0},
+        {"turn_to_deg": 135.0, "rate_deg_s": 0.5, "direction": "right"},
+        {"duration_s": 1200.0 - 480.0}])
+    ex, ey = exact.position(t)
+    assert np.max(np.hypot(x[0] - ex, y[0] - ey)) < 5e-3
+    np.testing.assert_allclose(v_end[0], 8.0 * np.array([np.sin(np.deg2rad(135.0)),
+                                                         np.cos(np.deg2rad(135.0))]))
+    assert last["manoeuvre_start_s"][0] == pytest.approx(300.0)
+    assert last["manoeuvre_end_s"][0] == pytest.approx(480.0)
+    assert last["course_change_deg"][0] == pytest.approx(90.0)
+
+
+def test_manoeuvre_plans_turn_and_change_speed_in_order():
+    cfg = ManoeuvreConfig(prob=1.0, count=3, speed_change_rel=0.3, accel_m_s2=0.05)
+    speed0 = np.full(500, 10.0)
+    plan = manoeuvre_plan(cfg, 1200.0, speed0, np.random.default_rng(5))
+    ends = plan["start"] + np.maximum(plan["turn_s"], plan["dv_s"])
+    assert (plan["start"][1:] >= ends[:-1] - 1e-9).all()  # one after the other
+    turns = np.rad2deg(np.abs(plan["turn"]))
+    assert ((turns >= 20) & (turns <= 120)).all()
+    course, speed = course_speed(plan, np.zeros(500), speed0, np.array([1e6]))
+    np.testing.assert_allclose(np.rad2deg(course[:, 0]), np.rad2deg(plan["turn"].sum(0)))
+    assert ((speed > 10 * 0.7**3 - 1e-9) & (speed < 10 * 1.3**3 + 1e-9)).all()
+
+
+def test_wander_has_the_covariance_of_white_acceleration():
+    q, t = 2e-3, np.arange(0.0, 601.0, 5.0)
+    px, py, vx, vy = wander(q, t, 20000, np.random.default_rng(1))
+    T = t[-1]
+    expected = q * np.array([[T**3 / 3, T**2 / 2], [T**2 / 2, T]])
+    for p, v in ((px, vx), (py, vy)):
+        cov = np.cov(np.vstack([p[:, -1], v[:, -1]]))
+        np.testing.assert_allclose(cov, expected, rtol=0.05)
+    assert (px[:, 0] == 0).all() and (vy[:, 0] == 0).all()
+
+
+def _sim(sigma=0.0, **target):
+    return simulate_shard(Config(n_tracks=300, shard_size=300, sigma_deg=sigma, seed=4,
+                                 target=TargetConfig(**target)), 0)
+
+
+def test_truth_is_the_state_at_the_last_bearing():
+    """Noiseless bearings of moving targets: the truth's straight line through the state at
+    the last bearing gives exactly the last bearing."""
+    log, truth = _sim(accel_psd_m2_s3=1e-3, manoeuvres=ManoeuvreConfig(prob=0.5))
+    truth = truth.to_pandas()
+    t, k = log.t_s[-1], -1
+    bearing = bearing_from_north(truth.x0_m + truth.vx_m_s * t - log.own_x_m[k],
+                                 truth.y0_m + truth.vy_m_s * t - log.own_y_m[k])
+    np.testing.assert_allclose(np.rad2deg(bearing) % 360, log.bearing_deg[:, k], atol=1e-9)
+    assert truth.manoeuvring.mean() == pytest.approx(0.5, abs=0.1)
+    assert truth.loc[~truth.manoeuvring, "course_change_deg"].isna().all()
+    assert log.accel_psd_m2_s3 is None  # targets that manoeuvre declare no motion model
+
+
+def test_options_off_leave_the_dataset_as_it_was_and_draws_are_shared():
+    base, base_truth = _sim(sigma=0.5)
+    declared_off, _ = _sim(sigma=0.5, declared=False)
+    np.testing.assert_array_equal(base.bearing_deg, declared_off.bearing_deg)
+    assert base.accel_psd_m2_s3 == 0.0 and declared_off.accel_psd_m2_s3 is None
+    assert list(base_truth.column_names) == ["track_id", "x0_m", "y0_m", "vx_m_s", "vy_m_s",
+                                             "distance0_m", "course_deg", "speed_m_s"]
+    # a target's manoeuvre is the same at every share that makes it manoeuvre
+    _, half = _sim(manoeuvres=ManoeuvreConfig(prob=0.5))
+    _, full = _sim(manoeuvres=ManoeuvreConfig(prob=1.0))
+    half, full = half.to_pandas(), full.to_pandas()
+    both = half.manoeuvring.to_numpy()
+    np.testing.assert_array_equal(half.course_change_deg[both], full.course_change_deg[both])
+    again, _ = _sim(sigma=0.5, accel_psd_m2_s3=1e-4)
+    twice, _ = _sim(sigma=0.5, accel_psd_m2_s3=1e-4)
+    np.testing.assert_array_equal(again.bearing_deg, twice.bearing_deg)
+
+
+def test_bad_target_options_are_refused():
+    from tma.errors import ConfigError
+
+    for target in (TargetConfig(accel_psd_m2_s3=-1.0),
+                   TargetConfig(manoeuvres=ManoeuvreConfig(prob=2.0)),
+                   TargetConfig(manoeuvres=ManoeuvreConfig(start_frac=0.9, end_frac=0.1)),
+                   TargetConfig(manoeuvres=ManoeuvreConfig(turn_rate_min_deg_s=0.0))):
+        with pytest.raises(ConfigError, match="target"):
+            Config(target=target)

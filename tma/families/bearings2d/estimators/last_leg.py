@@ -1,0 +1,214 @@
+"""``last_leg``: a manoeuvring target's last leg, found and solved: ``lm`` on the bearings
+after the target's last manoeuvre.
+
+Bearings-only TMA of a manoeuvring target is usually posed leg by leg: the target holds
+course and speed between manoeuvres, and each leg is solved from the own-ship geometry
+during it (Le Cadre and Tremois, "Bearings-only tracking for maneuvering sources", IEEE
+Trans. Aerospace and Electronic Systems 34(1), 1998, model the source as such legs). What is
+followed here:
+
+1. ``lm`` on all the track's bearings (the motion it assumes, ``accel_psd_m2_s3``, as
+   ``lm``'s). A track whose residual sequence passes the trend test (``status``) is one leg:
+   the answer is ``lm``'s.
+2. Otherwise, the change time by likelihood over candidate times: for each tau every
+   ``step_s`` that leaves ``min_leg_s`` and ``min_bearings`` on both sides, a
+   constant-velocity fit to the bearings before tau and another to those from tau; with a
+   common noise the most likely tau minimises F_before(tau) + F_after(tau) (the two-phase
+   regression of Quandt, JASA 53, 1958; the change-point likelihood of Hinkley, Biometrika
+   57(1), 1970).
+3. The bearings from tau are the candidate last leg. If they fail the trend test in turn
+   (tau fell within a turn, or an earlier manoeuvre was found first) step 2 is repeated on
+   them, up to ``max_rounds`` times.
+4. The leg's solution is ``lm``'s on the leg's bearings alone (``bearings_used``), with
+   every output column, its status and its one-sigma errors referring to that leg:
+   ``leg_start_s`` is its first bearing, and a leg the own-ship did not manoeuvre during is
+   ``unobservable``, as it should be. A leg that still fails the test after the last round
+   keeps status ``manoeuvring``.
+
+Each fit takes the lowest F of its starts: the whole track's solution and the leg's first
+bearing at ``start_min_m``-``start_max_m`` (geometric, ``leg_starts`` of them).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tma.config import require
+from tma.families.bearings2d import ncv
+from tma.families.bearings2d.estimators.lm import MAX_INT, LevenbergMarquardt
+from tma.families.bearings2d.estimators.lm import Config as LmConfig
+from tma.families.bearings2d.estimators.lm_kernel import STOP_F_TOL, marquardt
+from tma.families.bearings2d.status import trend_test_p
+
+
+@dataclass
+class Config(LmConfig):
+    name: str = "last_leg"
+    step_s: float = 30.0  # candidate change times every this many seconds
+    min_leg_s: float = 120.0  # a leg (before or after a change) lasts at least this long
+    max_rounds: int = 3  # change searches per track (each within the last leg found)
+    settle_alpha: float = 0.2  # a leg whose CV trend test rejects at this starts step_s later
+    leg_starts: int = 4  # initial distances along the leg's first bearing, besides the track's
+
+    def __post_init__(self):
+        super().__post_init__()
+        w = "estimator 'last_leg'"
+        require(0 < self.step_s < 1e7, w, f"step_s must lie in (0, 1e7) s, got {self.step_s}")
+        require(0 < self.min_leg_s < 1e7, w,
+                f"min_leg_s must lie in (0, 1e7) s, got {self.min_leg_s}")
+        require(0 < self.settle_alpha < 1, w, "settle_alpha must lie in (0, 1)")
+        require(1 <= self.max_rounds <= 20, w,
+                f"max_rounds must lie in [1, 20], got {self.max_rounds}")
+        require(1 <= self.leg_starts <= 16, w,
+                f"leg_starts must lie in [1, 16], got {self.leg_starts}")
+        require(self.loss == "squared", w, f"loss must be squared, got {self.loss!r}")
+
+
+class LastLeg(LevenbergMarquardt):
+    name = "last_leg"
+    Config = Config
+    outputs = ("start_won", "cost_robust_rad2", "n_downweighted", "n_rounds")
+
+    def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
+        out = super().solve(t, own_x, own_y, measured_rad, valid, first)
+        n, K = measured_rad.shape
+        present = np.ones((n, K), dtype=bool) if valid is None else valid
+        used = present.copy()
+        rounds = np.zeros(n, dtype=np.int64)
+        todo = np.flatnonzero(self._drifting(t, own_x, own_y, measured_rad, present,
+                                             out["theta"]))
+        for _ in range(self.config.max_rounds):
+            if todo.size == 0:
+                break
+            rounds[todo] += 1
+            tau = self._change_times(t, own_x, own_y, measured_rad[todo], used[todo],
+                                     out["theta"][todo])
+            found = np.isfinite(tau)
+            todo, tau = todo[found], tau[found]
+            used[todo] &= t >= tau[:, None]
+            leg = self._settle(t, own_x, own_y, measured_rad[todo], used[todo],
+                               out["theta"][todo])
+            used[todo] = leg.pop("used")
+            for key, value in leg.items():
+                out[key][todo] = value
+            drifting = self._drifting(t, own_x, own_y, measured_rad[todo], used[todo],
+                                      out["theta"][todo])
+            todo = todo[drifting]
+        out["converged"] = out["stop_reason"] == STOP_F_TOL
+        out["bearings_used"] = used
+        out["leg_start_s"] = t[np.argmax(used, axis=1)]
+        out["n_rounds"] = rounds
+        return out
+
+    def _drifting(self, t, own_x, own_y, measured, used, theta):
+        """Tracks whose residual sequence fails the trend test, under the motion assumed."""
+        if measured.shape[0] == 0:
+            return np.zeros(0, dtype=bool)
+        q, sigma = self.accel_psd, self.log_sigma_deg
+        first = np.argmax(used, axis=1)
+        last = used.shape[1] - 1 - np.argmax(used[:, ::-1], axis=1)
+        fit = ncv.smooth(t, own_x, own_y, measured, used, first, last, theta, q,
+                         np.full(measured.shape[0], np.nan if sigma is None else
+                                 np.deg2rad(sigma)), iterate=q > 0)
+        with np.errstate(invalid="ignore"):
+            return trend_test_p(fit["innovations"], t, self.config.motion_terms) \
+                < self.config.motion_alpha
+
+    def _settle(self, t, own_x, own_y, measured, used, theta):
+        """The fit of each candidate leg, its start moved on by ``step_s`` while its
+        constant-velocity residual sequence still fails the trend test at ``settle_alpha``
+        (the change time falls within a turn: the leg starts once the turn is over), as
+        long as ``min_leg_s`` remains. Returns the fits and the bearings used."""
+        cfg = self.config
+        used = used.copy()
+        fit = self._fit(t, own_x, own_y, measured, used, theta)
+        last_t = t[used.shape[1] - 1 - np.argmax(used[:, ::-1], axis=1)]
+        todo = np.arange(measured.shape[0])
+        while todo.size:
+            first = np.argmax(used[todo], axis=1)
+            last = used.shape[1] - 1 - np.argmax(used[todo, ::-1], axis=1)
+            sigma = self.log_sigma_deg
+            cv = ncv.smooth(t, own_x, own_y, measured[todo], used[todo], first, last,
+                            fit["theta"][todo], 0.0,
+                            np.full(todo.size, np.nan if sigma is None else np.deg2rad(sigma)),
+                            iterate=False)
+            with np.errstate(invalid="ignore"):
+                unsettled = trend_test_p(cv["innovations"], t, cfg.motion_terms) \
+                    < cfg.settle_alpha
+            start = t[first] + cfg.step_s
+            room = (last_t[todo] - start >= cfg.min_leg_s) & (
+                (used[todo] & (t >= start[:, None])).sum(axis=1) >= cfg.min_bearings)
+            todo, start = todo[unsettled & room], start[unsettled & room]
+            if todo.size == 0:
+                break
+            used[todo] &= t >= start[:, None]
+            again = self._fit(t, own_x, own_y, measured[todo], used[todo], fit["theta"][todo])
+            for key, value in again.items():
+                fit[key][todo] = value
+        fit["used"] = used
+        return fit
+
+    def _change_times(self, t, own_x, own_y, measured, used, theta):
+        """The most likely change time per track (NaN where no candidate leaves two legs):
+        the tau minimising F(before) + F(after) of two constant-velocity fits."""
+        cfg = self.config
+        n = measured.shape[0]
+        lo = np.where(used.any(axis=1), t[np.argmax(used, axis=1)], np.inf)
+        hi = t[used.shape[1] - 1 - np.argmax(used[:, ::-1], axis=1)]
+        span = np.nanmax(np.where(np.isfinite(lo), hi - lo, 0.0), initial=0.0)
+        offsets = np.arange(cfg.min_leg_s, span - cfg.min_leg_s + 1e-9, cfg.step_s)
+        best, best_cost = np.full(n, np.nan), np.full(n, np.inf)
+        for offset in offsets:
+            tau = lo + offset
+            before, after = used & (t < tau[:, None]), used & (t >= tau[:, None])
+            enough = ((before.sum(1) >= cfg.min_bearings) & (after.sum(1) >= cfg.min_bearings)
+                      & (hi - tau >= cfg.min_leg_s))
+            if not enough.any():
+                continue
+            rows = np.flatnonzero(enough)
+            cost = (self._fit(t, own_x, own_y, measured[rows], before[rows], theta[rows],
+                              cost_only=True)
+                    + self._fit(t, own_x, own_y, measured[rows], after[rows], theta[rows],
+                                cost_only=True))
+            better = cost < best_cost[rows]
+            best[rows[better]], best_cost[rows[better]] = tau[rows[better]], cost[better]
+        return best
+
+    def _fit(self, t, own_x, own_y, measured, used, theta, cost_only=False):
+        """Constant-velocity ML fits of the bearings ``used`` (rows), each from the lowest F
+        of its starts: ``theta`` and the leg's first bearing at ``leg_starts`` distances."""
+        cfg = self.config
+        n = measured.shape[0]
+        first = np.argmax(used, axis=1)
+        rows = np.arange(n)
+        bearing = measured[rows, first]
+        ox0, oy0 = own_x[first], own_y[first]
+        starts = [theta]
+        for d in np.geomspace(cfg.start_min_m, cfg.start_max_m, cfg.leg_starts):
+            # a target at rest at distance d along the leg's first bearing
+            starts.append(np.column_stack([ox0 + d * np.sin(bearing), oy0 + d * np.cos(bearing),
+                                           np.zeros(n), np.zeros(n)]))
+        best = None
+        weight = np.ascontiguousarray(used, dtype=float)
+        for start in starts:
+            fit = {"theta": np.array(np.nan_to_num(start), dtype=float),
+                   "n_f_evals": np.zeros(n, dtype=np.int64),
+                   "n_iter": np.zeros(n, dtype=np.int64),
+                   "stop_reason": np.full(n, -1, dtype=np.int64),
+                   "cost_rad2": np.zeros(n), "jtj": np.zeros((n, 4, 4))}
+            marquardt(fit["theta"], np.ascontiguousarray(t, float),
+                      np.ascontiguousarray(own_x, float), np.ascontiguousarray(own_y, float),
+                      np.ascontiguousarray(measured, float), weight, True, float(cfg.lambda0),
+                      float(cfg.lambda_up), float(cfg.lambda_down), float(cfg.f_tol_rad2),
+                      min(int(cfg.max_iter), MAX_INT), float(cfg.lambda_max),
+                      float(cfg.pd_rtol), fit["n_f_evals"], fit["n_iter"], fit["stop_reason"],
+                      fit["cost_rad2"], fit["jtj"])
+            if best is None:
+                best = fit
+                continue
+            better = np.nan_to_num(fit["cost_rad2"], nan=np.inf) < \
+                np.nan_to_num(best["cost_rad2"], nan=np.inf) - cfg.f_tol_rad2
+            best["n_f_evals"] += fit["n_f_evals"]
+            for key in ("theta", "n_iter", "stop_reason", "cost_rad2", "jtj"):
+                best[key][better] = fit[key][better]
+        return best["cost_rad2"] if cost_only else best
