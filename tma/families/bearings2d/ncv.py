@@ -203,15 +203,22 @@ def _smooth(t, lo, hi, mf, Pf, Pp, ms):
 
 
 @njit(error_model="numpy", depends=(atan2,))
-def _map_cost(t, ox, oy, z, w, weighted, lo, hi, s, lam, prior, p0):
-    """MAP cost (units of sigma^2): squared bearing residuals, the NCV process term
-    (lam > 0) and the diffuse prior about ``prior`` (4,)."""
+def _bearing_cost(ox, oy, z, w, weighted, lo, hi, s):
+    """Sum of squared wrapped bearing residuals (rad^2) of the trajectory ``s`` (K, 4)."""
     c = 0.0
     for k in range(lo, hi + 1):
         if (not weighted) or w[k] > 0.0:
             r = z[k] - atan2(s[k, 0] - ox[k], s[k, 1] - oy[k])
             r -= TWO_PI * np.rint(r * (1.0 / TWO_PI))
             c += r * r
+    return c
+
+
+@njit(error_model="numpy", depends=(atan2,))
+def _map_cost(t, ox, oy, z, w, weighted, lo, hi, s, lam, prior, p0):
+    """MAP cost (units of sigma^2): squared bearing residuals, the NCV process term
+    (lam > 0) and the diffuse prior about ``prior`` (4,)."""
+    c = _bearing_cost(ox, oy, z, w, weighted, lo, hi, s)
     if lam > 0.0:
         for k in range(lo, hi):
             T = t[k + 1] - t[k]
@@ -449,13 +456,7 @@ def smooth_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, lam
                     for m in range(max(c, d), 4):
                         v += Rinv[c, m] * Rinv[d, m]
                     P_last[i, c, d] = v
-        c2 = 0.0
-        for k in range(lo, hi + 1):
-            if (not weighted) or w[k] > 0.0:
-                res = z[k] - atan2(nom[k, 0] - ox[k], nom[k, 1] - oy[k])
-                res -= TWO_PI * np.rint(res * (1.0 / TWO_PI))
-                c2 += res * res
-        cost[i] = c2
+        cost[i] = _bearing_cost(ox, oy, z, w, weighted, lo, hi, nom)
 
 
 MAX_PASSES = 30  # Gauss-Newton passes
