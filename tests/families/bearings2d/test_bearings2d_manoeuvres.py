@@ -121,7 +121,7 @@ def test_nbearings_is_never_ok():
 @pytest.mark.parametrize("sigma", [0.1, 0.5, 1.0])
 def test_mpekf_errors_are_consistent(sigma):
     """Its covariance (the batch one plus its distance from the batch optimum): 93-97 % of
-    ok tracks within the chi-square(4) 95 % point (the filter's own: 71-87 %)."""
+    ok tracks within the chi-square(4) 95 % point (the filter's own: 72-87 %)."""
     cfg = Config(n_tracks=1500, shard_size=1500, sigma_deg=sigma, seed=31)
     log, truth = simulate_shard(cfg, 0)
     m = track_metrics(_estimate(log, "mpekf"), truth.to_pandas())

@@ -17,8 +17,9 @@ found by Gauss-Newton from a constant-velocity solution: the iterated extended K
 smoother (Bell, "The iterated Kalman smoother as a Gauss-Newton method", SIAM J. Optim.
 4(3), 1994), each pass a Kalman filter linearised about the current trajectory and a
 Rauch-Tung-Striebel smoother, with a step halved until the MAP cost falls. These passes
-give the first state a diffuse prior (``PRIOR_RANGES`` times the range of the
-constant-velocity start, ``PRIOR_SPEED_M_S`` per velocity axis).
+give the first state a wide prior about the constant-velocity start (``PRIOR_RANGES``
+times its range, ``PRIOR_SPEED_M_S`` per velocity axis), kept fixed over the passes and in
+the cost, so little that the answer is the bearings' and q's.
 
 About the MAP trajectory a last pass, a square-root information filter started from no
 information at all (exactly diffuse: Bierman, "Factorization Methods for Discrete
@@ -28,8 +29,9 @@ with their variances S_k. Under the model e_k = nu_k / sqrt(S_k) are independent
 (with q = 0 they are the recursive residuals of Brown, Durbin and Evans, "Techniques for
 testing the constancy of regression relationships over time", JRSS B 37(2), 1975): the
 sequence the fit tests read (``status``). The few that resolve a direction the earlier
-bearings left undetermined (S above ``MAX_S``: the diffuse ones, about one per state
-dimension) are left out. A covariance-form pass would not do: a prior centred on the
+bearings left undetermined (the diffuse ones, about one per state dimension: S above
+``MAX_S`` in a pass with q = 0, since process noise does not change which they are) are
+left out. A covariance-form pass would not do: a prior centred on the
 answer, however wide, shrinks the early innovations and makes the sequence look smoother
 than white (the trend test then rejects at a third of its level).
 
@@ -49,7 +51,7 @@ import math
 import numpy as np
 
 from tma.angles import TWO_PI
-from tma.families.bearings2d.model import atan2
+from tma.families.bearings2d.model import atan2, bearing_residuals
 from tma.jit import njit
 
 MAX_S = 1e4  # an innovation variance (in noise variances) above this: a diffuse one
@@ -152,14 +154,14 @@ def _chol_solve(A, b, L, y):
 
 
 @njit(error_model="numpy", depends=(atan2,))
-def _filter(t, ox, oy, z, w, weighted, lo, hi, nom, lam, p0, mf, Pf, Pp, nu, S):
+def _filter(t, ox, oy, z, w, weighted, lo, hi, nom, lam, prior, p0, mf, Pf, Pp, nu, S):
     """Kalman filter over epochs lo..hi linearised about ``nom`` (K, 4); filtered means and
     covariances, predicted covariances (index k: the prediction into k) and the innovations
     (NaN where no bearing). ``p0``: the diffuse prior's (position, velocity) variances."""
     m, mp, P = np.empty(4), np.empty(4), np.zeros((4, 4))
     h, kg, tmp, A = np.zeros(4), np.empty(4), np.empty(4), np.empty((4, 4))
     for i in range(4):
-        m[i] = nom[lo, i]
+        m[i] = prior[i]
     P[0, 0] = P[1, 1] = p0[0]
     P[2, 2] = P[3, 3] = p0[1]
     for k in range(lo, hi + 1):
@@ -244,7 +246,7 @@ def _fit(t, ox, oy, z, w, weighted, lo, hi, nom, lam, p0, max_iter, tol_m, mf, P
     cost = _map_cost(t, ox, oy, z, w, weighted, lo, hi, nom, lam, prior, p0)
     passes = 0
     for _ in range(max_iter):
-        _filter(t, ox, oy, z, w, weighted, lo, hi, nom, lam, p0, mf, Pf, Pp, nu, S)
+        _filter(t, ox, oy, z, w, weighted, lo, hi, nom, lam, prior, p0, mf, Pf, Pp, nu, S)
         passes += 1
         if not _smooth(t, lo, hi, mf, Pf, Pp, ms):
             return -1
@@ -416,7 +418,7 @@ def smooth_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, lam
     nom = np.empty((K, 4))
     mf, ms, trial = np.empty((K, 4)), np.empty((K, 4)), np.empty((K, 4))
     Pf, Pp = np.empty((K, 4, 4)), np.empty((K, 4, 4))
-    nu, S = np.empty(K), np.empty(K)
+    nu, S, S0 = np.empty(K), np.empty(K), np.empty(K)
     R, r, Rinv = np.empty((4, 4)), np.empty(4), np.empty((4, 4))
     p0 = np.empty(2)
     for i in range(n):
@@ -441,9 +443,14 @@ def smooth_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, lam
         passes[i] = made
         if made < 0:
             continue
+        # the diffuse bearings are those of the information structure, which process noise
+        # does not change (a pass with q = 0 finds them; with q > 0 every variance is larger
+        # and, for a tiny sigma, all would pass MAX_S)
+        if lam[i] > 0.0:
+            _srif(t, ox, oy, z, w, weighted, lo, hi, nom, 0.0, nu, S0, R, r)
         _srif(t, ox, oy, z, w, weighted, lo, hi, nom, lam[i], nu, S, R, r)
         for k in range(lo, hi + 1):
-            if nu[k] == nu[k] and S[k] <= MAX_S:
+            if nu[k] == nu[k] and (S0[k] if lam[i] > 0.0 else S[k]) <= MAX_S:
                 e[i, k] = nu[k]
         if _invert_upper(R, Rinv):
             for c in range(4):
@@ -460,7 +467,9 @@ def smooth_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, lam
 
 
 MAX_PASSES = 30  # Gauss-Newton passes
-MIN_SIGMA_RAD = 1e-8  # the noise the units refer to is at least this (a noiseless log)
+# the motion fit assumes at least this bearing noise (rad; 1e-3 deg, finer than any bearing
+# sensor): with a noiseless log, q / sigma^2 would be numerically infinite
+MIN_SIGMA_RAD = float(np.deg2rad(1e-3))
 TOL_M = 1e-3  # a pass moving no position by more than this (m) ends the iteration
 
 
@@ -502,8 +511,6 @@ def smooth(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_ps
     if known.all():
         sigma2, rounds = sigma**2, 1
     else:  # start from the constant-velocity fit's residual RMS
-        from tma.families.bearings2d.model import bearing_residuals
-
         r = bearing_residuals(np.nan_to_num(theta_cv), t, own_x, own_y, measured_rad, valid)
         count = np.maximum(valid.sum(axis=1) if weighted else K, 5) - 4
         sigma2, rounds = np.where(known, sigma**2, np.einsum("nk,nk->n", r, r) / count), 3

@@ -27,7 +27,8 @@ course and speed at each track's last bearing ("now") by their Jacobians (delta 
 - ``unobservable``: J^T J is numerically singular (scaled by its diagonal, smallest over
   largest eigenvalue <= ``singular_rcond``), or range_sd / range > ``max_range_rel_sd``
   (range is not determined well enough to use: no own-ship manoeuvre, a target too far
-  away, too much unmodelled target motion);
+  away, too much unmodelled target motion), or the trend test was due but too few bearings
+  remain to run it (the motion cannot be checked);
 - ``approximate``: the fit passed every test, but its one-sigma errors are not honest by
   construction: the estimator is biased (``nbearings``), or it assumes a constant-velocity
   target where the log's targets are not known to move so (``accel_psd`` > 0);
@@ -99,13 +100,14 @@ def runs_test_p(residuals, valid):
 
 
 @njit(error_model="numpy")
-def _trend_sums(e, t, m, out):
+def _trend_sums(e, t, m_max, out):
     """Per row of ``e`` (n, K; NaN where absent): the squares of e explained by the first
-    ``m`` cosines cos(pi j u), u = (t - t_first) / (t_last - t_first) over its present
-    entries (least squares), the sum of squares and the count, into ``out`` (n, 3)."""
+    m cosines cos(pi j u), u = (t - t_first) / (t_last - t_first), over its present entries
+    (least squares), m = min(``m_max``, count // 3) so that a short sequence is still
+    tested, the sum of squares, the count and m, into ``out`` (n, 4)."""
     n, K = e.shape
-    G, b, L, y, c = (np.empty((m, m)), np.empty(m), np.empty((m, m)), np.empty(m),
-                     np.empty(m))
+    G, b, L, y, c = (np.empty((m_max, m_max)), np.empty(m_max), np.empty((m_max, m_max)),
+                     np.empty(m_max), np.empty(m_max))
     for i in range(n):
         lo, hi, count, total = -1, -1, 0, 0.0
         for k in range(K):
@@ -115,12 +117,15 @@ def _trend_sums(e, t, m, out):
                 hi = k
                 count += 1
                 total += e[i, k] * e[i, k]
-        out[i, 1], out[i, 2] = total, count
-        if count <= m or t[hi] <= t[lo]:
+        m = min(m_max, count // 3)
+        out[i, 1], out[i, 2], out[i, 3] = total, count, m
+        if m < 1 or t[hi] <= t[lo]:
             out[i, 0] = np.nan
             continue
-        G[:, :] = 0.0
-        b[:] = 0.0
+        for j in range(m):
+            b[j] = 0.0
+            for l in range(m):
+                G[j, l] = 0.0
         span = t[hi] - t[lo]
         for k in range(lo, hi + 1):
             if e[i, k] == e[i, k]:
@@ -161,22 +166,22 @@ def _trend_sums(e, t, m, out):
 
 def trend_test_p(innovations, t_s, terms):
     """p-value of the smooth-trend test on each row of normalised innovations (n, K) (NaN
-    where none): the generalised likelihood ratio of a bias made of the first ``terms``
-    cosines in time (a constant, a drift, a bend...) against none, in its F form,
-    F = (S_b / m) / ((S - S_b) / (N - m)) ~ F(m, N - m) with S the sum of squares, S_b the
-    part the cosines explain and N the innovations: scale-free, so it asks only whether
-    the residual sequence has a systematic slow pattern, whatever the noise level (that is
-    the chi-square's question), and an isolated outlier, spread over all frequencies, hardly
-    moves it. NaN where fewer than ``terms`` + 1 innovations."""
+    where none): the generalised likelihood ratio of a bias made of the first m cosines in
+    time (a constant, a drift, a bend...; m = ``terms``, fewer for a sequence shorter than
+    3 m) against none, in its F form, F = (S_b / m) / ((S - S_b) / (N - m)) ~ F(m, N - m)
+    with S the sum of squares, S_b the part the cosines explain and N the innovations:
+    scale-free, so it asks only whether the residual sequence has a systematic slow pattern,
+    whatever the noise level (that is the chi-square's question), and an isolated outlier,
+    spread over all frequencies, hardly moves it. NaN where fewer than 3 innovations."""
     from scipy.special import fdtrc
 
     e = np.ascontiguousarray(innovations, dtype=float)
-    sums = np.empty((e.shape[0], 3))
+    sums = np.empty((e.shape[0], 4))
     _trend_sums(e, np.ascontiguousarray(t_s, dtype=float), int(terms), sums)
-    explained, total, count = sums.T
+    explained, total, count, m = sums.T
     with np.errstate(divide="ignore", invalid="ignore"):
-        F = (explained / terms) / (np.maximum(total - explained, 0.0) / (count - terms))
-        return np.where(np.isfinite(explained), fdtrc(terms, count - terms, F), np.nan)
+        F = (explained / m) / (np.maximum(total - explained, 0.0) / (count - m))
+        return np.where(np.isfinite(explained), fdtrc(m, count - m, F), np.nan)
 
 
 def truncated_moments(c):
@@ -223,6 +228,17 @@ def noiseless_fit_p(cost_rad2, n_bearings):
     return np.where(rms_deg > NOISELESS_RMS_DEG, 0.0, 1.0)
 
 
+def range_rel_sd(theta, jtj, sigma2, t_now_s, own_x_now_m, own_y_now_m, rcond):
+    """The one-sigma error of range now over the range, from jtj^-1 sigma2 (inf where
+    theta is not finite or jtj singular)."""
+    finite = np.isfinite(theta).all(axis=1)
+    cov, singular = scaled_inverse(np.where(finite[:, None, None], jtj, np.nan), rcond)
+    (rng, *_), G = kinematics_now(theta, t_now_s, own_x_now_m, own_y_now_m)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rel = np.sqrt(np.einsum("ni,nij,nj->n", G[:, 0], cov, G[:, 0]) * sigma2) / rng
+    return np.where(singular | ~np.isfinite(rel), np.inf, rel)
+
+
 def noise_fit(cost_rad2, dof, sigma_deg):
     """sigma^2 (rad^2) per track and the p-value of the two-sided chi-square(dof) test of
     the fit ``cost_rad2`` (sum of squared residuals, rad^2) against the nominal noise
@@ -241,13 +257,15 @@ def noise_fit(cost_rad2, dof, sigma_deg):
 
 
 def assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t_now_s, own_x_now_m,
-           own_y_now_m, cfg) -> dict:
+           own_y_now_m, cfg, motion_tested=False) -> dict:
     """Status and one-sigma errors per track (see the module docstring).
 
     The covariance of theta is jtj^-1 sigma2 (``sigma2`` rad^2 per track); ``fit_p``: the
-    noise test's p-value (NaN: none); ``motion_p``: the trend test's (NaN: not run);
-    ``approximate``: bool per track; ``cfg`` holds ``singular_rcond``, ``fit_alpha``,
-    ``motion_alpha``, ``max_range_rel_sd``. Returns output columns."""
+    noise test's p-value (NaN: none); ``motion_p``: the trend test's (NaN: not run, or too
+    few innovations); ``motion_tested``: whether the trend test was due (then a NaN, a
+    motion the bearings cannot check, is ``unobservable``); ``approximate``: bool per
+    track; ``cfg`` holds ``singular_rcond``, ``fit_alpha``, ``motion_alpha``,
+    ``max_range_rel_sd``. Returns output columns."""
     finite = np.isfinite(theta).all(axis=1)
     cov, singular = scaled_inverse(np.where(finite[:, None, None], jtj, np.nan),
                                    cfg.singular_rcond)
@@ -258,6 +276,7 @@ def assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t_now_s,
         poorly_fit = fit_p < cfg.fit_alpha
         drifting = motion_p < cfg.motion_alpha
         vague = ~(sd[:, 0] <= cfg.max_range_rel_sd * rng)  # a NaN sd counts as vague
+        vague |= motion_tested & np.isnan(motion_p)
     status = np.select([~converged, drifting, poorly_fit, singular | vague, approximate],
                        ["not_converged", "manoeuvring", "poor_fit", "unobservable",
                         "approximate"], "ok")

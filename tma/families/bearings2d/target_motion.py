@@ -11,7 +11,7 @@ left or right alike, at a rate uniform in [``turn_rate_min_deg_s``,
 ``turn_rate_max_deg_s``], and changes speed by a factor uniform in [1 - ``speed_change_rel``,
 1 + ``speed_change_rel``] at ``accel_m_s2``; it ends when both are done. Course and speed
 are then piecewise linear in time, and positions their integral (3-point Gauss-Legendre per
-bearing interval: exact on a straight or turning stretch, millimetres at a kink).
+bearing interval: within millimetres of the exact arcs, ``tma.path``).
 
 Wander (``accel_psd_m2_s3`` = q > 0): per axis, position and velocity deviations driven by
 white acceleration of spectral density q, drawn exactly on the bearing epochs (the
@@ -163,6 +163,7 @@ def target_paths(cfg: TargetConfig, x0, y0, course0, speed0, t, manoeuvre_rng, w
     n = x0.size
     duration = float(t[-1] - t[0])
     plan = manoeuvre_plan(cfg.manoeuvres, duration, speed0, manoeuvre_rng)
+    plan["start"] = plan["start"] + t[0]  # times of the log, as the bearings
     if plan["manoeuvres"].any():
         # velocity at the Gauss nodes of every bearing interval, integrated
         dt = np.diff(t)

@@ -12,10 +12,11 @@ from tma.families.bearings2d import ncv
 from tma.families.bearings2d.log import BearingsLog
 from tma.families.bearings2d.model import BearingTerms
 from tma.families.bearings2d.ncv import RECORDED_ACCEL_PSD
-from tma.families.bearings2d.status import assess, noise_fit, trend_test_p
+from tma.families.bearings2d.status import assess, noise_fit, range_rel_sd, trend_test_p
 from tma.linalg import scaled_inverse
 
 BLOCK_TRACKS = 64
+GROSS_SIGMAS = 5.0  # a robust fit's outliers: bearings this many sigma off (Gaussian: 6e-7)
 
 
 def evaluate_in_blocks(terms: BearingTerms, theta, block=BLOCK_TRACKS):
@@ -75,13 +76,17 @@ class BearingsEstimator(Estimator):
 
     ``models_motion``: the estimator can follow a nearly-constant-velocity target: with
     q = ``accel_psd_m2_s3`` > 0 its constant-velocity fit is refined to the NCV maximum a
-    posteriori state (``ncv.smooth``), whose covariance includes the target's own motion.
-    One that cannot reports ``approximate`` there, as does one whose errors are not honest
-    by construction (``honest_errors`` False)."""
+    posteriori state (``ncv.smooth``), whose covariance includes the target's own motion;
+    for a robust fit (``loss`` huber|cauchy) on the bearings no more than ``GROSS_SIGMAS``
+    off its constant-velocity line and off the motion fit (outliers, not wander). One that
+    cannot follow such a target reports ``approximate`` there, as does one whose errors are
+    not honest by construction (``honest_errors`` False). ``tests_motion``: the trend test
+    runs even where the log declares its targets' motion (``last_leg``)."""
 
     family = "bearings2d"
     models_motion = False
     honest_errors = True
+    tests_motion = False  # runs the trend test even where the log declares its motion
 
     def estimate(self, log: BearingsLog) -> dict:
         """Estimate theta for every track of ``log``; returns output columns by name."""
@@ -108,7 +113,9 @@ class BearingsEstimator(Estimator):
             q = RECORDED_ACCEL_PSD if log.accel_psd_m2_s3 is None else log.accel_psd_m2_s3
         self.accel_psd = q  # the targets' motion the outputs assume, for solve
         undeclared = log.accel_psd_m2_s3 is None or log.sigma_deg is None
-        test = cfg.motion_test == "on" or (cfg.motion_test == "auto" and undeclared)
+        test = cfg.motion_test == "on" or (cfg.motion_test == "auto"
+                                           and (undeclared or self.tests_motion))
+        test &= log.sigma_deg != 0  # a noiseless sensor: any misfit fails its own test
         out = self.solve(t, ox, oy, measured, valid, first)
         theta = out.pop("theta")
         if "cost_rad2" in out:  # iterative estimators know F and J^T J at their solution
@@ -118,7 +125,7 @@ class BearingsEstimator(Estimator):
         # a fit with its own noise scale and fit test (robust lm) passes both on, and the
         # bearings it kept
         sigma2, fit_p = out.pop("sigma2_rad2", None), out.pop("fit_p", None)
-        own_fit_test = fit_p is not None
+        own_fit_test = fit_p is not None  # a robust fit (its scale, and outliers in "inliers")
         used = out.pop("bearings_used", None)  # a fit of part of each track (last_leg)
         if used is not None:
             n_bearings, valid = used.sum(axis=1), used
@@ -130,19 +137,39 @@ class BearingsEstimator(Estimator):
         motion_p = np.full(n, np.nan)
         approximate = np.full(n, not self.honest_errors)
         follows = q > 0 and self.models_motion
+        # residuals below any sensor's noise (a noiseless log, declared or not) have no
+        # pattern to test: round-off has one
+        tested = np.full(n, test) & (np.sqrt(sigma2) >= ncv.MIN_SIGMA_RAD)
         if follows or test:
-            sigma_rad = (np.full(n, np.nan) if log.sigma_deg is None and follows
-                         else np.sqrt(sigma2))
-            fit = ncv.smooth(t, ox, oy, measured, use, first, last, theta, q if follows else 0.0,
-                             sigma_rad, iterate=follows)
-            if test:
-                motion_p = trend_test_p(fit["innovations"], t, cfg.motion_terms)
+            # a track whose range the constant-velocity fit leaves undetermined stays so:
+            # the motion fit could only widen it (and its MAP would shrink range to fit
+            # noise); its innovations for the trend test are those about the fit's line
+            follow = np.zeros(n, dtype=bool)
             if follows:
-                theta, cost, jtj, sigma2, fit_p = self._followed(fit, log.sigma_deg, fit_p,
-                                                                 own_fit_test)
+                follow = range_rel_sd(theta, jtj, sigma2, t[last], ox[last], oy[last],
+                                      cfg.singular_rcond) <= cfg.max_range_rel_sd
+            innovations = np.full(measured.shape, np.nan)
+            for rows, iterate in ((np.flatnonzero(follow), True),
+                                  (np.flatnonzero(~follow), False)):
+                if rows.size == 0 or not (iterate or test):
+                    continue
+                fit = self._motion_fit(t, ox, oy, measured, use, first, last, theta, rows,
+                                       q if follows else 0.0, sigma2, iterate,
+                                       log.sigma_deg is None and iterate, own_fit_test)
+                innovations[rows] = fit["innovations"]
+                if iterate:
+                    theta, cost, jtj, sigma2, fit_p = (
+                        np.array(v, dtype=float) for v in (theta, cost, jtj, sigma2, fit_p))
+                    (theta[rows], cost[rows], jtj[rows], sigma2[rows],
+                     fit_p[rows]) = self._followed(fit, log.sigma_deg, fit_p[rows])
+                    out["converged"] = out["converged"].copy()
+                    out["converged"][rows] &= fit["passes"] >= 0
+            if test:
+                motion_p = np.where(tested, trend_test_p(innovations, t, cfg.motion_terms),
+                                    np.nan)
         approximate |= q > 0 and not self.models_motion
         trust = assess(theta, jtj, sigma2, fit_p, motion_p, out["converged"], approximate,
-                       t[last], ox[last], oy[last], cfg)
+                       t[last], ox[last], oy[last], cfg, motion_tested=tested)
         leg_start = out.pop("leg_start_s", t[first])
         columns = {
             "x0_m": theta[:, 0], "y0_m": theta[:, 1], "vx_m_s": theta[:, 2], "vy_m_s": theta[:, 3],
@@ -159,6 +186,7 @@ class BearingsEstimator(Estimator):
             for j in range(i, 4):
                 columns[f"jtj_{i}{j}"] = jtj[:, i, j]
         return columns
+
     def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
         """``valid``: mask or None (all present); ``first``: index of each track's first
         bearing; ``self.log_sigma_deg`` is the log's nominal noise. Returns ``theta`` (n, 4),
@@ -168,21 +196,41 @@ class BearingsEstimator(Estimator):
         raise NotImplementedError
 
     @staticmethod
-    def _followed(fit, sigma_deg, fit_p, own_fit_test):
+    def _motion_fit(t, ox, oy, measured, use, first, last, theta, rows, q, sigma2, iterate,
+                    sigma_unknown, robust):
+        """``ncv.smooth`` of tracks ``rows`` (``iterate`` False: about their constant-velocity
+        line); a robust fit's (``robust``) bearings more than ``GROSS_SIGMAS`` off the
+        motion fit are outliers: dropped, and fitted again."""
+        part = None if use is None else use[rows]
+        sigma_rad = np.full(rows.size, np.nan) if sigma_unknown else np.sqrt(sigma2[rows])
+        args = (t, ox, oy, measured[rows])
+        fit = ncv.smooth(*args, part, first[rows], last[rows], theta[rows], q, sigma_rad,
+                         iterate=iterate)
+        wild = np.abs(np.nan_to_num(fit["innovations"])) > GROSS_SIGMAS
+        if iterate and robust and wild.any():
+            part = (np.ones(wild.shape, dtype=bool) if part is None else part) & ~wild
+            fit = ncv.smooth(*args, part, first[rows], last[rows], theta[rows], q, sigma_rad)
+        return fit
+
+    @staticmethod
+    def _followed(fit, sigma_deg, fit_p):
         """theta, F, J^T J, sigma^2 and the noise test of the NCV state ``fit``
         (``ncv.smooth``): J^T J is the information sigma^2 C^-1 of its covariance C (so that
         C is what every reader computes as J^T J^-1 sigma^2); the noise test is the
-        two-sided chi-square of its normalised innovations when sigma is known, unless the
-        estimator tests the fit itself (``own_fit_test``: robust lm)."""
+        two-sided chi-square of its normalised innovations when sigma is known (none when
+        unknown: a robust fit's own test judged the constant-velocity fit, which a wandering
+        target fails; below ``ncv.MIN_SIGMA_RAD``, the constant-velocity fit's)."""
         from scipy.special import chdtrc
 
         sigma2 = fit["sigma2"]
-        info, singular = scaled_inverse(fit["cov_theta"], 1e-14)
+        info, _ = scaled_inverse(fit["cov_theta"], 1e-14)
         info *= sigma2[:, None, None]
-        if not own_fit_test and sigma_deg is not None and sigma_deg > 0:
+        if sigma_deg is not None and np.deg2rad(sigma_deg) >= ncv.MIN_SIGMA_RAD:
             e2 = fit["innovations"] ** 2
             count = np.sum(np.isfinite(e2), axis=1)
             upper = chdtrc(np.maximum(count, 1), np.nansum(e2, axis=1))
             fit_p = np.where(count > 0, np.minimum(1.0, 2 * np.minimum(upper, 1 - upper)),
                              np.nan)
+        elif sigma_deg is None:
+            fit_p = np.full(sigma2.size, np.nan)
         return fit["theta"], fit["cost_rad2"], info, sigma2, fit_p

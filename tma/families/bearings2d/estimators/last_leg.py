@@ -68,6 +68,7 @@ class LastLeg(LevenbergMarquardt):
     name = "last_leg"
     Config = Config
     outputs = ("start_won", "cost_robust_rad2", "n_downweighted", "n_rounds")
+    tests_motion = True  # its legs are tested whatever the log declares
 
     def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
         out = super().solve(t, own_x, own_y, measured_rad, valid, first)
@@ -75,8 +76,8 @@ class LastLeg(LevenbergMarquardt):
         present = np.ones((n, K), dtype=bool) if valid is None else valid
         used = present.copy()
         rounds = np.zeros(n, dtype=np.int64)
-        todo = np.flatnonzero(self._drifting(t, own_x, own_y, measured_rad, present,
-                                             out["theta"]))
+        todo = np.arange(0) if self.config.motion_test == "off" else np.flatnonzero(
+            self._drifting(t, own_x, own_y, measured_rad, present, out["theta"]))
         for _ in range(self.config.max_rounds):
             if todo.size == 0:
                 break
@@ -111,8 +112,12 @@ class LastLeg(LevenbergMarquardt):
                          np.full(measured.shape[0], np.nan if sigma is None else
                                  np.deg2rad(sigma)), iterate=q > 0)
         with np.errstate(invalid="ignore"):
-            return trend_test_p(fit["innovations"], t, self.config.motion_terms) \
+            drifting = trend_test_p(fit["innovations"], t, self.config.motion_terms) \
                 < self.config.motion_alpha
+        # below any sensor's noise (a noiseless log) the residuals are round-off: no pattern
+        noisy = (sigma is None or np.deg2rad(sigma) >= ncv.MIN_SIGMA_RAD) & (
+            np.sqrt(fit["sigma2"]) >= ncv.MIN_SIGMA_RAD)
+        return drifting & noisy
 
     def _settle(self, t, own_x, own_y, measured, used, theta):
         """The fit of each candidate leg, its start moved on by ``step_s`` while its

@@ -33,7 +33,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.config import require
-from tma.families.bearings2d.estimators.base import BearingsConfig, BearingsEstimator
+from tma.families.bearings2d.estimators.base import (
+    GROSS_SIGMAS,
+    BearingsConfig,
+    BearingsEstimator,
+)
 from tma.families.bearings2d.estimators.lm_kernel import (
     LOSSES,
     STOP_F_TOL,
@@ -272,7 +276,8 @@ class LevenbergMarquardt(BearingsEstimator):
         out["jtj"] = sandwich_information(r, jac, scale, loss)
         beyond = np.abs(r) > TUNING[loss] * scale[:, None]
         out["n_downweighted"] = (beyond if valid is None else beyond & valid).sum(axis=1)
-        out["inliers"] = ~beyond if valid is None else valid & ~beyond  # for a motion fit
+        kept = np.abs(r) <= GROSS_SIGMAS * scale[:, None]  # a motion fit drops outliers only
+        out["inliers"] = kept if valid is None else valid & kept
         if sigma is None:
             fit_p = runs_test_p(r, valid)
         elif sigma > 0:
