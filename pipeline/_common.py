@@ -31,7 +31,6 @@ from tma.families import (
     load_scenario,
     scenario_module,
 )
-from tma.families.bearings2d.sources.base import GROUPS as SOURCE_GROUPS
 from tma.io.atomic import write_json_atomic
 from tma.io.dataset import Dataset, datasets_dir
 from tma.io.owned import plain_name
@@ -43,10 +42,11 @@ _stage_hydra = None  # Hydra's config of the stage run_stage is running (else No
 SWEEP_ENV = "TMA_SWEEP_ID"  # set by SweepTable while a multirun runs
 SWEEP_RECORD = "tma-aggregate.json"  # what an aggregate job of a multirun read
 PROBE_BYTES = 1 << 16  # more than Hydra writes of its own before the stage starts
-KNOWN_KEYS = {  # top-level keys of conf/config.yaml and conf/ingest.yaml (+key adds none)
-    "dataset", "estimator", "force", "grid", "parallel", "paths", "progress", "scenario",
-    "table", "format", "input", "min_bearings", "name", "sigma_deg", "navigation",
-    *SOURCE_GROUPS}  # ingest's reading groups: columns, bearing, ownship, csv, time, nav, origin
+# the top-level keys of conf/config.yaml and conf/ingest.yaml and their config groups (+key
+# adds none)
+KNOWN_KEYS = {key for conf in ("config", "ingest")
+              for key in OmegaConf.load(Path(CONF_DIR) / f"{conf}.yaml")} - {"defaults", "hydra"} \
+    | {"scenario", "estimator", "parallel"}
 
 
 def fail(message: str, status: int = 2):

@@ -17,7 +17,6 @@ from mcap_protobuf.schema import register_schema as register_protobuf_schema
 from tests.conftest import proto_message_class
 from tma import __version__
 from tma.errors import InputError
-from tma.families.bearings2d.geo import local_to_geodetic, location_fix
 from tma.families.bearings2d.log import (
     BEARINGS_TOPIC,
     CHANNELS,
@@ -33,6 +32,7 @@ from tma.families.bearings2d.log import (
     write_bearings_log,
 )
 from tma.families.bearings2d.scenario import Config, simulate_shard
+from tma.geo import local_to_geodetic, location_fix
 from tma.io import mcap_writer
 from tma.io.mcap_log import LogWriter, check_integrity, json_record, read_log, schema_bytes
 from tma.io.mcap_writer import WIDE, Encoded, McapWriter, Ragged, json_objects

@@ -8,7 +8,8 @@ A family's scenario module provides ``Config`` (with ``n_tracks``, ``shard_size`
 table or None)``, ``write_log(path, log, metadata) -> n_messages`` and ``read_log(path)``;
 optionally ``simulation_key``/``simulate_raw``/``from_raw`` when datasets of different
 configs share their random draws. Its report module provides ``aggregate_runs(entries,
-tables_dir, table_name)``.
+tables_dir, table_name)``; an ``ingest`` module, when the family reads recorded logs,
+``OBSERVATION``, ``Settings`` and ``logs`` (``tma.ingest``).
 """
 
 import functools
@@ -37,6 +38,18 @@ class Family:
     @property
     def report(self):
         return importlib.import_module(f"tma.families.{self.name}.report")
+
+    @property
+    def ingest(self):
+        """What the family reads from a recorded log (``tma.ingest``): its ``ingest`` module,
+        with ``OBSERVATION``, ``Settings`` and ``logs``."""
+        try:
+            return importlib.import_module(f"tma.families.{self.name}.ingest")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"tma.families.{self.name}.ingest":
+                raise
+            raise ConfigError(f"family {self.name} does not ingest recorded logs (it has no "
+                              "ingest module)") from None
 
     def estimator_class(self, name: str):
         module, cls = self.estimators[name].split(":")

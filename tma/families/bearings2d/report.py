@@ -17,7 +17,6 @@ import pandas as pd  # noqa: E402
 import pyarrow as pa  # noqa: E402
 
 from tma.families.bearings2d import benchmark, paper  # noqa: E402
-from tma.families.bearings2d.geo import local_to_geodetic  # noqa: E402
 from tma.families.bearings2d.map_outputs import (  # noqa: E402
     MAX_PLOTS,
     position_covariance,
@@ -34,10 +33,11 @@ from tma.families.bearings2d.metrics import (  # noqa: E402
     track_metrics,
 )
 from tma.families.bearings2d.status import STATUSES  # noqa: E402
+from tma.geo import local_to_geodetic  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
-from tma.io.mcap_log import format_utc  # noqa: E402
 from tma.paper import write_against_paper  # noqa: E402
 from tma.tables import markdown_table, save_figure, write_csv, write_markdown  # noqa: E402
+from tma.utc import format_utc  # noqa: E402
 
 INTRO = """Bearings-only TMA of a constant-velocity target from a manoeuvring observer
 (`../shared/specs/bearings2d.md`). Each row: one estimator at one bearing noise sigma over

@@ -24,9 +24,9 @@ from tma.angles import bearing_from_north, wrap_to_pi
 from tma.config import require
 from tma.families.bearings2d.log import BearingsLog, read_bearings_log, write_bearings_log
 from tma.io import arrow
-from tma.io.mcap_log import config_epoch_ns
 from tma.path import LegPath
 from tma.sharding import shard_rng, shard_track_ids
+from tma.utc import config_epoch_ns
 
 FAMILY = "bearings2d"
 OUTLIER_STREAM = 1  # spawn-key element of the outlier stream under the shard's (shard,)

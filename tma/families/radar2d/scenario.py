@@ -15,9 +15,9 @@ from tma.config import require
 from tma.errors import ConfigError
 from tma.families.radar2d.log import RadarLog, read_radar_log, write_radar_log
 from tma.io import arrow
-from tma.io.mcap_log import config_epoch_ns
 from tma.path import LegPath
 from tma.sharding import shard_rng, shard_track_ids
+from tma.utc import config_epoch_ns
 
 FAMILY = "radar2d"
 # Sanity bounds: every run's scans are held in memory at once; a coastal radar's horizon is
