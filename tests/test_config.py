@@ -8,7 +8,7 @@ from hydra import compose, initialize_config_dir
 from hydra.errors import ConfigCompositionException
 from omegaconf import OmegaConf
 
-from pipeline._common import CONF_DIR, engine_requested, estimator_nodes, scenario_nodes
+from pipeline._common import CONF_DIR, engine, estimator_nodes, scenario_nodes
 from tests.conftest import compose_cfg, run_stage_here
 from tma.config import to_plain
 from tma.errors import ConfigError
@@ -48,8 +48,8 @@ def test_every_estimator_composes_from_its_dataclass_alone(name):
 
 @pytest.mark.parametrize("name", _options("parallel"))
 def test_every_parallel_option_composes(name):
-    engine = engine_requested(compose_cfg([f"parallel={name}"]))
-    assert engine.kind == ("dask" if name == "dask" else "joblib") and engine.n_jobs >= 1
+    chosen = engine(compose_cfg([f"parallel={name}"]))
+    assert chosen.kind == ("dask" if name == "dask" else "joblib") and chosen.n_jobs >= 1
 
 
 @pytest.mark.parametrize("name", _options("experiment"))

@@ -118,16 +118,27 @@ def register_configs():
 
     Every command runs this first, so it imports every scenario and estimator module: their
     top-level imports stay light (numba, scipy, pandas and matplotlib load where they are
-    used; ``tests/test_startup.py``)."""
+    used; ``tests/test_startup.py``).
+
+    Also the group ``estimator_keys``, one option per family: every key of the family's
+    estimators (their defaults, ``name`` left out). An experiment merges it into
+    ``estimator`` (``- /estimator_keys@estimator: <family>``) so that Hydra lets the command
+    line set any of them with ``estimator.KEY=VALUE``; ``tma.experiment.estimator_configs``
+    then copies the value into the experiment's estimators that have KEY. These values are
+    never run."""
     from hydra.core.config_store import ConfigStore
 
     store = ConfigStore.instance()
     for name in NAMES:
         fam = family(name)
         store.store(group="scenario", name=name, node=defaults(fam.scenario.Config))
+        keys = {}
         for estimator in fam.estimators:
-            store.store(group="estimator", name=estimator,
-                        node=defaults(fam.estimator_class(estimator).Config))
+            node = defaults(fam.estimator_class(estimator).Config)
+            store.store(group="estimator", name=estimator, node=node)
+            keys.update(node)
+        keys.pop("name", None)
+        store.store(group="estimator_keys", name=name, node=keys)
 
 
 def dataset_name(module, cfg) -> str:
