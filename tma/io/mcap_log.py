@@ -39,11 +39,16 @@ from mcap_protobuf.schema import build_file_descriptor_set
 from tma import __version__
 from tma.errors import InputError, TmaError
 from tma.io.atomic import VerifiedPath, atomic_path
-from tma.io.mcap_writer import CHUNK_SIZE, MAGIC, Encoded, McapWriter, interleave, json_objects
-from tma.io.proto_columns import decode_message, encode_columns, encode_message, proto_schema
+from tma.io.mcap_writer import CHUNK_SIZE, MAGIC, Encoded, McapWriter, Ragged, interleave
+from tma.io.proto_columns import (
+    SCHEMA_DIR,
+    decode_message,
+    encode_columns,
+    encode_message,
+    proto_schema,
+)
 from tma.utc import MAX_EPOCH_NS, format_utc
 
-SCHEMA_DIR = Path(__file__).parent / "schemas"
 PROFILE = ""  # plain MCAP (JSON and protobuf channels): no ROS profile
 _JSON_OPTIONS = orjson.OPT_SERIALIZE_NUMPY
 
@@ -189,10 +194,17 @@ class Channel:
 
     def columns(self, fields: dict) -> Encoded:
         """Messages of this tma channel from whole columns (one value, or a ``Ragged``, per
-        message and field; ``json_objects`` / ``encode_columns``)."""
-        if self.encoding == "json":
-            return json_objects(fields)
-        return encode_columns(proto_schema(self.schema), fields)
+        message and field): protobuf by ``encode_columns``; JSON (tma writes none itself)
+        one object after the other."""
+        if self.encoding == "protobuf":
+            return encode_columns(proto_schema(self.schema), fields)
+        columns = {k: np.split(c.values, np.cumsum(c.counts)[:-1]) if isinstance(c, Ragged)
+                   else np.asarray(c).tolist() for k, c in fields.items()}
+        n = {len(c) for c in columns.values()}
+        if len(n) != 1:
+            raise ValueError("JSON columns need a field, and as many values in each")
+        return Encoded.of([self.encode({k: c[i] for k, c in columns.items()})
+                           for i in range(n.pop())])
 
     def encode(self, message) -> bytes:
         """One message: a dict on a tma channel, a message object on a published one."""
