@@ -17,8 +17,10 @@ from tma.families import (
     build_estimator,
     estimator_class,
     estimator_names,
+    family,
     load_scenario,
 )
+from tma.scenario import ScenarioConfig
 
 CONF = Path(CONF_DIR)
 
@@ -155,3 +157,13 @@ def test_fields_declared_nonfinite_accept_inf_but_not_nan():
     for node, key in (({"limit": float("nan")}, "limit"), ({"gain": float("inf")}, "gain")):
         with pytest.raises(ConfigError, match=f"x: {key} must be finite"):
             validate(Schema, node, "x")
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_every_scenario_has_the_base_fields_and_their_checks(name):
+    config = family(name).scenario.Config
+    assert issubclass(config, ScenarioConfig) and config().family == name
+    for key, bad in (("n_tracks", 0), ("shard_size", 0), ("seed", -1), ("family", "other"),
+                     ("epoch_utc", "noon")):
+        with pytest.raises(ConfigError, match=rf"^scenario '{name}': {key}"):
+            config(**{key: bad})

@@ -25,16 +25,29 @@ from tma.families import family as family_of
 from tma.io.dataset import Dataset, datasets_dir
 from tma.io.owned import plain_name, remove_stale_temporaries
 from tma.parallel import in_threads
-from tma.runs import MANIFEST, check_datasets, full_config, open_run, run_path, runs_dir
+from tma.runs import (
+    MANIFEST,
+    check_datasets,
+    full_config,
+    open_run,
+    run_path,
+    runs_dir,
+    seconds_per_track,
+)
 
 
 @dataclass
 class RunEntry:
+    """A finished run as a report sees it: its dataset, estimator, directory, manifest and
+    estimates, and its wall seconds per track (``tma.runs.seconds_per_track``; NaN when
+    unknown), read once here."""
+
     dataset: Dataset
     estimator: str
     run_root: Path
     manifest: dict
     estimates: "pd.DataFrame"
+    seconds_per_track: float = float("nan")
 
 
 def aggregate(data_dir, tables_dir, jobs, table=None, default_suffix="custom") -> list[Path]:
@@ -51,7 +64,8 @@ def aggregate(data_dir, tables_dir, jobs, table=None, default_suffix="custom") -
     for (dataset, estimator, root), (manifest, estimates) in zip(runs, opened, strict=True):
         remove_stale_temporaries(root, only_dead=True)
         by_family.setdefault(dataset.family, []).append(
-            RunEntry(dataset, estimator, root, manifest, estimates.to_pandas()))
+            RunEntry(dataset, estimator, root, manifest, estimates.to_pandas(),
+                     seconds_per_track(root)))
     written = []
     for family, entries in by_family.items():
         module = family_of(family).report

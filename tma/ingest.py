@@ -23,7 +23,7 @@ from tma.errors import ConfigError, InputError
 from tma.families import family as family_named
 from tma.io.atomic import sha256_file
 from tma.io.dataset import MANIFEST, datasets_dir, file_record, shard_relpath, write_manifest
-from tma.io.owned import is_owned, locked, plain_name, recover, remove_owned, staging_dir, swap_in
+from tma.io.owned import building, is_owned, plain_name
 from tma.sources import KINDS, read_source, source_kind
 from tma.sources.align import align
 from tma.sources.base import groups, source_options, unknown_option
@@ -144,19 +144,14 @@ def ingest(input_path, *, data_dir, family: str, name=None, fmt="auto", force=Fa
                                  "kind": nav_kind}
     config = {"format": fmt, **config, "options": to_plain(options)}
     root = datasets_dir(data_dir) / name
-    with locked([root]):
-        recover(root)
+    with building([root], resume=False) as outputs:  # a failure leaves nothing behind
         if root.exists() and not is_owned(root):
             raise InputError(f"{root} exists and was not created by tma: choose another name=")
         if (root / MANIFEST).exists() and not force:
             raise InputError(f"dataset {root} exists: choose another name= or set force=true")
-        stage = staging_dir(root, fresh=True)
-        try:
-            _write_dataset(stage, family, name, logs, config, sources, {**summary, **extra})
-        except BaseException:
-            remove_owned(stage)
-            raise
-        return swap_in(stage, root)
+        _write_dataset(outputs.stage(root, fresh=True), family, name, logs, config, sources,
+                       {**summary, **extra})
+        return outputs.swap(root)
 
 
 def _write_dataset(stage, family, name, logs, config, sources, extra):
