@@ -24,9 +24,16 @@
     each in a fresh process.
 (g) Where shards run (``bench/cluster.py``): shards per second in this process, with joblib
     and on a Dask LocalCluster of 1 and 2 workers, and the scheduler's overhead per task.
+(h) Hand-made I/O, each against the library it replaces, on the case it is kept for (tma keeps
+    hand-made I/O only where it pays >= 2x on a realistic case): the MCAP writer
+    (``tma.io.mcap_writer``) against ``mcap.writer.Writer`` fed message by message, on a
+    default shard and on a recorded log of one contact with a million bearings (the bytes
+    must be the same); the protobuf column encoder (``encode_columns``, ``encode_message``)
+    against protobuf's serializer; and reading, by protobuf's parser (a hand-made parser was
+    measured no more than 1.2x faster on both logs, and removed).
 
 Options: ``--tracks N`` (2000), ``--sigma DEG`` (0.5), ``--runs N`` (30), ``--skip-stages``,
-``--only SECTION`` (lm, stages, ranges2d, filters3d, cmnf, compile, cluster),
+``--only SECTION`` (lm, stages, ranges2d, filters3d, cmnf, compile, cluster, io),
 ``--paths3d N`` (2500), ``--cmnf-paths N`` (100000), ``--repeat N`` (3).
 """
 
@@ -47,11 +54,13 @@ from tma.families import build_estimator
 from tma.families.bearings2d.estimators.lm import initial_theta
 from tma.families.bearings2d.model import bearing_jacobian, bearing_residuals
 from tma.families.bearings2d.scenario import Config, simulate_shard
+from tma.io.mcap_writer import Ragged
 from tma.parallel import keep_freed_memory
 
 REPO = Path(__file__).resolve().parents[1]
 THETA = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")
-SECTIONS = ("lm", "stages", "ranges2d", "filters3d", "cmnf", "compile", "real_motion", "cluster")
+SECTIONS = ("lm", "stages", "ranges2d", "filters3d", "cmnf", "compile", "real_motion", "cluster",
+            "io")
 
 
 def timed(function, *args):
@@ -375,6 +384,7 @@ import numpy as np
 from tma.families import build_estimator
 from tma.families.bearings2d.model import BearingTerms
 from tma.families.bearings2d.scenario import Config, simulate_shard
+from tma.io.mcap_writer import Ragged
 from tma.families.ranges2d.bisection import BisectionDensity
 from tma.families.ranges2d.model import RangeModel
 from tma.families.bearing_doppler3d.model import AuvModel, model_record
@@ -454,6 +464,108 @@ def bench_real_motion():
     logging.disable(logging.NOTSET)
 
 
+class MessageWriter:
+    """``tma.io.mcap_writer.McapWriter``'s interface over ``mcap.writer.Writer``, one
+    ``add_message`` per message: the library the hand-made writer replaces."""
+
+    def __init__(self, stream, profile="", library="", chunk_size=1 << 20, compression="zstd"):
+        from mcap.writer import CompressionType, Writer
+
+        kind = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4}[compression]
+        self._writer = Writer(stream, chunk_size=chunk_size, compression=kind,
+                              enable_crcs=True, enable_data_crcs=True)
+        self._writer.start(profile=profile, library=library)
+        self.n_messages = 0
+
+    def add_schema(self, name, encoding, data):
+        return self._writer.register_schema(name=name, encoding=encoding, data=data)
+
+    def add_channel(self, topic, message_encoding, schema_id, metadata):
+        return self._writer.register_channel(topic=topic, message_encoding=message_encoding,
+                                             schema_id=schema_id, metadata=metadata)
+
+    def add_metadata(self, name, data):
+        self._writer.add_metadata(name, data)
+
+    def add_messages(self, channel_id, log_time, buffers, starts, lengths):
+        data = memoryview(np.concatenate(buffers) if len(buffers) > 1 else buffers[0])
+        for channel, t, start, length in zip(channel_id.tolist(), log_time.tolist(),
+                                             starts.tolist(), lengths.tolist(), strict=True):
+            self._writer.add_message(channel, log_time=t, publish_time=t, sequence=self.n_messages,
+                                     data=bytes(data[start:start + length]))
+            self.n_messages += 1
+
+    def finish(self):
+        self._writer.finish()
+
+
+def _best(function, repeat):
+    return min(timed(function)[2] for _ in range(repeat))
+
+
+def bench_io(repeat: int = 3):
+    import google.protobuf.internal.api_implementation as protobuf_api
+
+    from tma.families.bearing_doppler3d import scenario as bd3d
+    from tma.families.bearing_doppler3d.log import FIELDS
+    from tma.families.bearings2d.log import BearingsLog, read_bearings_log, write_bearings_log
+    from tma.io import mcap_log
+    from tma.io.proto_columns import encode_message, proto_schema
+
+    print(f"(h) hand-made I/O against the library it replaces (wall time, best of {repeat}; "
+          f"protobuf {protobuf_api.Type()})")
+    shard, _ = simulate_shard(Config(n_tracks=2000, shard_size=2000), 0)
+    n = 1_000_000
+    t = np.arange(n) * 1.0
+    one = BearingsLog(t_s=t, own_x_m=3.0 * t, own_y_m=500.0 * np.sin(t / 600.0),
+                      track_id=np.array([0]), epoch_utc_ns=1_767_225_600 * 10**9,
+                      bearing_deg=np.random.default_rng(1).uniform(0.0, 360.0, (1, n)))
+    cases = {"default shard (601 epochs x 2,000 bearings, 1,202 messages)": (shard, repeat),
+             "one contact, 1M bearings (2M messages, a recorded log)": (one, 1)}
+    with tempfile.TemporaryDirectory() as tmp:
+        for label, (log, times) in cases.items():
+            seconds, data = {}, {}
+            for name, writer in (("tma", mcap_log.McapWriter), ("mcap", MessageWriter)):
+                path = Path(tmp) / f"{name}.mcap"
+                original, mcap_log.McapWriter = mcap_log.McapWriter, writer
+                try:
+                    seconds[name] = _best(lambda p=path, lg=log: write_bearings_log(p, lg),
+                                          times)
+                finally:
+                    mcap_log.McapWriter = original
+                data[name] = path.read_bytes()
+            read = _best(lambda p=Path(tmp) / "tma.mcap": read_bearings_log(p), times)
+            print(f"    {label}:\n      write: tma's writer {seconds['tma']:6.3f} s, mcap's "
+                  f"Writer {seconds['mcap']:6.3f} s: {seconds['mcap'] / seconds['tma']:4.1f}x "
+                  f"({'the same bytes' if data['tma'] == data['mcap'] else 'BYTES DIFFER'}); "
+                  f"read (protobuf's parser) {read:6.3f} s")
+    schema = proto_schema("tma.BearingBatch")
+    columns = [{"t_s": float(k), "track_id": shard.track_id.tolist(),
+                "bearing_deg": shard.bearing_deg[:, k].tolist()} for k in range(shard.t_s.size)]
+    ours = _best(lambda: mcap_log.Channel("/b", "tma.BearingBatch", encoding="protobuf").columns(
+        {"t_s": shard.t_s, "track_id": Ragged(np.tile(shard.track_id, shard.t_s.size),
+                                              np.full(shard.t_s.size, shard.n_tracks)),
+         "bearing_deg": Ragged(shard.bearing_deg.T.ravel(), np.full(shard.t_s.size,
+                                                                    shard.n_tracks))}), repeat)
+    theirs = _best(lambda: [schema.message_class(**m).SerializeToString(deterministic=True)
+                            for m in columns], repeat)
+    print(f"    encode a default shard's bearings: encode_columns {ours * 1e3:6.1f} ms, "
+          f"protobuf's serializer {theirs * 1e3:6.1f} ms: {theirs / ours:4.1f}x")
+    log, _ = bd3d.simulate_shard(bd3d.Config(n_tracks=2500, shard_size=2500), 0)
+    schema = proto_schema("tma.HydrophoneBatch")
+    names = FIELDS[:log.per_sensor]
+    messages = [{"t_s": float(tk), "sensor_id": i, "track_id": log.track_id,
+                 **{name: log.obs[:, k, log.per_sensor * i + f] for f, name in enumerate(names)}}
+                for k, tk in enumerate(log.t_s) for i in range(len(log.model["sensors_m"]))]
+    ours = _best(lambda: [encode_message(schema, m) for m in messages], repeat)
+    theirs = _best(lambda: [schema.message_class(**{
+        k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in m.items()
+    }).SerializeToString(deterministic=True) for m in messages], repeat)
+    print(f"    encode a bearing_doppler3d shard ({len(messages)} messages x 2,500 paths) "
+          f"one message at a time: encode_message {ours * 1e3:6.1f} ms, protobuf's "
+          f"serializer {theirs * 1e3:6.1f} ms: {theirs / ours:4.1f}x")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--tracks", type=int, default=2000)
@@ -489,6 +601,8 @@ def main():
         from cluster import bench_cluster  # bench/cluster.py (run as a script); tma[dask]
 
         bench_cluster()
+    if wanted("io"):
+        bench_io(args.repeat)
 
 
 if __name__ == "__main__":

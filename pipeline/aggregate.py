@@ -9,7 +9,7 @@ import hydra
 
 from pipeline._common import (
     CONF_DIR,
-    checked_estimator_nodes,
+    estimator_nodes,
     log,
     open_datasets,
     record_sweep_job,
@@ -20,7 +20,7 @@ from tma.aggregate import aggregate
 
 
 def aggregate_stage(cfg):
-    estimators = checked_estimator_nodes(cfg)  # a bad estimator config fails before any I/O
+    estimators = estimator_nodes(cfg, checked=True)  # a bad estimator config fails before any I/O
     jobs = [(ds, est) for ds in open_datasets(cfg) for est in estimators]
     table, suffix = cfg.table, "custom"
     number = sweep_job(cfg)

@@ -4,8 +4,8 @@ import hydra
 
 from pipeline._common import (
     CONF_DIR,
-    checked_estimator_nodes,
     engine,
+    estimator_nodes,
     log,
     open_datasets,
     run_stage,
@@ -14,7 +14,7 @@ from tma.runs import estimate_runs
 
 
 def estimate_stage(cfg):
-    estimators = checked_estimator_nodes(cfg)  # a bad estimator config fails before any I/O
+    estimators = estimator_nodes(cfg, checked=True)  # a bad estimator config fails before any I/O
     jobs = [(ds, est) for ds in open_datasets(cfg) for est in estimators]
     roots = estimate_runs(cfg.paths.data_dir, jobs, engine=engine(cfg), progress=cfg.progress,
                           force=cfg.force)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from pipeline._common import engine_requested, scenario_nodes
+from pipeline._common import engine, scenario_nodes
 from tests.conftest import compose_cfg, run_cli
 from tests.test_pipeline import GRID, _all_stages, _files
 from tma.errors import ConfigError, InputError
@@ -29,10 +29,10 @@ def cluster():
 
 def test_parallel_dask_gives_the_bytes_of_parallel_serial(tmp_path):
     trees = []
-    for engine in ("serial", "dask"):
-        root = tmp_path / engine
+    for choice in ("serial", "dask"):
+        root = tmp_path / choice
         _all_stages([*GRID, f"paths.data_dir={root}", f"paths.tables_dir={root}/tables",
-                     f"parallel={engine}"])
+                     f"parallel={choice}"])
         trees.append(_files(root))
     assert trees[0].keys() == trees[1].keys()
     assert [str(k) for k in trees[0] if trees[0][k] != trees[1][k]] == []
@@ -72,7 +72,7 @@ def test_a_worker_killed_mid_run_costs_only_its_shard(tmp_path, cluster):
 ])
 def test_bad_cluster_options_are_one_clear_line(override, message):
     with pytest.raises(ConfigError, match=message.replace("(", r"\(").replace(")", r"\)")):
-        engine_requested(compose_cfg(["parallel=dask", override]))
+        engine(compose_cfg(["parallel=dask", override]))
 
 
 def test_slurm_preset_composes_and_its_local_twin_runs_a_sweep_one_layer_deep(tmp_path):

@@ -8,7 +8,7 @@ from hydra import compose, initialize_config_dir
 from hydra.errors import ConfigCompositionException
 from omegaconf import OmegaConf
 
-from pipeline._common import CONF_DIR, engine_requested, estimator_nodes, scenario_nodes
+from pipeline._common import CONF_DIR, engine, estimator_nodes, scenario_nodes
 from tests.conftest import compose_cfg, run_stage_here
 from tma.config import to_plain
 from tma.errors import ConfigError
@@ -17,8 +17,10 @@ from tma.families import (
     build_estimator,
     estimator_class,
     estimator_names,
+    family,
     load_scenario,
 )
+from tma.scenario import ScenarioConfig
 
 CONF = Path(CONF_DIR)
 
@@ -48,8 +50,8 @@ def test_every_estimator_composes_from_its_dataclass_alone(name):
 
 @pytest.mark.parametrize("name", _options("parallel"))
 def test_every_parallel_option_composes(name):
-    engine = engine_requested(compose_cfg([f"parallel={name}"]))
-    assert engine.kind == ("dask" if name == "dask" else "joblib") and engine.n_jobs >= 1
+    chosen = engine(compose_cfg([f"parallel={name}"]))
+    assert chosen.kind == ("dask" if name == "dask" else "joblib") and chosen.n_jobs >= 1
 
 
 @pytest.mark.parametrize("name", _options("experiment"))
@@ -155,3 +157,13 @@ def test_fields_declared_nonfinite_accept_inf_but_not_nan():
     for node, key in (({"limit": float("nan")}, "limit"), ({"gain": float("inf")}, "gain")):
         with pytest.raises(ConfigError, match=f"x: {key} must be finite"):
             validate(Schema, node, "x")
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_every_scenario_has_the_base_fields_and_their_checks(name):
+    config = family(name).scenario.Config
+    assert issubclass(config, ScenarioConfig) and config().family == name
+    for key, bad in (("n_tracks", 0), ("shard_size", 0), ("seed", -1), ("family", "other"),
+                     ("epoch_utc", "noon")):
+        with pytest.raises(ConfigError, match=rf"^scenario '{name}': {key}"):
+            config(**{key: bad})

@@ -26,7 +26,8 @@ from tma.families.bearings2d.log import (
 )
 from tma.families.bearings2d.scenario import Config, simulate_shard
 from tma.io.atomic import atomic_path, write_parquet_atomic
-from tma.io.mcap_log import LogWriter, format_utc, json_record, parse_utc
+from tma.io.mcap_log import LogWriter, json_record
+from tma.utc import format_utc, parse_utc
 
 EPOCH = "2026-01-01T00:00:00Z"
 EPOCH_NS = 1_767_225_600 * 10**9  # the same instant, counted by hand

@@ -1,8 +1,8 @@
 """tma's MCAP writer against the reference, ``mcap.writer.Writer`` fed message by message with
 the same options (tma's former LogWriter): the files must be byte-identical, every CRC, index,
 statistic and summary offset included, with zstd and lz4 chunks, JSON and protobuf messages
-(each message as orjson or protobuf's own serializer writes it). And ``json_objects``
-against ``orjson.dumps`` of each object, log times against ``epoch + round(t * 1e9)``."""
+(each message as orjson or protobuf's own serializer writes it). And log times against
+``epoch + round(t * 1e9)``."""
 
 import io
 
@@ -17,7 +17,6 @@ from mcap_protobuf.schema import register_schema as register_protobuf_schema
 from tests.conftest import proto_message_class
 from tma import __version__
 from tma.errors import InputError
-from tma.families.bearings2d.geo import local_to_geodetic, location_fix
 from tma.families.bearings2d.log import (
     BEARINGS_TOPIC,
     CHANNELS,
@@ -33,9 +32,9 @@ from tma.families.bearings2d.log import (
     write_bearings_log,
 )
 from tma.families.bearings2d.scenario import Config, simulate_shard
-from tma.io import mcap_writer
+from tma.geo import local_to_geodetic, location_fix
 from tma.io.mcap_log import LogWriter, check_integrity, json_record, read_log, schema_bytes
-from tma.io.mcap_writer import WIDE, Encoded, McapWriter, Ragged, json_objects
+from tma.io.mcap_writer import Encoded, McapWriter
 from tma.io.proto_columns import proto_schema
 
 EPOCH_NS = 1_767_225_600 * 10**9  # 2026-01-01T00:00:00Z
@@ -220,8 +219,7 @@ LOGS = {
     "tiny": lambda: _log(1, 3),
     "one track, multi-chunk": lambda: _log(1, 40_000, epoch_utc_ns=EPOCH_NS, sigma_deg=0.5),
     "gaps, empty epochs, no epoch": lambda: _log(5, 3000, seed=1, gaps=0.6),
-    "wide (one dump per message)": lambda: _log(WIDE + 40, 400, seed=2, gaps=0.1,
-                                                epoch_utc_ns=EPOCH_NS),
+    "wide": lambda: _log(104, 400, seed=2, gaps=0.1, epoch_utc_ns=EPOCH_NS),
     "geo: protobuf + JSON, labels, metadata": _simulated_geo_log,
 }
 
@@ -352,60 +350,3 @@ def test_times_outside_mcap_range_are_one_clear_error(tmp_path, epoch, t_s, ok):
     for convert in (w.time_ns, lambda v: w.log_times([0.0, v])):
         with pytest.raises(InputError, match="outside MCAP's log time range"):
             convert(t_s)
-
-
-# -- JSON columns -----------------------------------------------------------------------------
-
-def _awkward_floats(rng, n):
-    bits = rng.integers(0, 2**64, n, dtype=np.uint64, endpoint=False)
-    x = bits.view(np.float64)
-    x[::7] = rng.choice([0.0, -0.0, np.nan, np.inf, -np.inf, 1e16, 1e-7, 5e-324, 0.1, 1e21,
-                         2.0**53, -1.7976931348623157e308, 123.0], x[::7].size)
-    return x
-
-
-@pytest.mark.parametrize("width", [0, 1, 3, WIDE + 1, 5 * WIDE])
-def test_json_objects_are_orjsons_bytes(width, monkeypatch):
-    """Floats of every kind (any bit pattern, NaN and infinities as null), integers, empty
-    arrays: each object as orjson.dumps writes it, narrow objects by columns and wide ones
-    one by one."""
-    used = []
-    for way in ("_by_columns", "_one_by_one"):
-        function = getattr(mcap_writer, way)
-        monkeypatch.setattr(mcap_writer, way, lambda *a, f=function, w=way: used.append(w)
-                            or f(*a))
-    rng = np.random.default_rng(width)
-    n = 3000 if width < WIDE else 200
-    counts = rng.integers(0, 2 * width + 1, n)
-    t = _awkward_floats(rng, n)
-    ids = rng.integers(-2**63, 2**63, counts.sum())
-    values = _awkward_floats(rng, counts.sum())
-    k = rng.integers(-5, 5, n).astype(np.int32)
-    got = json_objects({"t_s": t, "k": k, "track_id": Ragged(ids, counts),
-                        "bearing_deg": Ragged(values, counts)})
-    ends = np.cumsum(counts)
-    for i in range(n):
-        a, b = ends[i] - counts[i], ends[i]
-        expected = orjson.dumps({"t_s": float(t[i]), "k": int(k[i]), "track_id": ids[a:b],
-                                 "bearing_deg": values[a:b]}, option=NUMPY)
-        assert got[i] == expected
-    assert len(got) == n and got.data.size == got.offsets[-1]
-    assert used == ["_by_columns" if width < WIDE / 2 else "_one_by_one"]
-
-
-def test_json_floats_are_written_as_float64_values():
-    x = np.array([0.1, 1 / 3, 3.4e38], np.float32)
-    assert [json_objects({"x": x})[i] for i in range(3)] == [
-        orjson.dumps({"x": float(v)}) for v in x]
-
-
-@pytest.mark.parametrize("fields", [
-    {},
-    {"a": np.ones(3), "b": np.ones(4)},
-    {"a": np.ones(3), "b": Ragged(np.ones(4), np.array([1, 1, 1]))},
-    {"a": np.array(["x"])},
-    {"a": np.ones((2, 2))},
-])
-def test_json_objects_refuse_mismatched_columns(fields):
-    with pytest.raises(ValueError):
-        json_objects(fields)

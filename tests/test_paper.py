@@ -20,6 +20,7 @@ from tma.families.bearings2d import paper as b2d_paper
 from tma.families.radar2d import paper as radar_paper
 from tma.families.radar2d.metrics import Segments
 from tma.families.ranges2d import paper as ranges_paper
+from tma.tables import write_table
 
 PAPERS = REPO.parent / "shared" / "specs" / "papers.md"
 
@@ -120,22 +121,26 @@ def _rows():
             paper.claim("f", "a | b", "s", "p", "largest |x - y|", 2.0, False, "n")]
 
 
-def test_csv_schema_and_section_written_once(tmp_path):
-    md = tmp_path / "t.md"
-    md.write_text("# Title\n\ntable\n")
-    written = paper.write_against_paper(_rows(), md, "Intro.")
-    assert written == [tmp_path / "t_paper.csv"]
-    csv = pd.read_csv(written[0])
+def test_one_writer_for_a_table_and_its_section(tmp_path):
+    data = pd.DataFrame({"x": [1.5, 2.0]})
+    shown = pd.DataFrame({"x (m)": ["1.5", "2"]})
+    written = write_table(tmp_path, "t", "Title", "Intro of the table.", data, shown,
+                          notes="A note.", paper=(_rows(), "Intro."))
+    assert written == [tmp_path / "t.csv", tmp_path / "t.md", tmp_path / "t_paper.csv"]
+    csv = pd.read_csv(written[2])
     assert list(csv.columns) == paper.COLUMNS
     assert list(csv.verdict) == ["reproduced", "does not hold"]
     assert csv.note[1] == "statistic: largest |x - y|; n"
-    paper.write_against_paper(_rows(), md, "Intro.")  # aggregated again: replaced, not doubled
-    text = md.read_text()
-    assert text.startswith("# Title\n\ntable\n\n## Against the paper\n")
+    text = written[1].read_text()
+    assert text.startswith("# Title\n\nIntro of the table.\n\n| x (m) |\n|---|\n| 1.5 |\n"
+                           "| 2 |\n\nA note.\n\n## Against the paper\n\nIntro.")
     assert text.count("## Against the paper") == 1
     assert "Verdicts: published numbers: 1 reproduced, 0 differs, 0 not comparable; claims: 0 " \
            "holds, 1 does not hold, 0 not comparable." in text
     assert "a \\| b" in text and "largest \\|x - y\\|" in text  # pipes escaped in cells
+    assert written[0].read_text() == "x\n1.5\n2.0\n"
+    write_table(tmp_path, "t", "Title", "Intro.", data, shown)  # without a paper: no section
+    assert "Against the paper" not in written[1].read_text()
     assert not list(tmp_path.glob(".*tmp*"))
 
 

@@ -144,21 +144,7 @@ def test_what_protobuf_refuses_is_refused(data):
     schema, cls = proto_schema("tma.BearingBatch"), proto_message_class("tma.BearingBatch")
     with pytest.raises(DecodeError):
         cls.FromString(data)  # the reference agrees that these are not messages
-    with pytest.raises((ValueError, IndexError, struct.error)):
-        decode_message(schema, data)
-
-
-@pytest.mark.parametrize("data", [
-    _key(1, 0) + b"\x01",  # a double sent as a varint
-    _key(1, 2) + b"\x08" + b"\0" * 8,  # a double sent as bytes
-    _key(2, 5) + b"\0" * 4,  # sfixed64 array sent as fixed32
-])
-def test_a_known_field_of_another_type_is_refused_where_protobuf_would_drop_it(data):
-    """protobuf's parser keeps such a field as an unknown one and reads the default (0):
-    a message of another schema would pass as zeros. tma refuses it."""
-    schema, cls = proto_schema("tma.BearingBatch"), proto_message_class("tma.BearingBatch")
-    assert cls.FromString(data).t_s == 0.0 and not cls.FromString(data).track_id
-    with pytest.raises(ValueError, match="wire type"):
+    with pytest.raises(DecodeError):
         decode_message(schema, data)
 
 

@@ -21,7 +21,7 @@ from tests.conftest import REPO, SMALL, compose_cfg, run_stage_here
 from tma.errors import ConfigError, InputError, IntegrityError
 from tma.families.bearings2d.ingest import ingest
 from tma.families.bearings2d.scenario import Config, simulate_shard
-from tma.io.owned import MARKER
+from tma.io.owned import MARKER, building
 
 
 def _tree(root: Path) -> dict:
@@ -195,3 +195,28 @@ def test_two_simulates_of_the_same_new_dataset_at_once_both_succeed(tmp_path):
     assert len(manifests) == 1
     from tma.io.dataset import Dataset
     Dataset.open(manifests[0].parent).verify()
+
+
+@pytest.mark.parametrize("resume", [True, False])
+def test_building_swaps_complete_outputs_and_keeps_a_failed_one_to_resume(tmp_path, resume):
+    """``building``: the lock -> recover -> stage -> swap of simulate, estimate and ingest."""
+    target = tmp_path / "out"
+    with building([target]) as outputs:
+        stage = outputs.stage(target)
+        (stage / "a").write_text("1")
+        assert outputs.swap(target) == target
+    assert (target / "a").read_text() == "1" and (target / MARKER).exists()
+    assert not stage.exists() and not (tmp_path / ".out.lock").read_text()
+    with pytest.raises(RuntimeError), building([target], resume=resume) as outputs:
+        (outputs.stage(target, fresh=True) / "a").write_text("2")
+        raise RuntimeError("killed")
+    assert (target / "a").read_text() == "1"  # the good output is untouched
+    assert stage.exists() == resume  # kept to resume from, or removed
+    os.replace(target, tmp_path / f".out.old-{os.getpid()}")  # as a kill inside a swap leaves
+    with building([target]) as outputs:  # recovered first
+        assert (target / "a").read_text() == "1"
+        (outputs.stage(target, adopt=True) / "b").write_text("3")
+        outputs.swap(target)
+    # resumed from the failed stage, or (none left) from the adopted output
+    assert (target / "a").read_text() == ("2" if resume else "1")
+    assert (target / "b").read_text() == "3" and not list(tmp_path.glob(".out.partial"))

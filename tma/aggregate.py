@@ -23,18 +23,31 @@ if TYPE_CHECKING:  # pandas (0.2 s) and pyarrow.dataset load where used, not at 
 from tma.errors import InputError
 from tma.families import family as family_of
 from tma.io.dataset import Dataset, datasets_dir
-from tma.io.owned import remove_stale_temporaries
+from tma.io.owned import plain_name, remove_stale_temporaries
 from tma.parallel import in_threads
-from tma.runs import MANIFEST, check_datasets, full_config, open_run, run_path, runs_dir
+from tma.runs import (
+    MANIFEST,
+    check_datasets,
+    full_config,
+    open_run,
+    run_path,
+    runs_dir,
+    seconds_per_track,
+)
 
 
 @dataclass
 class RunEntry:
+    """A finished run as a report sees it: its dataset, estimator, directory, manifest and
+    estimates, and its wall seconds per track (``tma.runs.seconds_per_track``; NaN when
+    unknown), read once here."""
+
     dataset: Dataset
     estimator: str
     run_root: Path
     manifest: dict
     estimates: "pd.DataFrame"
+    seconds_per_track: float = float("nan")
 
 
 def aggregate(data_dir, tables_dir, jobs, table=None, default_suffix="custom") -> list[Path]:
@@ -51,7 +64,8 @@ def aggregate(data_dir, tables_dir, jobs, table=None, default_suffix="custom") -
     for (dataset, estimator, root), (manifest, estimates) in zip(runs, opened, strict=True):
         remove_stale_temporaries(root, only_dead=True)
         by_family.setdefault(dataset.family, []).append(
-            RunEntry(dataset, estimator, root, manifest, estimates.to_pandas()))
+            RunEntry(dataset, estimator, root, manifest, estimates.to_pandas(),
+                     seconds_per_track(root)))
     written = []
     for family, entries in by_family.items():
         module = family_of(family).report
@@ -70,6 +84,31 @@ def aggregate(data_dir, tables_dir, jobs, table=None, default_suffix="custom") -
 # -- every run's metrics as one dataset -------------------------------------------------------
 
 KEY_COLUMNS = ("family", "dataset", "estimator", "run")
+
+
+def sweep_record(sweep: str | None, job: int, data_dir, tables_dir, jobs) -> dict:
+    """What one aggregate job of a sweep read (its runs), for ``aggregate_sweep``."""
+    return {"sweep": sweep, "job": job, "data_dir": str(Path(data_dir).resolve()),
+            "tables_dir": str(Path(tables_dir).resolve()),
+            "runs": [{"dataset": str(Path(ds.root).resolve()), "estimator": est}
+                     for ds, est in jobs]}
+
+
+def aggregate_sweep(records: list[dict], table: str | None = None) -> list[Path]:
+    """One table of every run the aggregate jobs of a sweep read (their ``sweep_record``s):
+    ``table``, default ``<family>-sweep``; each run once, in job order."""
+    if table is not None:
+        plain_name(table, "table")
+    groups: dict[tuple, dict] = {}
+    for record in sorted(records, key=lambda r: r["job"]):
+        runs = groups.setdefault((record["data_dir"], record["tables_dir"]), {})
+        for run in record["runs"]:
+            runs.setdefault((run["dataset"], json.dumps(run["estimator"], sort_keys=True)), run)
+    written = []
+    for (data_dir, tables_dir), runs in groups.items():
+        jobs = [(Dataset.open(r["dataset"]), r["estimator"]) for r in runs.values()]
+        written += aggregate(data_dir, tables_dir, jobs, table=table, default_suffix="sweep")
+    return written
 
 
 def _flat(node, prefix: str) -> dict:

@@ -29,15 +29,13 @@ measured value and ``holds`` / ``does not hold`` / ``not comparable``.
 """
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 from scipy.special import ndtri
 
-from tma.io.atomic import write_text_atomic
 from tma.stats import wilson_interval
-from tma.tables import markdown_table, write_csv
+from tma.tables import markdown_table
 
 COLUMNS = ["family", "quantity", "setting", "paper", "ours", "ours_lo", "ours_hi", "z",
            "verdict", "note"]
@@ -335,16 +333,3 @@ def csv_frame(rows: list[dict]) -> pd.DataFrame:
             note = "; ".join(filter(None, [f"statistic: {r['statistic']}", note]))
         out.append({**{c: r[c] for c in COLUMNS}, "note": note})
     return pd.DataFrame(out, columns=COLUMNS)
-
-
-def write_against_paper(rows: list[dict], markdown_path, intro: str) -> list[Path]:
-    """Append the section to the table's Markdown (already written by the report; rewritten
-    atomically) and write ``<table>_paper.csv`` beside it. Returns the CSV's path."""
-    markdown_path = Path(markdown_path)
-    text = markdown_path.read_text()
-    cut = text.find("\n" + SECTION + "\n")
-    text = (text if cut < 0 else text[:cut + 1]).rstrip("\n")
-    write_text_atomic(markdown_path, text + "\n\n" + section(rows, intro))
-    csv_path = markdown_path.with_name(f"{markdown_path.stem}_paper.csv")
-    write_csv(csv_frame(rows), csv_path)
-    return [csv_path]

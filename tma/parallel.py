@@ -15,7 +15,7 @@ import gc
 import logging
 import os
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 
 from threadpoolctl import threadpool_limits
 
@@ -65,6 +65,28 @@ class Engine:
     @property
     def in_process(self) -> bool:
         return self.kind == "joblib" and self.n_jobs == 1
+
+
+def engine_from(node, launcher: str = "") -> Engine:
+    """The ``parallel`` config group (a dict) as an ``Engine``; unknown keys and bad values
+    are one ConfigError. Inside a job of a parallel Hydra launcher (``launcher`` names its
+    target: joblib, submitit) shards run serially in the job: one parallel layer only."""
+    if not isinstance(node, dict):
+        raise ConfigError(f"parallel must be a config group entry (default, serial, dask), "
+                          f"got '{node}'")
+    known = {f.name for f in fields(Engine)} - {"kind"} | {"engine"}
+    unknown = sorted(set(node) - known)
+    if unknown:
+        raise ConfigError(f"unknown option(s) parallel.{', parallel.'.join(unknown)} (known: "
+                          f"{', '.join(sorted(known))})")
+    values = dict(node)
+    requested = Engine(kind=values.pop("engine", "joblib"), **values)
+    launcher = launcher.lower()
+    if ("joblib" in launcher or "submitit" in launcher) and requested.kind == "joblib" \
+            and requested.n_jobs != 1:
+        log.info("parallel launcher active: shards run serially inside each job")
+        return replace(requested, n_jobs=1)
+    return requested
 
 
 def as_engine(engine) -> Engine:

@@ -16,6 +16,7 @@ after its manifest and every file it lists verify, and the dataset it reads is v
 every use.
 """
 
+import json
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,7 +32,7 @@ from tma.families import build_estimator, estimator_class, scenario_module
 from tma.io import arrow
 from tma.io.atomic import sha256_json, write_json_atomic, write_parquet_atomic
 from tma.io.dataset import Dataset, file_record, read_sealed_manifest, sealed
-from tma.io.owned import adopt_broken, locked, recover, staging_dir, swap_in
+from tma.io.owned import building
 from tma.io.shards import finished_record, mark_finished
 from tma.parallel import in_threads, iter_tasks
 
@@ -40,6 +41,7 @@ RUN_FORMAT = "tma-run"
 RUN_FORMAT_VERSION = 2
 MANIFEST = "manifest.json"
 ESTIMATES = "estimates.parquet"
+TIMING = "timing.json"
 
 
 def runs_dir(data_dir) -> Path:
@@ -197,7 +199,17 @@ def finish_run(stage: Path, dataset: Dataset, estimator_config: dict, tasks, rec
     timing = {"shards": {Path(t.out_path).name: {"seconds": r["seconds"], "rows": r["rows"],
                                                  "epochs": r["epochs"]}
                          for t, r in zip(tasks, records, strict=True)}}
-    write_json_atomic(stage / "timing.json", timing)
+    write_json_atomic(stage / TIMING, timing)
+
+
+def seconds_per_track(root) -> float:
+    """Wall seconds per track of a finished run, over its shards (``timing.json``: not
+    hashed, so not verified); NaN when it is absent or unreadable."""
+    try:
+        shards = json.loads((Path(root) / TIMING).read_text())["shards"].values()
+        return sum(s["seconds"] for s in shards) / sum(s["rows"] for s in shards)
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, ZeroDivisionError):
+        return float("nan")
 
 
 def _is_good(root: Path) -> bool:
@@ -220,8 +232,8 @@ def estimate_runs(data_dir, jobs, *, engine=2, progress=True, force=False):
     for dataset, est_cfg in jobs:
         est_cfg = full_config(dataset, est_cfg)
         planned.append((run_path(data_dir, dataset, est_cfg), dataset, est_cfg))
-    with locked([p[0] for p in planned]):  # one process per run; a second one waits
-        return _estimate_locked(data_dir, planned, engine=engine, progress=progress,
+    with building([p[0] for p in planned]) as outputs:  # one process per run; others wait
+        return _estimate_locked(outputs, data_dir, planned, engine=engine, progress=progress,
                                 force=force)
 
 
@@ -234,19 +246,15 @@ def check_datasets(datasets) -> None:
         dataset.check_files()
 
 
-def _estimate_locked(data_dir, planned, *, engine, progress, force):
-    for root, _, _ in planned:
-        recover(root)
+def _estimate_locked(outputs, data_dir, planned, *, engine, progress, force):
     # finished runs are reused once their files verify, checked several at a time
     reuse = [False] * len(planned) if force else in_threads(_is_good, [p[0] for p in planned])
     todo, tasks = [], []
     for (root, dataset, est_cfg), good in zip(planned, reuse, strict=True):
         if good or any(p[0] == root for p in todo):
             continue
-        stage = root.with_name(f".{root.name}.partial")
-        if not force:
-            adopt_broken(root, stage)  # its verified shards are reused, the rest recomputed
-        stage = staging_dir(root, fresh=force)
+        # a broken run is adopted: its verified shards are reused, the rest recomputed
+        stage = outputs.stage(root, fresh=force, adopt=True)
         # the key hashes the config before prepare, so training (an artefact the prepared
         # config records by content hash) happens only when the run must be computed
         key = run_key(dataset, est_cfg)
@@ -263,7 +271,7 @@ def _estimate_locked(data_dir, planned, *, engine, progress, force):
     for root, stage, dataset, est_cfg, ts in todo:
         if not ts:  # a dataset without shards: nothing to wait for
             finish_run(stage, dataset, est_cfg, ts, [])
-            swap_in(stage, root)
+            outputs.swap(root)
     # each run is finished (concatenated, sealed, swapped in) as soon as its last shard is
     # in, while the workers go on with the next runs' shards
     for group, records in zip(groups.values(), iter_tasks(
@@ -275,7 +283,7 @@ def _estimate_locked(data_dir, planned, *, engine, progress, force):
             waiting[id(run)] -= 1
             if not waiting[id(run)]:
                 finish_run(stage, dataset, est_cfg, ts, [done[u.out_path] for u in ts])
-                swap_in(stage, root)
+                outputs.swap(root)
     return [p[0] for p in planned]
 
 

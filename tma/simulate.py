@@ -21,7 +21,7 @@ from tma.families import dataset_name, load_scenario
 from tma.io import arrow
 from tma.io.atomic import sha256_json, write_parquet_atomic
 from tma.io.dataset import Dataset, datasets_dir, file_record, shard_relpath, write_manifest
-from tma.io.owned import locked, recover, staging_dir, swap_in
+from tma.io.owned import building
 from tma.io.shards import finished_record, mark_finished, sidecar
 from tma.parallel import in_threads, run_tasks
 from tma.sharding import n_shards
@@ -105,14 +105,13 @@ def simulate_datasets(scenario_nodes, data_dir, *, engine=2, force=False, progre
     ``engine``: where shards run (``tma.parallel.Engine``, or a number of local workers)."""
     configs = [load_scenario(node) for node in scenario_nodes]
     roots = [datasets_dir(data_dir) / dataset_name(module, cfg) for module, cfg in configs]
-    with locked(roots):  # a second simulate of the same dataset waits, then finds it done
-        return _simulate_locked(configs, roots, engine=engine, force=force, progress=progress)
+    with building(roots) as outputs:  # a second simulate of a dataset waits, finds it done
+        return _simulate_locked(outputs, configs, roots, engine=engine, force=force,
+                                progress=progress)
 
 
-def _simulate_locked(configs, roots, *, engine, force, progress):
+def _simulate_locked(outputs, configs, roots, *, engine, force, progress):
     plains = [to_plain(cfg) for _, cfg in configs]
-    for root in roots:
-        recover(root)
     # a dataset that exists and verifies is kept; they are checked several at a time
     kept = [False] * len(roots) if force else in_threads(
         lambda item: _is_good(*item), list(zip(roots, plains, strict=True)))
@@ -124,7 +123,7 @@ def _simulate_locked(configs, roots, *, engine, force, progress):
         if n_shards(cfg) > MAX_SHARDS:
             raise ConfigError(f"scenario '{module.FAMILY}': n_tracks / shard_size gives "
                               f"{n_shards(cfg)} shards (at most {MAX_SHARDS}): raise shard_size")
-        stage = staging_dir(root, fresh=force)
+        stage = outputs.stage(root, fresh=force)
         shard_tasks = [ShardTask(str(stage), plain, i) for i in range(n_shards(cfg))]
         plans.append((root, stage, module, plain, shard_tasks))
         tasks += shard_tasks
@@ -159,5 +158,5 @@ def _simulate_locked(configs, roots, *, engine, force, progress):
         shutil.rmtree(stage / PARTS, ignore_errors=True)  # inside our own staging directory
         for t in shard_tasks:  # resume bookkeeping is no longer needed once the manifest exists
             sidecar(t.log_path).unlink(missing_ok=True)
-        swap_in(stage, root)
+        outputs.swap(root)
     return [p[0] for p in plans]

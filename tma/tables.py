@@ -21,11 +21,29 @@ def markdown_table(df: pd.DataFrame) -> str:
     return "\n".join([head, rule, *body]) + "\n"
 
 
-def write_markdown(path: Path, title: str, intro: str, table: str, notes: str = ""):
-    text = f"# {title}\n\n{intro.strip()}\n\n{table}"
+def write_table(tables_dir, name: str, title: str, intro: str, data: pd.DataFrame,
+                shown: pd.DataFrame, *, float_format=None, notes: str = "",
+                paper=None) -> list[Path]:
+    """One table, as every report writes it: ``<name>.csv`` (``data``, every number;
+    ``float_format`` as ``write_csv``), ``<name>.md`` (``# title``, ``intro``, the formatted
+    cells of ``shown``, ``notes``) and, given ``paper`` = ``(rows, intro)`` (the family's
+    comparison, ``tma.paper``), the section "Against the paper" at the end of the Markdown
+    and ``<name>_paper.csv``. Returns the paths written: csv, md (, paper csv)."""
+    tables_dir = Path(tables_dir)
+    paths = [tables_dir / f"{name}.csv", tables_dir / f"{name}.md"]
+    write_csv(data, paths[0], float_format=float_format)
+    text = f"# {title}\n\n{intro.strip()}\n\n{markdown_table(shown)}"
     if notes:
         text += f"\n{notes.strip()}\n"
-    write_text_atomic(path, text)
+    if paper is not None:
+        from tma.paper import csv_frame, section  # tma.paper writes its CSV with write_csv
+
+        rows, paper_intro = paper
+        text = text.rstrip("\n") + "\n\n" + section(rows, paper_intro)
+        paths.append(tables_dir / f"{name}_paper.csv")
+        write_csv(csv_frame(rows), paths[-1])
+    write_text_atomic(paths[1], text)
+    return paths
 
 
 def save_figure(fig, path: Path):

@@ -8,7 +8,8 @@ A family's scenario module provides ``Config`` (with ``n_tracks``, ``shard_size`
 table or None)``, ``write_log(path, log, metadata) -> n_messages`` and ``read_log(path)``;
 optionally ``simulation_key``/``simulate_raw``/``from_raw`` when datasets of different
 configs share their random draws. Its report module provides ``aggregate_runs(entries,
-tables_dir, table_name)``.
+tables_dir, table_name)``; an ``ingest`` module, when the family reads recorded logs,
+``OBSERVATION``, ``Settings`` and ``logs`` (``tma.ingest``).
 """
 
 import functools
@@ -37,6 +38,18 @@ class Family:
     @property
     def report(self):
         return importlib.import_module(f"tma.families.{self.name}.report")
+
+    @property
+    def ingest(self):
+        """What the family reads from a recorded log (``tma.ingest``): its ``ingest`` module,
+        with ``OBSERVATION``, ``Settings`` and ``logs``."""
+        try:
+            return importlib.import_module(f"tma.families.{self.name}.ingest")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"tma.families.{self.name}.ingest":
+                raise
+            raise ConfigError(f"family {self.name} does not ingest recorded logs (it has no "
+                              "ingest module)") from None
 
     def estimator_class(self, name: str):
         module, cls = self.estimators[name].split(":")
@@ -105,16 +118,27 @@ def register_configs():
 
     Every command runs this first, so it imports every scenario and estimator module: their
     top-level imports stay light (numba, scipy, pandas and matplotlib load where they are
-    used; ``tests/test_startup.py``)."""
+    used; ``tests/test_startup.py``).
+
+    Also the group ``estimator_keys``, one option per family: every key of the family's
+    estimators (their defaults, ``name`` left out). An experiment merges it into
+    ``estimator`` (``- /estimator_keys@estimator: <family>``) so that Hydra lets the command
+    line set any of them with ``estimator.KEY=VALUE``; ``tma.experiment.estimator_configs``
+    then copies the value into the experiment's estimators that have KEY. These values are
+    never run."""
     from hydra.core.config_store import ConfigStore
 
     store = ConfigStore.instance()
     for name in NAMES:
         fam = family(name)
         store.store(group="scenario", name=name, node=defaults(fam.scenario.Config))
+        keys = {}
         for estimator in fam.estimators:
-            store.store(group="estimator", name=estimator,
-                        node=defaults(fam.estimator_class(estimator).Config))
+            node = defaults(fam.estimator_class(estimator).Config)
+            store.store(group="estimator", name=estimator, node=node)
+            keys.update(node)
+        keys.pop("name", None)
+        store.store(group="estimator_keys", name=name, node=keys)
 
 
 def dataset_name(module, cfg) -> str:

@@ -13,22 +13,20 @@ the message classes themselves. Log times are absolute (UTC ns) when the log has
 Integrity: ``LogWriter`` writes every CRC MCAP has (chunk ``uncompressed_crc``, DataEnd
 ``data_section_crc``, Footer ``summary_crc``), so every byte of a file tma writes is covered
 by a CRC or is a fixed field checked by value (magic, DataEnd and Footer opcode and length).
-``read_log`` checks all of them before it decodes anything and refuses a damaged file with
-one ``InputError`` naming it. A CRC of 0 means "not computed" (MCAP spec; other tools may
-write files so): what it would cover is then unchecked, see docs/formats.md.
+``McapFile`` (under ``read_log``) checks all of them before it decodes anything and refuses
+a damaged file with one ``InputError`` naming it. A CRC of 0 means "not computed" (MCAP spec;
+other tools may write files so): what it would cover is then unchecked, see docs/formats.md.
 """
 
 import contextlib
 import functools
 import math
 import numbers
-import re
 import struct
 import sys
 import zlib
 from collections import Counter
 from dataclasses import dataclass, field
-from datetime import UTC, datetime, timedelta
 from io import BytesIO
 from pathlib import Path
 
@@ -39,12 +37,18 @@ from mcap.reader import NonSeekingReader, SeekingReader
 from mcap_protobuf.schema import build_file_descriptor_set
 
 from tma import __version__
-from tma.errors import ConfigError, InputError
+from tma.errors import InputError, TmaError
 from tma.io.atomic import VerifiedPath, atomic_path
-from tma.io.mcap_writer import CHUNK_SIZE, MAGIC, Encoded, McapWriter, interleave, json_objects
-from tma.io.proto_columns import decode_message, encode_columns, encode_message, proto_schema
+from tma.io.mcap_writer import CHUNK_SIZE, MAGIC, Encoded, McapWriter, Ragged, interleave
+from tma.io.proto_columns import (
+    SCHEMA_DIR,
+    decode_message,
+    encode_columns,
+    encode_message,
+    proto_schema,
+)
+from tma.utc import MAX_EPOCH_NS, format_utc
 
-SCHEMA_DIR = Path(__file__).parent / "schemas"
 PROFILE = ""  # plain MCAP (JSON and protobuf channels): no ROS profile
 _JSON_OPTIONS = orjson.OPT_SERIALIZE_NUMPY
 
@@ -190,10 +194,17 @@ class Channel:
 
     def columns(self, fields: dict) -> Encoded:
         """Messages of this tma channel from whole columns (one value, or a ``Ragged``, per
-        message and field; ``json_objects`` / ``encode_columns``)."""
-        if self.encoding == "json":
-            return json_objects(fields)
-        return encode_columns(proto_schema(self.schema), fields)
+        message and field): protobuf by ``encode_columns``; JSON (tma writes none itself)
+        one object after the other."""
+        if self.encoding == "protobuf":
+            return encode_columns(proto_schema(self.schema), fields)
+        columns = {k: np.split(c.values, np.cumsum(c.counts)[:-1]) if isinstance(c, Ragged)
+                   else np.asarray(c).tolist() for k, c in fields.items()}
+        n = {len(c) for c in columns.values()}
+        if len(n) != 1:
+            raise ValueError("JSON columns need a field, and as many values in each")
+        return Encoded.of([self.encode({k: c[i] for k, c in columns.items()})
+                           for i in range(n.pop())])
 
     def encode(self, message) -> bytes:
         """One message: a dict on a tma channel, a message object on a published one."""
@@ -207,45 +218,6 @@ class Channel:
 # -- absolute time ----------------------------------------------------------------------------
 
 TIME = "tma.time"  # metadata record: {"epoch_utc_ns", "epoch_utc"} when the log has UTC times
-MAX_EPOCH_NS = 7_258_118_400 * 10**9  # 2200-01-01: leaves log_time (uint64 ns) 350 years
-_ISO_UTC = re.compile(r"(\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}(?::\d{2})?)(?:[.,](\d{1,9}))?"
-                      r"(Z|[+-]\d{2}(?::?\d{2})?)", re.IGNORECASE)
-_UNIX_EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
-
-
-def parse_utc(text) -> int:
-    """An ISO-8601 time with a zone (``2026-01-01T00:00:00Z``, ``...T02:00:00.25+02:00``) as
-    UTC nanoseconds since the Unix epoch, exact to the nanosecond; between 1970 and 2200.
-    Raises ValueError saying what is wrong."""
-    match = _ISO_UTC.fullmatch(text.strip()) if isinstance(text, str) else None
-    if match is None:
-        raise ValueError(f"'{text}' is not an ISO-8601 time with a zone "
-                         "(e.g. 2026-01-01T00:00:00Z or 2026-01-01T01:00:00+01:00)")
-    base, fraction, zone = match.groups()
-    try:
-        when = datetime.fromisoformat(base.replace(" ", "T")
-                                      + ("+00:00" if zone.upper() == "Z" else zone))
-    except ValueError as exc:
-        raise ValueError(f"'{text}' is not a valid time ({exc})") from None
-    ns = (when - _UNIX_EPOCH) // timedelta(seconds=1) * 10**9 + int((fraction or "").ljust(9, "0"))
-    if not 0 <= ns < MAX_EPOCH_NS:
-        raise ValueError(f"'{text}' is not between 1970 and 2200")
-    return ns
-
-
-def format_utc(ns: int) -> str:
-    """UTC nanoseconds since the Unix epoch as ISO-8601 (``2026-01-01T00:20:00.5Z``)."""
-    seconds, nanos = divmod(int(ns), 10**9)
-    text = (_UNIX_EPOCH + timedelta(seconds=seconds)).strftime("%Y-%m-%dT%H:%M:%S")
-    return text + (f".{nanos:09d}".rstrip("0") if nanos else "") + "Z"
-
-
-def config_epoch_ns(value, where: str, key: str = "epoch_utc") -> int:
-    """A config's ``epoch_utc`` (UTC of t = 0) in ns; ConfigError naming the key otherwise."""
-    try:
-        return parse_utc(value)
-    except ValueError as exc:
-        raise ConfigError(f"{where}: {key}: {exc}") from None
 
 
 def read_epoch(metadata: dict, where: str) -> int | None:
@@ -470,98 +442,235 @@ def check_integrity(data: bytes, crcs: bool = True) -> str | None:
     return None
 
 
+def _detail(exc: Exception) -> str:
+    return f"{type(exc).__name__}: {' '.join(str(exc).split())[:200]}"
+
+
+@contextlib.contextmanager
+def invalid_mcap(where: str):
+    """Whatever parsing untrusted bytes raises (mcap, zstd/lz4, struct, Unicode, orjson,
+    KeyError on a dangling id, MemoryError on an absurd size...) means a damaged or foreign
+    file: one InputError naming it."""
+    try:
+        yield
+    except TmaError:
+        raise
+    except Exception as exc:
+        raise InputError(f"{where}: not a valid MCAP log ({_detail(exc)})") from None
+
+
+def ros2_type(name: str) -> str:
+    """ROS 2 type names as ``pkg/msg/Type``; some writers drop the ``msg`` (``pkg/Type``)."""
+    parts = name.split("/")
+    return f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 else name
+
+
+@dataclass
+class Topic:
+    """A topic of an MCAP file: its schema name, message encoding, message count (from the
+    statistics; None without them) and channels."""
+
+    name: str
+    schema: str
+    encoding: str
+    count: int | None
+    channels: list
+    mixed: bool = False  # channels of different schemas or encodings share the topic
+
+    def __str__(self):
+        count = "?" if self.count is None else self.count
+        return f"{self.name} ({self.schema or 'no schema'}, {count})"
+
+
+class McapFile:
+    """An MCAP file read whole and checked once, its topics decoded on demand: the one MCAP
+    reader of tma (its own logs, ``read_log``; any log a user brings, ``tma.sources.mcap``).
+
+    Before anything is decoded: ``check_integrity`` (magic, footer, summary and data-section
+    CRCs) and the metadata count against the summary's statistics; as topics are read, each
+    chunk's CRC and the message counts. Bytes a dataset manifest verified
+    (``VerifiedPath``) are parsed as they are, their CRCs not checked again (the sha256 covers
+    them). ``topics`` maps each topic to its ``Topic`` (ROS 2 schema names as
+    ``pkg/msg/Type``); ``metadata`` the metadata records by name."""
+
+    def __init__(self, path):
+        self.path, self.where = Path(path), str(path)
+        self._crcs = not (isinstance(path, VerifiedPath) and path.data is not None)
+        try:
+            self._data = Path(path).read_bytes() if self._crcs else path.data
+        except FileNotFoundError:
+            raise InputError(f"{path}: no such file") from None
+        except OSError as exc:
+            raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
+        problem = check_integrity(self._data, self._crcs)
+        if problem:
+            raise InputError(f"{path}: not a valid MCAP log ({problem})")
+        with invalid_mcap(self.where):
+            self._reader = SeekingReader(BytesIO(self._data), validate_crcs=self._crcs)
+            self.summary = self._reader.get_summary()
+            records = list(self._reader.iter_metadata())
+        stats = self.summary.statistics
+        # The statistics repeat what the indexes should lead to: for a file without CRCs this
+        # catches a damaged chunk or metadata index that would silently drop records.
+        if stats is not None and len(records) != stats.metadata_count:
+            raise InputError(f"{path}: {len(records)} metadata records, the summary counts "
+                             f"{stats.metadata_count} (damaged index?)")
+        self.metadata = {m.name: dict(m.metadata) for m in records}
+        self.topics = {}
+        for ch in sorted(self.summary.channels.values(), key=lambda c: c.id):
+            schema = self.summary.schemas.get(ch.schema_id)
+            name = "" if schema is None else schema.name
+            if ch.message_encoding == "cdr":
+                name = ros2_type(name)
+            count = None if stats is None else stats.channel_message_counts.get(ch.id, 0)
+            topic = self.topics.setdefault(ch.topic, Topic(ch.topic, name, ch.message_encoding,
+                                                           0, []))
+            if (topic.schema, topic.encoding) != (name, ch.message_encoding):
+                topic.schema, topic.mixed = f"{topic.schema} | {name}", True
+            topic.channels.append(ch)
+            topic.count = None if count is None or topic.count is None else topic.count + count
+
+    def describe(self) -> str:
+        """What the file holds, for messages: ``topics /a (schema, messages), ...``."""
+        if not self.topics:
+            return "the file has no topics"
+        return "topics " + ", ".join(str(t) for t in self.topics.values())
+
+    def schema(self, channel):
+        return self.summary.schemas.get(channel.schema_id)
+
+    def _decoder(self, channel, factories, reads: str):
+        schema = self.schema(channel)
+        for factory in factories:
+            try:
+                decoder = factory.decoder_for(channel.message_encoding, schema)
+            except Exception as exc:
+                raise InputError(f"{self.where}: the schema of {channel.topic} "
+                                 f"({schema.name}) cannot be parsed ({_detail(exc)})") from None
+            if decoder is not None:
+                return decoder
+        raise InputError(
+            f"{self.where}: cannot decode {channel.topic}: message encoding "
+            f"'{channel.message_encoding}', schema encoding "
+            f"'{getattr(schema, 'encoding', '')}'; tma reads {reads}")
+
+    def read(self, names: list[str], factories, reads: str = "json and protobuf"
+             ) -> dict[str, tuple[np.ndarray, list]]:
+        """``{topic: (log times (uint64 ns), decoded messages)}`` of these topics, in log-time
+        order (equal times keep their file order), in one pass over the file. ``factories``:
+        mcap ``DecoderFactory``s, the first that decodes a channel is used; ``reads`` says
+        which encodings they decode, for the message when none does. A message that does not
+        decode, or counts that contradict the statistics, raise InputError."""
+        mixed = [n for n in names if self.topics[n].mixed]
+        if mixed:
+            raise InputError(f"{self.where}: {mixed[0]} has channels of different schemas "
+                             f"({self.topics[mixed[0]].schema}): tma cannot tell which to read")
+        channels = {ch.id: ch for name in names for ch in self.topics[name].channels}
+        decoders = {cid: self._decoder(ch, factories, reads) for cid, ch in channels.items()}
+        times, decoded = {n: [] for n in names}, {n: [] for n in names}
+        counts = Counter()
+        with invalid_mcap(self.where):
+            reader = self._reader
+            if not self.summary.chunk_indexes:  # mcap would scan without checking chunk CRCs
+                reader = NonSeekingReader(BytesIO(self._data), validate_crcs=self._crcs)
+            # in file order (mcap's log-time order costs a heap operation per message)
+            for _, channel, message in reader.iter_messages(topics=names, log_time_order=False):
+                try:
+                    value = decoders[channel.id](message.data)
+                except Exception as exc:
+                    raise InputError(
+                        f"{self.where}: the message on {channel.topic} at log time "
+                        f"{message.log_time} ns does not decode as "
+                        f"{self.topics[channel.topic].schema} ({_detail(exc)})") from None
+                times[channel.topic].append(message.log_time)
+                decoded[channel.topic].append(value)
+                counts[channel.id] += 1
+        stats = self.summary.statistics
+        for cid, ch in channels.items():
+            expected = None if stats is None else stats.channel_message_counts.get(cid, 0)
+            if expected is not None and counts[cid] != expected:
+                raise InputError(f"{self.where}: {counts[cid]} messages on {ch.topic}, the "
+                                 f"summary counts {expected} (damaged index?)")
+        out = {}
+        for name in names:
+            log_times = np.array(times[name], np.uint64)
+            messages = decoded[name]
+            if np.any(log_times[1:] < log_times[:-1]):
+                order = np.argsort(log_times, kind="stable")
+                log_times, messages = log_times[order], [messages[i] for i in order]
+            out[name] = (log_times, messages)
+        return out
+
+
 def read_log(path, expected: dict[str, str], nonempty: bool = False):
-    """Read an MCAP log. ``expected`` maps topic -> schema name; ``nonempty``: each of these
-    topics must hold a message.
+    """Read an MCAP log of tma's schemas. ``expected`` maps topic -> schema name;
+    ``nonempty``: each of these topics must hold a message.
 
     Returns ``(messages, metadata)``: ``messages[topic]`` is a list of decoded dicts in
     log-time order, ``metadata`` maps metadata record names to dicts. Raises one
-    ``InputError`` naming the file for a non-MCAP, truncated or damaged file (CRCs, see
-    ``check_integrity``), for missing topics or mismatched schemas, for a message that is
-    not a JSON object and for message counts that contradict the summary's statistics.
+    ``InputError`` naming the file for a non-MCAP, truncated or damaged file (``McapFile``),
+    for missing topics or mismatched schemas, for a message that is not a JSON object and for
+    message counts that contradict the summary's statistics.
     """
-    # bytes checked against a dataset manifest: their CRCs are right, the sha256 says so
-    crcs = not (isinstance(path, VerifiedPath) and path.data is not None)
-    try:  # logs are shards of modest size: check what we parse
-        data = Path(path).read_bytes() if crcs else path.data
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such file") from None
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    path = Path(path)
-    problem = check_integrity(data, crcs)
-    if problem:
-        raise InputError(f"{path}: not a valid MCAP log ({problem})")
-    try:
-        messages, metadata = _read_records(BytesIO(data), expected, str(path), crcs)
-    except InputError:
-        raise
-    except Exception as exc:
-        # Whatever parsing untrusted bytes raises (mcap, zstd/lz4, struct, Unicode, orjson,
-        # KeyError on a dangling id, MemoryError on an absurd size...) means bad input.
-        detail = " ".join(str(exc).split())[:200]
-        raise InputError(f"{path}: not a valid MCAP log ({type(exc).__name__}: {detail})"
-                         ) from None
-    empty = [topic for topic in expected if nonempty and not messages[topic]]
-    if empty:
-        raise InputError(f"{path}: no messages on {', '.join(empty)}")
-    return messages, metadata
-
-
-def _read_records(stream, expected: dict[str, str], where: str, crcs: bool = True):
-    reader = SeekingReader(stream, validate_crcs=crcs, decoder_factories=[TmaDecoderFactory()])
-    summary = reader.get_summary()
-    found = {ch.topic: summary.schemas.get(ch.schema_id) for ch in summary.channels.values()}
-    missing = [t for t in expected if t not in found]
+    file = McapFile(path)
+    where = file.where
+    missing = [t for t in expected if t not in file.topics]
     if missing:
         raise InputError(
             f"{where}: missing topic(s) {', '.join(missing)}; "
-            f"the log has: {', '.join(sorted(found)) or 'no channels'}"
+            f"the log has: {', '.join(sorted(file.topics)) or 'no channels'}"
         )
-    encodings = {ch.topic: ch.message_encoding for ch in summary.channels.values()}
     for topic, schema_name in expected.items():
-        got = found[topic].name if found[topic] is not None else None
-        if got != schema_name:
-            raise InputError(f"{where}: topic {topic} has schema '{got}', expected '{schema_name}'")
-        if encodings[topic] not in ENCODINGS:
+        found = file.topics[topic]
+        if found.schema != schema_name:
+            raise InputError(f"{where}: topic {topic} has schema '{found.schema}', expected "
+                             f"'{schema_name}'")
+        if found.encoding not in ENCODINGS:
             raise InputError(f"{where}: topic {topic} has message encoding "
-                             f"'{encodings[topic]}'; tma reads {' or '.join(ENCODINGS)}")
-        if encodings[topic] == "protobuf":
+                             f"'{found.encoding}'; tma reads {' or '.join(ENCODINGS)}")
+        if found.encoding == "protobuf":
             try:
-                checked_proto_schema(found[topic])
+                checked_proto_schema(file.schema(found.channels[0]))
             except ValueError as exc:
                 raise InputError(f"{where}: topic {topic}: {exc}") from None
-    messages, counts = {t: [] for t in expected}, Counter()
-    scan = reader
-    if not summary.chunk_indexes:  # mcap would scan the file without checking chunk CRCs
-        stream.seek(0)
-        scan = NonSeekingReader(stream, validate_crcs=crcs,
-                                decoder_factories=[TmaDecoderFactory()])
-    times = {t: [] for t in expected}
-    # in file order (mcap's log-time order costs a heap operation per message); sorted below
-    for _, channel, message, decoded in scan.iter_decoded_messages(topics=list(expected),
-                                                                   log_time_order=False):
-        if not isinstance(decoded, dict):
-            raise InputError(f"{where}: the message on {channel.topic} at log time "
-                             f"{message.log_time} ns is not a JSON object")
-        messages[channel.topic].append(decoded)
-        times[channel.topic].append(message.log_time)
-        counts[channel.id] += 1
-    for topic, log_times in times.items():
-        log_times = np.array(log_times, np.uint64)
-        if np.any(log_times[1:] < log_times[:-1]):  # equal times keep their file order
-            messages[topic] = [messages[topic][i] for i in np.argsort(log_times, kind="stable")]
-    records = list(reader.iter_metadata())
-    # The statistics repeat what the indexes should lead to: for a file without CRCs this
-    # catches a damaged chunk or metadata index that would silently drop records.
-    stats = summary.statistics
-    if stats is not None:
-        for ch in summary.channels.values():
-            n = stats.channel_message_counts.get(ch.id, 0)
-            if ch.topic in expected and counts[ch.id] != n:
-                raise InputError(f"{where}: {counts[ch.id]} messages on {ch.topic}, the summary "
-                                 f"counts {n} (damaged index?)")
-        if len(records) != stats.metadata_count:
-            raise InputError(f"{where}: {len(records)} metadata records, the summary counts "
-                             f"{stats.metadata_count} (damaged index?)")
-    return messages, {m.name: dict(m.metadata) for m in records}
+    messages = {}
+    for topic, (log_times, decoded) in file.read(list(expected), [TmaDecoderFactory()]).items():
+        wrong = [type(m) is not dict for m in decoded]
+        if any(wrong):
+            raise InputError(f"{where}: the message on {topic} at log time "
+                             f"{log_times[wrong.index(True)]} ns is not a JSON object")
+        messages[topic] = decoded
+    empty = [topic for topic in expected if nonempty and not messages[topic]]
+    if empty:
+        raise InputError(f"{where}: no messages on {', '.join(empty)}")
+    return messages, file.metadata
+
+
+# -- the records every log may carry -----------------------------------------------------------
+
+GEO = "tma.geo"  # {origin_lat_deg, origin_lon_deg, epoch_utc_ns}: the local plane's origin
+TRACKS = "tma.tracks"  # {"track_id": [...], "label": [...]}: the contacts' text labels
+
+
+def geo_origin(metadata: dict, where: str) -> tuple[float, float] | None:
+    """(lat, lon) in deg of the log's local plane, from ``tma.geo``; None without it."""
+    if GEO not in metadata:
+        return None
+    with schema_errors(where, f"the metadata record {GEO}"):
+        geo = read_json_record(metadata, GEO, where)
+        return number(geo["origin_lat_deg"]), number(geo["origin_lon_deg"])
+
+
+def track_labels(metadata: dict, track_id: np.ndarray, where: str) -> np.ndarray | None:
+    """The labels of ``track_id`` from ``tma.tracks``, as an object array, or None."""
+    if TRACKS not in metadata:
+        return None
+    with schema_errors(where, f"the metadata record {TRACKS}"):
+        record = read_json_record(metadata, TRACKS, where)
+        ids = [integer(i) for i in record["track_id"]]
+        labels = dict(zip(ids, record["label"], strict=True))
+    missing = [int(i) for i in track_id if int(i) not in labels]
+    if missing:
+        raise InputError(f"{where}: the metadata record {TRACKS} has no label for track(s) "
+                         f"{', '.join(map(str, missing[:10]))}")
+    return np.array([labels[int(i)] for i in track_id], dtype=object)

@@ -6,7 +6,9 @@ carries the marker file ``.tma-owned``; only when it is complete is it swapped i
 leaves the old one byte-identical. A killed run leaves the staging directory behind and the
 next run resumes from it. Nothing is removed unless it carries the marker (or a tma
 manifest): a mistyped path never deletes files that tma did not create. A lock file
-``.<name>.lock`` (``flock``) serialises processes working on the same output.
+``.<name>.lock`` (``flock``) serialises processes working on the same output. Every stage that
+writes a dataset or a run (simulate, estimate, ingest) goes through ``building``: lock ->
+recover -> stage -> swap.
 """
 
 import contextlib
@@ -154,3 +156,44 @@ def locked(targets):
                 log.info("waiting for another tma process working on %s", target)
                 fcntl.flock(handle, fcntl.LOCK_EX)
         yield
+
+
+class Building:
+    """The outputs ``building`` holds: ``stage`` one of them, ``swap`` it in when complete."""
+
+    def __init__(self, targets, resume: bool):
+        self.targets, self.resume, self.stages = [Path(t) for t in targets], resume, {}
+
+    def stage(self, target, fresh: bool = False, adopt: bool = False) -> Path:
+        """The staging directory of ``target`` (``staging_dir``): empty when ``fresh``, else
+        what a killed process left; ``adopt``: an incomplete or damaged ``target`` is moved
+        there first, its finished pieces reused (``adopt_broken``)."""
+        target = Path(target)
+        if adopt and not fresh:
+            adopt_broken(target, target.with_name(f".{target.name}.partial"))
+        self.stages[target] = staging_dir(target, fresh=fresh)
+        return self.stages[target]
+
+    def swap(self, target) -> Path:
+        """Put the complete stage of ``target`` in its place (``swap_in``)."""
+        return swap_in(self.stages.pop(Path(target)), target)
+
+
+@contextlib.contextmanager
+def building(targets, resume: bool = True):
+    """Lock -> recover -> stage -> swap, for the outputs at ``targets`` (datasets, runs):
+    held exclusively (``locked``: a second process waits), each recovered from a swap a
+    killed process left (``recover``); the block stages and swaps them with the ``Building``
+    it is given. Stages the block leaves unswapped when it fails are kept for the next run to
+    resume (``resume``), or removed."""
+    with locked(targets):
+        for target in targets:
+            recover(target)
+        outputs = Building(targets, resume)
+        try:
+            yield outputs
+        except BaseException:
+            if not resume:
+                for stage in outputs.stages.values():
+                    remove_owned(stage)
+            raise

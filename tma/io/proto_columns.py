@@ -1,4 +1,5 @@
-"""tma's message schemas as protobuf, encoded and decoded a whole column at a time.
+"""tma's message schemas as protobuf: whole columns encoded at once, messages decoded by
+protobuf itself.
 
 Each JSON schema in ``tma/io/schemas/<name>.json`` has a protobuf twin, built here from it,
 so there is one definition of every message: the same fields in the same order, numbered
@@ -10,34 +11,30 @@ from 1, in a proto3 message whose full name is the schema's title (``tma.Bearing
 
 ``encode_columns`` writes exactly what protobuf's own serializer writes for each message
 (proto3: fields in number order, a scalar equal to 0 and an empty array left out, -0.0 and
-NaN kept), which the tests check against protobuf's serializer.
-
-Fixed-width types make a message's arrays the raw little-endian bytes of numpy arrays:
-``encode_columns`` writes many messages with a few numpy operations, and ``decode_message``
-reads an array with one ``numpy.frombuffer``, ~10x faster both ways than JSON text for the
-same float64 values (which round-trip exactly in both). A JSON ``null`` (a missing reading)
+NaN kept), which the tests check against protobuf's serializer. It is hand-made because it
+pays: fixed-width types make a message's arrays the raw little-endian bytes of numpy arrays,
+so n messages take a few numpy operations, ~7x faster than protobuf's serializer message by
+message on a default shard (``make bench``, section io). A JSON ``null`` (a missing reading)
 is NaN.
 
-``decode_message`` follows protobuf's rules, so messages from any protobuf writer read the
-same: fields in any order, an absent field is its default (0, or an empty array), the last
-of a scalar sent twice wins, packed and unpacked repeated fields are both accepted, unknown
-fields are skipped. A truncated message raises ValueError, and so does a known field sent
-with another wire type (stricter than protobuf, which would keep it as an unknown field and
-read the default: a message of another schema would pass as zeros).
+``decode_message`` is protobuf's own parser (the message class protobuf builds from the
+schema's FileDescriptorSet), with repeated fields as numpy arrays: a hand-made parser was no
+more than 1.2x faster on a default shard or on a million one-bearing messages (``make
+bench``), so protobuf's rules hold as protobuf applies them (fields in any order, an absent
+field is its default, the last of a scalar sent twice wins, packed and unpacked repeated
+fields, unknown fields skipped; bytes that do not parse raise ``DecodeError``).
 """
 
 import functools
-import struct
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import orjson
 
 from tma.io.mcap_writer import Encoded, Ragged, gather
 
-SCHEMA_DIR_NAME = "schemas"
-_FIXED64 = struct.Struct("<d")
-_SFIXED64 = struct.Struct("<q")
+SCHEMA_DIR = Path(__file__).parent / "schemas"  # tma's JSON schemas, embedded in its logs
 WIRE_FIXED64, WIRE_LENGTH = 1, 2
 _NUMPY = {"double": np.dtype("<f8"), "sfixed64": np.dtype("<i8")}
 
@@ -63,10 +60,6 @@ class ProtoSchema:
     fields: tuple[ProtoField, ...]
 
     @functools.cached_property
-    def by_number(self) -> dict[int, ProtoField]:
-        return {f.number: f for f in self.fields}
-
-    @functools.cached_property
     def descriptor_set(self) -> bytes:
         from google.protobuf import descriptor_pb2
 
@@ -82,6 +75,16 @@ class ProtoSchema:
                 type=proto.TYPE_DOUBLE if f.kind == "double" else proto.TYPE_SFIXED64)
         return descriptor_pb2.FileDescriptorSet(file=[file]).SerializeToString(
             deterministic=True)
+
+    @functools.cached_property
+    def message_class(self) -> type:
+        """protobuf's message class of this schema, built from ``descriptor_set``."""
+        from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+        pool = descriptor_pool.DescriptorPool()
+        for file in descriptor_pb2.FileDescriptorSet.FromString(self.descriptor_set).file:
+            pool.Add(file)
+        return message_factory.GetMessageClass(pool.FindMessageTypeByName(self.name))
 
     def matches(self, descriptor_set: bytes) -> bool:
         """Whether a schema's FileDescriptorSet declares this message with these fields
@@ -125,8 +128,6 @@ def _kind(spec: dict) -> tuple[str, bool]:
 @functools.cache
 def proto_schema(name: str) -> ProtoSchema:
     """The protobuf twin of ``tma/io/schemas/<name>.json``."""
-    from tma.io.mcap_log import SCHEMA_DIR
-
     spec = orjson.loads((SCHEMA_DIR / f"{name}.json").read_bytes())
     fields = tuple(ProtoField(key, number, *_kind(prop))
                    for number, (key, prop) in enumerate(spec["properties"].items(), 1))
@@ -246,72 +247,9 @@ def _typed(f: ProtoField, values) -> np.ndarray:
 
 # -- decoding ----------------------------------------------------------------------------------
 
-def _varint(data: bytes, pos: int) -> tuple[int, int]:
-    value = shift = 0
-    while True:
-        byte = data[pos]  # IndexError past the end: truncated
-        value |= (byte & 0x7F) << shift
-        pos += 1
-        if byte < 0x80:
-            return value, pos
-        shift += 7
-        if shift >= 70:
-            raise ValueError("a varint longer than 10 bytes")
-
-
-def _skip(data: bytes, pos: int, wire: int) -> int:
-    if wire == 0:
-        return _varint(data, pos)[1]
-    if wire == 1:
-        return pos + 8
-    if wire == 2:
-        length, pos = _varint(data, pos)
-        return pos + length
-    if wire == 5:
-        return pos + 4
-    raise ValueError(f"wire type {wire} (groups or invalid)")
-
-
 def decode_message(schema: ProtoSchema, data: bytes) -> dict:
     """One message of ``schema`` as a dict: scalars as Python float/int, repeated fields as
-    1-D numpy arrays (float64, int64). Raises ValueError for bytes that are not such a
-    message (see the module docstring)."""
-    out, parts, pos, end = {}, {}, 0, len(data)
-    fields = schema.by_number
-    while pos < end:
-        key, pos = _varint(data, pos)
-        number, wire = key >> 3, key & 7
-        f = fields.get(number)
-        if f is None:  # not in the schema: skipped, as protobuf readers do
-            if number == 0:
-                raise ValueError("field number 0")
-            pos = _skip(data, pos, wire)
-        elif wire == WIRE_FIXED64:
-            if pos + 8 > end:
-                break
-            value = (_FIXED64 if f.kind == "double" else _SFIXED64).unpack_from(data, pos)[0]
-            if f.repeated:
-                parts.setdefault(f.name, []).append(np.array([value], f.dtype))
-            else:
-                out[f.name] = value
-            pos += 8
-        elif wire == WIRE_LENGTH and f.repeated:
-            length, pos = _varint(data, pos)
-            if pos + length > end or length % 8:
-                raise ValueError(f"{f.name}: {length} bytes of packed 8-byte values"
-                                 + (" (truncated)" if pos + length > end else ""))
-            parts.setdefault(f.name, []).append(np.frombuffer(data, f.dtype, length // 8, pos))
-            pos += length
-        else:
-            raise ValueError(f"{f.name} ({'repeated ' if f.repeated else ''}{f.kind}) sent "
-                             f"with wire type {wire}")
-    if pos != end:
-        raise ValueError("truncated")
-    for f in schema.fields:
-        if f.repeated:
-            got = parts.get(f.name, ())
-            out[f.name] = (got[0] if len(got) == 1 else np.concatenate(got) if got
-                           else np.zeros(0, f.dtype))
-        else:
-            out.setdefault(f.name, 0.0 if f.kind == "double" else 0)
-    return out
+    1-D numpy arrays (float64, int64), by protobuf's parser (the module docstring)."""
+    message = schema.message_class.FromString(data)
+    return {f.name: np.array(getattr(message, f.name), f.dtype) if f.repeated
+            else getattr(message, f.name) for f in schema.fields}

@@ -12,8 +12,10 @@ import pymap3d
 
 from tma.families.bearings2d.estimators.lm import Config as LmConfig
 from tma.families.bearings2d.estimators.lm import LevenbergMarquardt
+from tma.families.bearings2d.ingest import OBSERVATION
 from tma.families.bearings2d.log import read_bearings_log
 from tma.io.dataset import Dataset
+from tma.sources.base import source_options as reading_options
 
 ORIGIN = (59.9, 10.7)  # deg
 START_UTC = "2025-06-01T08:00:00Z"
@@ -128,3 +130,8 @@ def check_against_truth(estimates: pd.DataFrame, t_offset_s=0.0, labels=None, ra
                                                                    true_range)
         course_err = (row.course_deg - true_course + 180) % 360 - 180
         assert abs(course_err) < course_tol_deg, (contact, row.course_deg, true_course)
+
+
+def source_options(node=None):
+    """The reading options of ``bearings2d`` (its observation, the bearing) from ``node``."""
+    return reading_options(node, OBSERVATION)

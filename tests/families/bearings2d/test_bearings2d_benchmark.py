@@ -13,7 +13,7 @@ from tests.conftest import compose_cfg, run_stage_here
 from tma.aggregate import RunEntry
 from tma.families.bearings2d import benchmark, metrics
 from tma.families.bearings2d.log import read_bearings_log
-from tma.runs import full_config, open_run, run_path
+from tma.runs import full_config, open_run, run_path, seconds_per_track
 
 N = 40
 
@@ -34,7 +34,7 @@ def runs(tmp_path_factory):
             run_root = run_path(root / "data", dataset, full_config(dataset, node))
             manifest, estimates = open_run(run_root)
             entries.append(RunEntry(dataset, node["name"], run_root, manifest,
-                                    estimates.to_pandas()))
+                                    estimates.to_pandas(), seconds_per_track(run_root)))
     return root, entries
 
 
@@ -106,7 +106,7 @@ def test_only_truth_datasets_and_names():
     assert not benchmark.is_benchmark(None)
     assert benchmark.estimator_label("iv", {"name": "iv", "iterations": 10}) == "iv"
     assert benchmark.estimator_label("iv", {"name": "iv", "iterations": 3}) == "iv iterations=3"
-    assert np.isnan(benchmark.ms_per_track(Path("/nonexistent")))
+    assert np.isnan(seconds_per_track(Path("/nonexistent")))
 
 
 def test_experiments_compose():

@@ -350,7 +350,7 @@ def test_a_million_bearings_ingest(tmp_path, n_tracks, capsys):
 
     start = time.perf_counter()
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr("tma.families.bearings2d.ingest.write_bearings_log", timed_write)
+        mp.setattr("tma.families.bearings2d.scenario.write_bearings_log", timed_write)
         root = ingest(tmp_path / "big.csv", data_dir=tmp_path / "data")
     total = time.perf_counter() - start
     m = json.loads((root / "manifest.json").read_text())

@@ -1,7 +1,7 @@
-"""``assemble``: one clock, one east-north plane, own-ship at every bearing, one epoch grid per
-own-ship. Checked against the recorded encounter's exact geometry (own-ship legs are straight,
-so linear interpolation and end-segment extrapolation are exact) and against geodesics
-(Vincenty) for the plane."""
+"""``tma.sources.align`` and ``bearings2d``'s logs from it: one clock, one east-north plane,
+own-ship at every bearing, one epoch grid per own-ship. Checked against the recorded
+encounter's exact geometry (own-ship legs are straight, so linear interpolation and end-segment
+extrapolation are exact) and against geodesics (Vincenty) for the plane."""
 
 import numpy as np
 import pymap3d.vincenty
@@ -13,12 +13,15 @@ from tests.families.bearings2d.recorded_geometry import (
     latlon,
     ownship_en,
     recorded,
+    source_options,
 )
 from tma.errors import InputError
-from tma.families.bearings2d.sources import assemble as assemble_module
-from tma.families.bearings2d.sources.assemble import assemble
-from tma.families.bearings2d.sources.base import Bearings, Navigation, Recording, source_options
-from tma.io.mcap_log import format_utc
+from tma.families.bearings2d import ingest as bearings2d_ingest
+from tma.families.bearings2d.log import SENSOR
+from tma.io.mcap_log import json_record
+from tma.sources.align import align
+from tma.sources.base import Contacts, Navigation, Recording
+from tma.utc import format_utc
 
 
 def _recording(labels=("T1",), nav_rows=None, nav_epoch=EPOCH_NS, obs_epoch=EPOCH_NS,
@@ -34,13 +37,16 @@ def _recording(labels=("T1",), nav_rows=None, nav_epoch=EPOCH_NS, obs_epoch=EPOC
     else:
         navigation = Navigation(nav.t_s.to_numpy() + shift_nav, nav_epoch, "nav",
                                 x_m=nav.east_m.to_numpy(), y_m=nav.north_m.to_numpy())
-    bearings = Bearings(b.t_s.to_numpy() + shift_obs, obs_epoch, b.track.to_numpy(dtype=object),
+    contacts = Contacts(b.t_s.to_numpy() + shift_obs, obs_epoch, b.track.to_numpy(dtype=object),
                         b.bearing_deg.to_numpy(), "brg")
-    return Recording(navigation, bearings, sigma_deg=sigma, notes=["found"]), rec
+    metadata = {} if sigma is None else {SENSOR: json_record({"sigma_deg": sigma})}
+    return Recording(navigation, contacts, metadata, notes=["found"]), rec
 
 
 def _run(recordings, **options):
-    return assemble(recordings, source_options(options), "test")
+    aligned = align(recordings, source_options(options), "test")
+    logs, _, _ = bearings2d_ingest.logs(aligned, bearings2d_ingest.Settings(), "test")
+    return logs, aligned.summary
 
 
 def test_own_ship_at_every_bearing_in_the_plane_of_the_first_fix():
@@ -155,7 +161,7 @@ def test_no_bearing_within_the_fixes_names_the_clock_and_the_option():
     with pytest.raises(InputError, match="1 own-ship fix"):
         _run([one])
     one, _ = _recording()
-    one.bearings.epoch_utc_ns += 10**13  # bearings three hours later than the fixes
+    one.contacts.epoch_utc_ns += 10**13  # bearings three hours later than the fixes
     with pytest.raises(InputError, match="no bearing lies within the own-ship fixes' time span"
                                          ".*time.format.*nav.max_extrapolation_s"):
         _run([one])
@@ -173,10 +179,10 @@ def test_two_positions_at_one_time_are_refused():
 
 def test_contacts_at_different_times_share_one_grid():
     one, rec = _recording(("T1", "T2"))
-    keep = np.ones(one.bearings.t_s.size, bool)
+    keep = np.ones(one.contacts.t_s.size, bool)
     keep[1::4] = False  # T2 misses every other epoch
-    for name in ("t_s", "track", "bearing_deg"):
-        setattr(one.bearings, name, getattr(one.bearings, name)[keep])
+    for name in ("t_s", "track", "values"):
+        setattr(one.contacts, name, getattr(one.contacts, name)[keep])
     (lg,), _ = _run([one])
     assert lg.bearing_deg.shape == (2, 400)
     assert np.isfinite(lg.bearing_deg[0]).all() and np.isnan(lg.bearing_deg[1]).sum() == 200
@@ -186,8 +192,8 @@ def test_a_huge_grid_is_split_into_logs_of_one_own_ship(monkeypatch):
     """Contacts at their own times would make a (tracks x epochs) grid too large: groups of
     tracks get their own (smaller) grids, and no bearing is lost."""
     one, rec = _recording(("T1", "T2", "T3"))
-    one.bearings.t_s = one.bearings.t_s + np.tile([0.0, 0.1, 0.2], 400)  # all epochs distinct
-    monkeypatch.setattr(assemble_module, "MAX_CELLS", 1000)  # below 2 tracks x 800 epochs
+    one.contacts.t_s = one.contacts.t_s + np.tile([0.0, 0.1, 0.2], 400)  # all epochs distinct
+    monkeypatch.setattr(bearings2d_ingest, "MAX_CELLS", 1000)  # below 2 tracks x 800 epochs
     logs, summary = _run([one])
     assert len(logs) == 3 and [lg.track_id.tolist() for lg in logs] == [[0], [1], [2]]
     assert sum(np.isfinite(lg.bearing_deg).sum() for lg in logs) == 1200
@@ -197,10 +203,10 @@ def test_a_huge_grid_is_split_into_logs_of_one_own_ship(monkeypatch):
 
 def test_radians_of_unstated_units_are_refused():
     one, _ = _recording()
-    one.bearings.bearing_deg = np.deg2rad(one.bearings.bearing_deg)
+    one.contacts.values = np.deg2rad(one.contacts.values)
     with pytest.raises(InputError, match="look like radians. Set bearing.units=rad"):
         _run([one])
-    one.bearings.units_stated = True
+    one.contacts.units_stated = True
     _run([one])
 
 

@@ -15,11 +15,11 @@ from tests.families.bearings2d.recorded_geometry import (
     estimate,
     iso,
     recorded,
+    source_options,
 )
 from tma.errors import InputError
 from tma.families.bearings2d.ingest import ingest
-from tma.families.bearings2d.sources.base import source_options
-from tma.families.bearings2d.sources.csv_table import read_csv_table
+from tma.sources.csv_table import read_csv_table
 
 
 def _iso_latlon(rec):
@@ -130,9 +130,9 @@ def test_recorded_table_variants_recover_the_target(tmp_path, variant):
 
 # -- what the reader returns, against what was written --------------------------------------
 
-def _read(path, navigation=True, bearings=True, **options):
+def _read(path, navigation=True, contacts=True, **options):
     return read_csv_table(path, source_options(options), navigation=navigation,
-                          bearings=bearings)
+                          contacts=contacts)
 
 
 def test_iso_times_positions_and_labels_are_read_exactly(tmp_path):
@@ -141,10 +141,10 @@ def test_iso_times_positions_and_labels_are_read_exactly(tmp_path):
     df = _iso_latlon(rec)
     df["contact"] = b.track
     (one,) = _read(_write(df, tmp_path / "x.csv"))
-    assert one.navigation.epoch_utc_ns == one.bearings.epoch_utc_ns == EPOCH_NS + 500_000_000
-    np.testing.assert_allclose(one.bearings.t_s, b.t_s - 0.5, atol=1e-9)
-    assert list(one.bearings.track) == list(b.track)
-    np.testing.assert_array_equal(one.bearings.bearing_deg, b.bearing_deg)
+    assert one.navigation.epoch_utc_ns == one.contacts.epoch_utc_ns == EPOCH_NS + 500_000_000
+    np.testing.assert_allclose(one.contacts.t_s, b.t_s - 0.5, atol=1e-9)
+    assert list(one.contacts.track) == list(b.track)
+    np.testing.assert_array_equal(one.contacts.values, b.bearing_deg)
     first = b.drop_duplicates("t_s")  # one fix per time (the contacts share the own-ship)
     np.testing.assert_array_equal(one.navigation.lat_deg, first.lat)
     np.testing.assert_array_equal(one.navigation.lon_deg, first.lon)
@@ -162,17 +162,17 @@ def test_time_formats(tmp_path, values, fmt, scale, epoch):
     df = pd.DataFrame({"t": values, "x": [0.0, 1.0, 2.0], "y": 0.0, "bearing_deg": 10.0})
     (one,) = _read(_write(df, tmp_path / "t.csv"), time={"format": fmt},
                    columns={"time": "t", "x": "x", "y": "y"})
-    assert one.bearings.epoch_utc_ns == epoch
+    assert one.contacts.epoch_utc_ns == epoch
     expected = (values - values[0]) * scale if epoch is not None else values
-    np.testing.assert_allclose(one.bearings.t_s, expected, atol=1e-9)
+    np.testing.assert_allclose(one.contacts.t_s, expected, atol=1e-9)
 
 
 def test_units_row_is_skipped_and_says_radians(tmp_path):
     path = tmp_path / "u.csv"
     path.write_text("time_s,own_x_m,own_y_m,brg\ns,m,m,rad\n0,0,0,0.5\n1,1,0,0.25\n")
     (one,) = _read(path)
-    np.testing.assert_allclose(one.bearings.bearing_deg, np.rad2deg([0.5, 0.25]))
-    assert one.bearings.units_stated
+    np.testing.assert_allclose(one.contacts.values, np.rad2deg([0.5, 0.25]))
+    assert one.contacts.units_stated
     assert any("units row" in n for n in one.notes)
 
 
@@ -181,7 +181,7 @@ def test_a_utf8_bom_and_spaces_around_names(tmp_path):
     path.write_bytes("\ufefftime_s , own_x_m, own_y_m , bearing_deg\r\n0, 0, 0, 45\r\n"
                      "2, 10, 0, 46\r\n".encode())
     (one,) = _read(path)
-    np.testing.assert_array_equal(one.bearings.bearing_deg, [45.0, 46.0])
+    np.testing.assert_array_equal(one.contacts.values, [45.0, 46.0])
     np.testing.assert_array_equal(one.navigation.x_m, [0.0, 10.0])
 
 
@@ -189,20 +189,20 @@ def test_a_delimiter_ending_every_row(tmp_path):
     path = tmp_path / "trailing.csv"
     path.write_text("time_s,own_x_m,own_y_m,bearing_deg\n0,0,0,45,\n2,10,0,46,\n")
     (one,) = _read(path)
-    np.testing.assert_array_equal(one.bearings.bearing_deg, [45.0, 46.0])
-    np.testing.assert_array_equal(one.bearings.t_s, [0.0, 2.0])
+    np.testing.assert_array_equal(one.contacts.values, [45.0, 46.0])
+    np.testing.assert_array_equal(one.contacts.t_s, [0.0, 2.0])
 
 
 def test_navigation_table_with_repeated_fixes(tmp_path):
     df = pd.DataFrame({"time_s": [0.0, 1.0, 1.0, 2.0], "lat": [59.9, 59.91, 59.91, 59.92],
                        "lon": 10.7})
-    (one,) = _read(_write(df, tmp_path / "nav.csv"), bearings=False)
-    assert one.bearings is None
+    (one,) = _read(_write(df, tmp_path / "nav.csv"), contacts=False)
+    assert one.contacts is None
     np.testing.assert_array_equal(one.navigation.t_s, [0.0, 1.0, 2.0])
     df.loc[2, "lat"] = 59.95
     with pytest.raises(InputError, match=r"two different own-ship positions at the time of "
                                          r"line 3 \(time_s\)"):
-        _read(_write(df, tmp_path / "nav.csv"), bearings=False)
+        _read(_write(df, tmp_path / "nav.csv"), contacts=False)
 
 
 # -- refusals: one line, naming the file, the line and the option ----------------------------

@@ -20,13 +20,13 @@ from tests.families.bearings2d.recorded_geometry import (
     check_against_truth,
     estimate,
     recorded,
+    source_options,
 )
 from tests.families.bearings2d.test_bearings2d_sources_ros2 import fuzz
 from tma.errors import InputError
 from tma.families.bearings2d.ingest import ingest
-from tma.families.bearings2d.sources.base import source_options
-from tma.families.bearings2d.sources.mcap import read_mcap
 from tma.io.dataset import Dataset
+from tma.sources.mcap import read_mcap
 
 CONTACT_SCHEMA = {"type": "object", "properties": {
     "track_id": {"type": ["integer", "string"]},
@@ -76,14 +76,14 @@ def test_location_fix_and_json_bearings(tmp_path):
     path = write_foxglove(tmp_path / "foxglove.mcap", rec)
     opts = {"bearing": {"topic": "/contacts", "field": "bearing_deg"}}
     got = read_mcap(path, source_options(opts))
-    nav, obs = got.navigation, got.bearings
+    nav, obs = got.navigation, got.contacts
     assert nav.epoch_utc_ns == obs.epoch_utc_ns == EPOCH_NS
     np.testing.assert_allclose(nav.t_s, rec.navigation.t_s, rtol=0, atol=1e-9)
     np.testing.assert_array_equal(nav.lat_deg, rec.navigation.lat)
     np.testing.assert_array_equal(nav.lon_deg, rec.navigation.lon)
     assert "/gps (foxglove.LocationFix)" in nav.source
     np.testing.assert_allclose(obs.t_s, rec.bearings.t_s, rtol=0, atol=1e-9)
-    np.testing.assert_array_equal(obs.bearing_deg, rec.bearings.bearing_deg)
+    np.testing.assert_array_equal(obs.values, rec.bearings.bearing_deg)
     assert obs.track.dtype == np.int64 and set(obs.track) == {1}
     assert not obs.units_stated  # a name ending in _deg states nothing (radians guard)
     assert "/contacts: contacts from the field 'track_id'" in got.notes
@@ -97,8 +97,8 @@ def test_our_topic_names_with_foxglove_schemas_need_no_option(tmp_path):
                           bearing_topic="/sonar/bearings", track=str)
     got = read_mcap(path, source_options({}))
     assert got.navigation.lat_deg is not None
-    np.testing.assert_array_equal(got.bearings.track, rec.bearings.track)  # text labels
-    np.testing.assert_array_equal(got.bearings.bearing_deg, rec.bearings.bearing_deg)
+    np.testing.assert_array_equal(got.contacts.track, rec.bearings.track)  # text labels
+    np.testing.assert_array_equal(got.contacts.values, rec.bearings.bearing_deg)
     assert "bearings: /sonar/bearings (contact_bearing, 800) (bearing.topic)" in got.notes
     estimates = ingest_and_check(path, tmp_path, None)
     assert sorted(estimates.label) == ["T1", "T2"]
@@ -127,11 +127,11 @@ def test_json_arrays_one_message_per_epoch(tmp_path):
             channel.log({"contacts": {"track_id": list(rows.track),
                                       "bearing_deg": list(rows.bearing_deg)}},
                         log_time=int(ns(t)))
-    got = read_mcap(path, source_options(opts), need=("bearings",))
+    got = read_mcap(path, source_options(opts), need=("contacts",))
     assert got.navigation is None
-    np.testing.assert_array_equal(got.bearings.track, rec.bearings.track)
-    np.testing.assert_array_equal(got.bearings.bearing_deg, rec.bearings.bearing_deg)
-    np.testing.assert_allclose(got.bearings.t_s, rec.bearings.t_s - 0.5, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(got.contacts.track, rec.bearings.track)
+    np.testing.assert_array_equal(got.contacts.values, rec.bearings.bearing_deg)
+    np.testing.assert_allclose(got.contacts.t_s, rec.bearings.t_s - 0.5, rtol=0, atol=1e-9)
 
 
 def test_unset_timestamps_use_log_time_and_nan_fixes_are_dropped(tmp_path):
@@ -174,11 +174,11 @@ def test_protobuf_writer_navigation_file(tmp_path):
             fix.timestamp.FromNanoseconds(int(t))
             writer.write_message("/fix", fix, log_time=int(t) + 10**8, publish_time=int(t))
     got = read_mcap(path, source_options({}), need=("navigation",))
-    assert got.bearings is None and got.navigation.epoch_utc_ns == EPOCH_NS
+    assert got.contacts is None and got.navigation.epoch_utc_ns == EPOCH_NS
     np.testing.assert_allclose(got.navigation.t_s, nav.t_s, rtol=0, atol=1e-9)
     np.testing.assert_array_equal(got.navigation.lat_deg, nav.lat)
     with pytest.raises(InputError, match="no bearings selected: set bearing.topic=<topic>"):
-        read_mcap(path, source_options({}), need=("bearings",))
+        read_mcap(path, source_options({}), need=("contacts",))
 
 
 def test_undecodable_and_malformed_messages_are_one_line(tmp_path):

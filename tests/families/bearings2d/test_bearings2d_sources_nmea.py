@@ -19,9 +19,9 @@ from tests.families.bearings2d.recorded_geometry import (
 )
 from tma.errors import InputError
 from tma.families.bearings2d.ingest import ingest
-from tma.families.bearings2d.sources import source_kind
-from tma.families.bearings2d.sources.nmea import read_nmea
 from tma.io.atomic import sha256_file
+from tma.sources import source_kind
+from tma.sources.nmea import read_nmea
 
 
 def _sentence(body: str) -> str:
@@ -77,7 +77,7 @@ def test_fixes_are_read_back_and_garbage_counted(tmp_path):
     nav = recorded().navigation.head(60)
     path = write_nmea(tmp_path / "gps.nmea", nav)
     rec = read_nmea(path)
-    assert rec.bearings is None and rec.navigation.geographic
+    assert rec.contacts is None and rec.navigation.geographic
     assert rec.navigation.epoch_utc_ns == EPOCH_NS
     np.testing.assert_allclose(rec.navigation.t_s, nav.t_s, atol=1e-9)
     # ddmm.mmmmmm keeps 1e-6 minutes: 2e-8 deg (2 mm)

@@ -16,6 +16,7 @@ from tests.families.bearings2d.recorded_geometry import (
     check_against_truth,
     estimate,
     recorded,
+    source_options,
 )
 from tma.errors import ConfigError, InputError
 from tma.families.bearings2d.ingest import ingest
@@ -26,12 +27,12 @@ from tma.families.bearings2d.log import (
     SENSOR,
     BearingsLog,
     channels,
+    nominal_sigma,
     write_bearings_log,
 )
-from tma.families.bearings2d.sources.base import source_options
-from tma.families.bearings2d.sources.mcap import read_mcap
 from tma.io.dataset import Dataset
 from tma.io.mcap_log import Channel, LogWriter, json_record
+from tma.sources.mcap import read_mcap
 
 NO_OPTIONS = source_options({})
 
@@ -75,8 +76,8 @@ def test_arrays_with_epoch_origin_labels_and_sigma(tmp_path):
     path = tmp_path / "dataset.mcap"
     write_bearings_log(path, log)  # with an origin: also /ownship/location_fix (LocationFix)
     got = read_mcap(path, NO_OPTIONS)
-    nav, obs = got.navigation, got.bearings
-    assert got.sigma_deg == 0.5
+    nav, obs = got.navigation, got.contacts
+    assert nominal_sigma(got.metadata, "test") == 0.5
     assert nav.epoch_utc_ns == obs.epoch_utc_ns == EPOCH_NS + 500_000_000  # t = 0.5 s
     np.testing.assert_allclose(nav.t_s, log.t_s - 0.5, rtol=0, atol=1e-9)
     # lat/lon at the log's origin: back through pymap3d's forward map to the metres written
@@ -87,7 +88,7 @@ def test_arrays_with_epoch_origin_labels_and_sigma(tmp_path):
     expected = rec.bearings.sort_values(["t_s", "track"], kind="stable")
     np.testing.assert_allclose(obs.t_s, expected.t_s - 0.5, rtol=0, atol=1e-9)
     np.testing.assert_array_equal(obs.track, expected.track)  # labels from tma.tracks
-    np.testing.assert_array_equal(obs.bearing_deg, expected.bearing_deg)
+    np.testing.assert_array_equal(obs.values, expected.bearing_deg)
     assert not obs.units_stated  # bearing_deg: degrees assumed, the radians guard applies
 
 
@@ -96,12 +97,12 @@ def test_scalar_messages_with_gps_starting_after_the_first_bearing(tmp_path):
     path = write_scalar_log(tmp_path / "late_gps.mcap", rec, nav_from_s=1.0)  # bearings: 0.5 s
     got = read_mcap(path, NO_OPTIONS)
     assert got.navigation.epoch_utc_ns == EPOCH_NS + 500_000_000  # the first bearing
-    assert got.bearings.t_s[0] == 0.0 and got.navigation.t_s[0] == 0.5  # raw, not refused
+    assert got.contacts.t_s[0] == 0.0 and got.navigation.t_s[0] == 0.5  # raw, not refused
     np.testing.assert_allclose(got.navigation.x_m, rec.navigation.east_m[1:])
-    np.testing.assert_allclose(got.bearings.t_s, rec.bearings.t_s - 0.5, rtol=0, atol=1e-9)
-    assert got.sigma_deg == 0.5
-    np.testing.assert_array_equal(got.bearings.bearing_deg, rec.bearings.bearing_deg)
-    assert set(got.bearings.track) == {1}
+    np.testing.assert_allclose(got.contacts.t_s, rec.bearings.t_s - 0.5, rtol=0, atol=1e-9)
+    assert nominal_sigma(got.metadata, "test") == 0.5
+    np.testing.assert_array_equal(got.contacts.values, rec.bearings.bearing_deg)
+    assert set(got.contacts.track) == {1}
     root = ingest(path, data_dir=tmp_path / "data", name="late_gps")
     manifest = Dataset.open(root).manifest
     assert manifest["dropped_bearings"]["count"] == 0  # 0.5 s before the fixes: extrapolated
@@ -117,11 +118,11 @@ def test_json_and_protobuf_logs_read_the_same(tmp_path):
                                       channels=channels(encoding)), NO_OPTIONS)
            for encoding in ("json", "protobuf")]
     for part, keys in [("navigation", ("t_s", "x_m", "y_m", "epoch_utc_ns")),
-                       ("bearings", ("t_s", "track", "bearing_deg", "epoch_utc_ns"))]:
+                       ("contacts", ("t_s", "track", "values", "epoch_utc_ns"))]:
         for key in keys:
             np.testing.assert_array_equal(getattr(getattr(got[0], part), key),
                                           getattr(getattr(got[1], part), key))
-    assert got[0].bearings.bearing_deg.size == len(rec.bearings)
+    assert got[0].contacts.values.size == len(rec.bearings)
 
 
 def test_relative_times_of_older_logs(tmp_path):
@@ -130,13 +131,13 @@ def test_relative_times_of_older_logs(tmp_path):
     path = tmp_path / "relative.mcap"
     write_bearings_log(path, log)  # no epoch, no origin: log_time = t_s
     got = read_mcap(path, NO_OPTIONS)
-    assert got.navigation.epoch_utc_ns is None and got.bearings.epoch_utc_ns is None
+    assert got.navigation.epoch_utc_ns is None and got.contacts.epoch_utc_ns is None
     np.testing.assert_allclose(got.navigation.t_s, log.t_s, rtol=0, atol=1e-9)
     np.testing.assert_array_equal(got.navigation.x_m, log.own_x_m)
-    np.testing.assert_allclose(got.bearings.t_s, log.t_s, rtol=0, atol=1e-9)
-    assert got.sigma_deg is None and set(got.bearings.track) == {0}
+    np.testing.assert_allclose(got.contacts.t_s, log.t_s, rtol=0, atol=1e-9)
+    assert nominal_sigma(got.metadata, "test") is None and set(got.contacts.track) == {0}
     rad = read_mcap(path, source_options({"bearing": {"units": "rad"}}))
-    np.testing.assert_allclose(rad.bearings.bearing_deg, np.rad2deg(log.bearing_deg[0]))
+    np.testing.assert_allclose(rad.contacts.values, np.rad2deg(log.bearing_deg[0]))
     with pytest.raises(ConfigError, match="bearing.field=data: /sonar/bearings has tma's schema "
                                           "tma.BearingBatch, whose bearings are 'bearing_deg'"):
         read_mcap(path, source_options({"bearing": {"field": "data"}}))
@@ -151,7 +152,7 @@ def test_duplicate_time_of_one_contact_is_refused(tmp_path):
         read_mcap(path, NO_OPTIONS)
     other = (42.5, {"t_s": 42.5, "track_id": 2, "bearing_deg": 10.0})  # another contact: fine
     got = read_mcap(write_scalar_log(tmp_path / "other.mcap", rec, extra=[other]), NO_OPTIONS)
-    assert sorted(set(got.bearings.track)) == [1, 2]
+    assert sorted(set(got.contacts.track)) == [1, 2]
 
 
 def test_location_fix_on_our_ownship_topic_is_read_by_its_schema(tmp_path):
@@ -170,7 +171,7 @@ def test_location_fix_on_our_ownship_topic_is_read_by_its_schema(tmp_path):
         got.notes)
     np.testing.assert_array_equal(got.navigation.lat_deg, rec.navigation.lat)
     np.testing.assert_allclose(got.navigation.t_s, rec.navigation.t_s, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(got.bearings.t_s, rec.bearings.t_s, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(got.contacts.t_s, rec.bearings.t_s, rtol=0, atol=1e-9)
 
 
 def test_times_that_are_not_seconds_are_refused(tmp_path):
@@ -204,6 +205,6 @@ def test_scalar_decoding_speed(tmp_path):
     start = time.perf_counter()
     got = read_mcap(path, NO_OPTIONS)
     seconds = time.perf_counter() - start
-    assert got.bearings.t_s.size == n
+    assert got.contacts.t_s.size == n
     print(f"\ntma schema, scalar fields: {seconds * 1e3:.0f} ms per 10k bearing messages "
           f"(+ {len(rec.navigation)} fixes)")

@@ -15,12 +15,12 @@ from tests.families.bearings2d.recorded_geometry import (
     check_against_truth,
     estimate,
     recorded,
+    source_options,
 )
 from tma.errors import ConfigError, InputError
 from tma.families.bearings2d.ingest import ingest
-from tma.families.bearings2d.sources.base import source_options
-from tma.families.bearings2d.sources.mcap import read_mcap
 from tma.io.dataset import Dataset
+from tma.sources.mcap import read_mcap
 
 # -- the ROS 2 message definitions (common_interfaces, Humble), concatenated with their
 # dependencies as rosbag2 and mcap-ros2-support store them -----------------------------------
@@ -153,7 +153,7 @@ def test_navsatfix_and_float64_bearings(tmp_path):
     rec = recorded()
     path = gps_and_float64(tmp_path, rec)
     got = read_mcap(path, options(bearing={"topic": "/bearing"}))
-    nav, obs = got.navigation, got.bearings
+    nav, obs = got.navigation, got.contacts
     # header.stamp, not log_time, for the fixes; log_time for Float64 (no header)
     assert nav.epoch_utc_ns == obs.epoch_utc_ns == EPOCH_NS  # the first fix, at t = 0
     np.testing.assert_allclose(nav.t_s, rec.navigation.t_s, rtol=0, atol=1e-9)
@@ -161,7 +161,7 @@ def test_navsatfix_and_float64_bearings(tmp_path):
     np.testing.assert_array_equal(nav.lon_deg, rec.navigation.lon)
     assert nav.x_m is None and "/gps/fix (sensor_msgs/msg/NavSatFix)" in nav.source
     np.testing.assert_allclose(obs.t_s, rec.bearings.t_s, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(obs.bearing_deg, rec.bearings.bearing_deg, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(obs.values, rec.bearings.bearing_deg, rtol=0, atol=1e-9)
     assert set(obs.track) == {"/bearing"} and not obs.units_stated
     assert any("/bearing: no time stamp" in n for n in got.notes)
     ingest_and_check(path, tmp_path, {"bearing": {"topic": "/bearing"}}, {"/bearing": "T1"})
@@ -175,15 +175,15 @@ def test_vector3stamped_direction_vectors(tmp_path):
                       ("/sonar/direction", "geometry_msgs/msg/Vector3Stamped",
                        vector_messages(rec.bearings)))
     opts = {"bearing": {"topic": "/sonar/direction", "field": "vector"}}
-    obs = read_mcap(path, options(**opts)).bearings
+    obs = read_mcap(path, options(**opts)).contacts
     np.testing.assert_allclose(obs.t_s, rec.bearings.t_s, rtol=0, atol=1e-9)  # header.stamp
-    wrapped = (obs.bearing_deg - rec.bearings.bearing_deg + 180) % 360 - 180
+    wrapped = (obs.values - rec.bearings.bearing_deg + 180) % 360 - 180
     np.testing.assert_allclose(wrapped, 0, atol=1e-9)
-    assert np.all((obs.bearing_deg >= 0) & (obs.bearing_deg < 360)) and obs.units_stated
+    assert np.all((obs.values >= 0) & (obs.values < 360)) and obs.units_stated
     ingest_and_check(path, tmp_path, opts, {"/sonar/direction": "T1"})
     # the field found without bearing.field; a unit makes no sense for a vector
     auto = read_mcap(path, options(bearing={"topic": "/sonar/direction"}))
-    np.testing.assert_array_equal(auto.bearings.bearing_deg, obs.bearing_deg)
+    np.testing.assert_array_equal(auto.contacts.values, obs.values)
     assert any("bearings from the field 'vector'" in n for n in auto.notes)
     with pytest.raises(ConfigError, match="direction vector, which has no units"):
         read_mcap(path, options(bearing={"topic": "/sonar/direction", "units": "deg"}))
@@ -196,14 +196,14 @@ def test_bearings_in_radians(tmp_path):
                        navsatfix_messages(rec.navigation)),
                       ("/bearing", "std_msgs/msg/Float64",
                        float64_messages(rec.bearings, np.pi / 180)))
-    obs = read_mcap(path, options(bearing={"topic": "/bearing", "units": "rad"})).bearings
-    np.testing.assert_allclose(obs.bearing_deg, rec.bearings.bearing_deg, rtol=1e-12)
+    obs = read_mcap(path, options(bearing={"topic": "/bearing", "units": "rad"})).contacts
+    np.testing.assert_allclose(obs.values, rec.bearings.bearing_deg, rtol=1e-12)
     assert obs.units_stated
     # unstated units: read as degrees, and said so (assemble's radians guard then refuses)
     unstated = read_mcap(path, options(bearing={"topic": "/bearing"}))
-    np.testing.assert_allclose(unstated.bearings.bearing_deg,
+    np.testing.assert_allclose(unstated.contacts.values,
                                np.deg2rad(rec.bearings.bearing_deg), rtol=1e-12)
-    assert not unstated.bearings.units_stated
+    assert not unstated.contacts.units_stated
     assert any("'data' read as degrees" in n for n in unstated.notes)
     with pytest.raises(InputError, match="look like radians. Set bearing.units=rad"):
         ingest(path, data_dir=tmp_path / "data", options={"bearing": {"topic": "/bearing"}})
@@ -273,8 +273,8 @@ def test_unordered_messages_are_sorted_and_duplicate_times_refused(tmp_path):
                       ("/gps/fix", "sensor_msgs/msg/NavSatFix",
                        navsatfix_messages(rec.navigation)[::-1]))
     got = read_mcap(path, options(bearing={"topic": "/bearing"}))
-    np.testing.assert_allclose(got.bearings.t_s, rec.bearings.t_s, rtol=0, atol=1e-9)
-    np.testing.assert_array_equal(got.bearings.bearing_deg, rec.bearings.bearing_deg)
+    np.testing.assert_allclose(got.contacts.t_s, rec.bearings.t_s, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(got.contacts.values, rec.bearings.bearing_deg)
     np.testing.assert_allclose(got.navigation.t_s, rec.navigation.t_s, rtol=0, atol=1e-9)
 
     twice = float64_messages(rec.bearings)
@@ -296,7 +296,7 @@ def test_unset_header_stamps_fall_back_to_log_time(tmp_path):
                        navsatfix_messages(rec.navigation)),
                       ("/dir", "geometry_msgs/msg/Vector3Stamped", messages))
     got = read_mcap(path, options(bearing={"topic": "/dir"}))
-    np.testing.assert_allclose(got.bearings.t_s, rec.bearings.t_s + LATENCY_NS / 1e9, atol=1e-9)
+    np.testing.assert_allclose(got.contacts.t_s, rec.bearings.t_s + LATENCY_NS / 1e9, atol=1e-9)
     assert "/dir: header.stamp is 0 (unset) in every message: log_time used" in got.notes
 
 
@@ -310,9 +310,9 @@ def test_simulation_clock(tmp_path):
     path = write_ros2(tmp_path / "sim.mcap", ("/gps/fix", "sensor_msgs/msg/NavSatFix", sim),
                       ("/bearing", "std_msgs/msg/Float64", bearings))
     got = read_mcap(path, options(bearing={"topic": "/bearing"}))
-    assert got.navigation.epoch_utc_ns is None and got.bearings.epoch_utc_ns is None
+    assert got.navigation.epoch_utc_ns is None and got.contacts.epoch_utc_ns is None
     np.testing.assert_allclose(got.navigation.t_s, rec.navigation.t_s, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(got.bearings.t_s, rec.bearings.t_s, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(got.contacts.t_s, rec.bearings.t_s, rtol=0, atol=1e-9)
     path = write_ros2(tmp_path / "mixed.mcap", ("/gps/fix", "sensor_msgs/msg/NavSatFix", sim),
                       ("/bearing", "std_msgs/msg/Float64", float64_messages(rec.bearings)))
     with pytest.raises(InputError, match="times of /bearing are UTC but those of /gps/fix are "
@@ -327,12 +327,12 @@ def test_what_the_file_holds_and_the_option_that_selects_it(tmp_path):
     holds = (f"topics /gps/fix (sensor_msgs/msg/NavSatFix, {n_nav}), "
              f"/bearing (std_msgs/msg/Float64, {n_obs})")
     with pytest.raises(InputError) as err:
-        read_mcap(path, options(), need=("navigation", "bearings"))
+        read_mcap(path, options(), need=("navigation", "contacts"))
     assert str(err.value) == (f"{path}: no bearings selected: set bearing.topic=<topic> "
                               f"[bearing.field=data]; {holds}")
     # not needed (a navigation file): no bearings, said in a note
     nav_only = read_mcap(path, options(), need=("navigation",))
-    assert nav_only.bearings is None and nav_only.navigation.t_s.size == n_nav
+    assert nav_only.contacts is None and nav_only.navigation.t_s.size == n_nav
     with pytest.raises(InputError, match=re.escape(f"bearing.topic=/sonar: no such topic; "
                                                    f"{holds}")):
         read_mcap(path, options(bearing={"topic": "/sonar"}))
@@ -349,7 +349,7 @@ def test_what_the_file_holds_and_the_option_that_selects_it(tmp_path):
                                          "of schema .*; set ownship.topic=<topic> or give "
                                          r"navigation=FILE; topics /bearing \(std_msgs/msg/Fl"):
         read_mcap(bearings_only, options(bearing={"topic": "/bearing"}),
-                  need=("navigation", "bearings"))
+                  need=("navigation", "contacts"))
 
 
 def test_damaged_and_undecodable_files_are_one_line(tmp_path):
@@ -381,7 +381,7 @@ def test_damaged_and_undecodable_files_are_one_line(tmp_path):
 
 def same_recording(a, b) -> bool:
     parts = [(a.navigation, b.navigation, ("t_s", "lat_deg", "lon_deg")),
-             (a.bearings, b.bearings, ("t_s", "track", "bearing_deg"))]
+             (a.contacts, b.contacts, ("t_s", "track", "values"))]
     return all(np.array_equal(getattr(x, f), getattr(y, f)) for x, y, names in parts
                for f in names)
 
@@ -434,6 +434,6 @@ def test_decoding_speed(tmp_path):
     start = time.perf_counter()
     got = read_mcap(path, options(bearing={"topic": "/bearing"}))
     seconds = time.perf_counter() - start
-    assert got.bearings.t_s.size == n and got.navigation.t_s.size == n
+    assert got.contacts.t_s.size == n and got.navigation.t_s.size == n
     print(f"\nROS 2: {seconds / 2 * 1e3:.0f} ms per 10k messages (NavSatFix + Float64, "
           f"{2 * n} read in {seconds:.2f} s)")

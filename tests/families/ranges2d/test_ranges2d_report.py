@@ -8,7 +8,7 @@ from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
 from pipeline.simulate import simulate_stage
 from tests.conftest import compose_cfg
-from tma.families.ranges2d.report import summary_row, track_metrics
+from tma.families.ranges2d.metrics import summary_row, track_metrics
 
 
 def test_status_in_metrics_and_counted_in_the_table():

@@ -2,7 +2,6 @@
 plots with each filter's own std dashed, and the section "Against the paper"
 (``tma.families.bearing_doppler3d.paper``)."""
 
-import json
 from pathlib import Path
 
 import matplotlib
@@ -27,8 +26,7 @@ from tma.families.bearing_doppler3d.metrics import (  # noqa: E402
 from tma.families.bearing_doppler3d.model import STATE_NAMES  # noqa: E402
 from tma.io import arrow  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
-from tma.paper import write_against_paper  # noqa: E402
-from tma.tables import markdown_table, save_figure, write_csv, write_markdown  # noqa: E402
+from tma.tables import save_figure, write_table  # noqa: E402
 
 SHORT = {"X_m": "X", "Y_m": "Y", "Z_m": "Z", "v_m_s": "v", "phi_rad": "phi", "a_m_s2": "a"}
 MID_S = 50.0
@@ -41,11 +39,6 @@ def _columns():
     cols += [f"rmse_{SHORT[c]}_T_all" for c in STATE_NAMES]
     return cols + ["divergence_share", "nees_mean", "nees_band_lo", "nees_band_hi",
                    "us_per_path_obs"]
-
-
-def _timing_us(run_root: Path, n_epochs: int) -> float:
-    shards = json.loads((run_root / "timing.json").read_text())["shards"].values()
-    return 1e6 * sum(s["seconds"] for s in shards) / (sum(s["rows"] for s in shards) * n_epochs)
 
 
 def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
@@ -81,7 +74,7 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
         row.update({"divergence_share": float(divergent.mean()),
                     "nees_mean": float(np.nanmean(nees_steps["nees_mean"])),
                     "nees_band_lo": lo, "nees_band_hi": hi,
-                    "us_per_path_obs": _timing_us(e.run_root, K)})
+                    "us_per_path_obs": 1e6 * e.seconds_per_track / K})
         rows.append(row)
         curves.append((e.estimator, doppler, steps))
         runs.append(paper.Run(e.estimator, doppler, steps, divergent,
@@ -89,9 +82,7 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
     table = pd.DataFrame(rows, columns=_columns()).sort_values(
         ["doppler", "estimator"], ascending=[False, True], kind="stable").reset_index(drop=True)
     tables_dir = Path(tables_dir)
-    paths = [tables_dir / f"{table_name}.{ext}" for ext in ("csv", "md", "png")]
-    paths.append(tables_dir / f"{table_name}_bearings_only.png")
-    write_csv(table, paths[0], float_format="%.6g")
+    plots = [tables_dir / f"{table_name}.png", tables_dir / f"{table_name}_bearings_only.png"]
     training = sorted({int(x) for x in table["training_paths"].dropna()})
     shown = pd.DataFrame({
         "estimator": table["estimator"], "Doppler": table["doppler"].map({True: "yes",
@@ -119,17 +110,13 @@ trained on {', '.join(map(str, training)) or 'n/a'} simulated paths (its gains a
 covariance are an artefact reused by later runs); `prior_mean` (the unconditional mean of the
 same bundle) is the baseline. Microseconds per path per observation are wall time of the
 vectorised filters (2 workers share the shards) and vary between machines."""
-    write_markdown(paths[1], "Underwater bearing-Doppler tracking: EKF, square-root EKF, CMNF",
-                   intro, markdown_table(shown))
-    for path, doppler in ((paths[2], True), (paths[3], False)):
+    paths = write_table(tables_dir, table_name,
+                        "Underwater bearing-Doppler tracking: EKF, square-root EKF, CMNF",
+                        intro, table, shown, float_format="%.6g",
+                        paper=(paper.against_paper(runs), paper.INTRO))
+    for path, doppler in ((plots[0], True), (plots[1], False)):
         _plot(path, [c for c in curves if c[1] == doppler], doppler)
-    return paths + write_paper_section(runs, paths[1])
-
-
-def write_paper_section(runs: list, markdown_path: Path) -> list[Path]:
-    """"Against the paper" (``tma.families.bearing_doppler3d.paper``): appended to the
-    table's Markdown, and ``<table>_paper.csv`` beside it."""
-    return write_against_paper(paper.against_paper(runs), markdown_path, paper.INTRO)
+    return paths + plots
 
 
 def _plot(path, curves, doppler):

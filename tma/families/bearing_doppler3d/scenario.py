@@ -21,7 +21,7 @@ from tma.families.bearing_doppler3d.log import (
 )
 from tma.families.bearing_doppler3d.model import STATE_NAMES, AuvModel, model_record
 from tma.io import arrow
-from tma.io.mcap_log import config_epoch_ns
+from tma.scenario import ScenarioConfig
 from tma.sharding import shard_rng, shard_track_ids
 
 FAMILY = "bearing_doppler3d"
@@ -52,7 +52,7 @@ class InitialConfig:
 
 
 @dataclass
-class Config:
+class Config(ScenarioConfig):
     family: str = FAMILY
     n_tracks: int = 10000  # test paths
     no_doppler: bool = False
@@ -71,15 +71,10 @@ class Config:
     initial: InitialConfig = field(default_factory=InitialConfig)
     seed: int = 20260104
     shard_size: int = 2500
-    epoch_utc: str = "2026-01-01T00:00:00Z"  # UTC of t = 0 (ISO-8601 with zone): MCAP log times
 
     def __post_init__(self):
-        w = "scenario 'bearing_doppler3d'"
-        config_epoch_ns(self.epoch_utc, w)
-        require(self.family == FAMILY, w, f"family must be '{FAMILY}'")
-        require(self.n_tracks >= 1 and self.shard_size >= 1, w,
-                "n_tracks, shard_size must be >= 1")
-        require(self.seed >= 0, w, "seed must be >= 0")
+        super().__post_init__()
+        w = self.where
         for name in ("duration_s", "obs_period_s", "truth_step_s", "filter_step_s",
                      "omega0_hz", "sound_speed_m_s", "sd_angle", "sd_doppler_hz"):
             require(getattr(self, name) > 0, w, f"{name} must be positive")
@@ -146,7 +141,7 @@ def from_raw(cfg: Config, shard_index: int, raw):
     track_id = shard_track_ids(cfg, shard_index)
     t = model.epochs()
     log = HydrophoneLog(t, track_id, model.select_readings(obs), record,
-                        config_epoch_ns(cfg.epoch_utc, f"scenario '{FAMILY}'"))
+                        cfg.epoch_ns)
     table = {"track_id": np.repeat(track_id, t.size), "step": np.tile(np.arange(t.size), n),
              "t_s": np.tile(t, n)}
     for i, name in enumerate(STATE_NAMES):

@@ -7,7 +7,7 @@ Ref1..Ref4 with 95 % Wilson intervals (as in the seed table), the RMSE of range 
 bound and the efficiency = mean bound / MSE (``metrics.efficiency_row``), the share of ``ok``
 tracks and of those whose normalised error lies below the chi-square(4) 95 % point
 (``consistent``, about 95 % for honest one-sigma errors), both with Wilson intervals, and the
-estimator's wall time per track from the run's ``timing.json`` (every shard's seconds over
+estimator's wall time per track (``RunEntry.seconds_per_track``: every shard's seconds over
 its tracks; worker processes may share the machine, so it varies between runs and machines).
 Runs of one estimator with a non-default config (e.g. ``mpekf`` with an innovation gate) are
 told apart by those settings in the ``estimator`` column. The plot gives RMSE / root mean
@@ -15,7 +15,6 @@ bound (1 = the bound) per quantity and Ref1 against sigma, or against the outlie
 only that varies. Every number is read from the run and dataset files.
 """
 
-import json
 import logging
 from pathlib import Path
 
@@ -39,7 +38,7 @@ from tma.families.bearings2d.metrics import (  # noqa: E402
     track_metrics,
 )
 from tma.stats import wilson_interval  # noqa: E402
-from tma.tables import markdown_table, save_figure, write_csv, write_markdown  # noqa: E402
+from tma.tables import save_figure, write_table  # noqa: E402
 
 log = logging.getLogger(__name__)
 
@@ -83,15 +82,6 @@ def estimator_label(name: str, config: dict) -> str:
     changed = [f"{k}={config[k]}" for k in sorted(config)
                if k != "name" and k in defaults and config[k] != defaults[k]]
     return " ".join([name, *changed])
-
-
-def ms_per_track(run_root: Path) -> float:
-    """Wall milliseconds per track over the run's shards (``timing.json``); NaN if absent."""
-    try:
-        shards = json.loads((Path(run_root) / "timing.json").read_text())["shards"].values()
-        return 1e3 * sum(s["seconds"] for s in shards) / sum(s["rows"] for s in shards)
-    except (OSError, ValueError, KeyError, TypeError, ZeroDivisionError):
-        return np.nan
 
 
 def dataset_bounds(dataset, truth: pd.DataFrame) -> pd.DataFrame:
@@ -146,7 +136,7 @@ def benchmark_table(entries) -> pd.DataFrame:
         rows.append(benchmark_row(
             estimator_label(entry.estimator, config), entry.dataset.manifest["config"]["sigma_deg"],
             outlier_prob(entry.dataset), entry.estimates, truth, bounds[entry.dataset.name],
-            ms_per_track(entry.run_root)))
+            1e3 * entry.seconds_per_track))
     return pd.DataFrame(rows, columns=COLUMNS).sort_values(
         ["estimator", "outlier_prob", "sigma_deg"], kind="stable").reset_index(drop=True)
 
@@ -232,12 +222,12 @@ def write_benchmark(entries, tables_dir, name: str) -> list[Path]:
     table = benchmark_table(entries)
     if table.empty:
         return []
-    tables_dir = Path(tables_dir)
-    paths = [tables_dir / f"{name}.{ext}" for ext in ("csv", "md", "png")]
-    write_csv(table, paths[0], float_format="%.6g")
     regions = "\n".join(f"- {r.capitalize()}: bearing <= {b} deg, distance <= {d:.0%}, course "
                         f"<= {c} deg, speed <= {s:.0%}" for r, (b, d, c, s) in REGIONS.items())
-    write_markdown(paths[1], "Bearings-only TMA: estimators against the Cramer-Rao bound",
-                   INTRO, markdown_table(shown_table(table)), "Success regions:\n" + regions)
-    _plot(table, paths[2])
+    paths = write_table(tables_dir, name,
+                        "Bearings-only TMA: estimators against the Cramer-Rao bound", INTRO,
+                        table, shown_table(table), float_format="%.6g",
+                        notes="Success regions:\n" + regions)
+    paths.append(Path(tables_dir) / f"{name}.png")
+    _plot(table, paths[-1])
     return paths

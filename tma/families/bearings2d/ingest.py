@@ -1,178 +1,158 @@
-"""The ingest stage: a recorded bearing log -> a ``bearings2d`` dataset (no truth).
+"""What ``bearings2d`` reads from a recorded log, and the logs it makes of it.
 
-``input=`` holds the bearings (and usually the own-ship): a CSV/TSV table, or an MCAP log
-(ROS 2, Foxglove or tma's own schema); ``navigation=`` may give the own-ship from a separate
-file (CSV with lat/lon or x/y, NMEA 0183 GGA/RMC, MCAP). The readers (``sources/``) return
-raw fixes and bearings; ``sources.assemble`` puts them on one clock and one east-north plane
-and builds one log per own-ship (see their docstrings for every rule). Times are shifted so
-the dataset starts at t = 0 at its first bearing; the UTC time of t = 0, the plane's origin
-(lat, lon), text track labels, the dropped bearings, the navigation gaps and every automatic
-choice go into the manifest. Bad input raises ``InputError`` naming the file, line or time,
-and the option that would fix it; nothing is written then. The dataset name is a plain name;
-the dataset is built beside its final place and swapped in only when complete, so a failed
-ingest (even with ``force=true``) leaves an existing dataset byte-identical.
+The readers and the stage are the core's (``tma.sources``, ``tma.ingest``); this family
+declares its observation, the bearing (``OBSERVATION``: degrees clockwise from north or
+radians, a direction vector as ``atan2(x, y)``, tma's own ``tma.BearingBatch`` on
+``/sonar/bearings``), guards it against radians read as degrees (``radians_guard``), checks
+its settings (``Settings``: ``sigma_deg``, ``min_bearings``) and puts each own-ship's bearings
+on one epoch grid shared by its tracks (``logs``): a ``BearingsLog`` per own-ship, NaN where a
+track has no bearing at an epoch, with the nominal noise an MCAP log declares (``tma.sensor``)
+or ``sigma_deg``.
 """
 
-import logging
-from pathlib import Path
+from dataclasses import dataclass
 
 import numpy as np
 
-from tma.config import to_plain
 from tma.errors import ConfigError, InputError
-from tma.families.bearings2d.log import write_bearings_log
-from tma.families.bearings2d.sources import read_source, source_kind
-from tma.families.bearings2d.sources.assemble import assemble
-from tma.families.bearings2d.sources.base import source_options
-from tma.io.atomic import sha256_file
-from tma.io.dataset import MANIFEST, datasets_dir, file_record, shard_relpath, write_manifest
-from tma.io.owned import is_owned, locked, plain_name, recover, remove_owned, staging_dir, swap_in
+from tma.families.bearings2d.log import BEARINGS_TOPIC, SCHEMAS, BearingsLog, nominal_sigma
+from tma.sources.base import Observation, Unit
+from tma.utc import MAX_SPAN_S
 
-log = logging.getLogger(__name__)
-MAX_SPAN_S = 9.2e9  # MCAP log times are nanoseconds in 64 bits: about 292 years
+MAX_CELLS = 1 << 26  # bearings grid cells (tracks x epochs) per log: 512 MiB of float64
+RADIANS_MIN_COUNT = 10
 
 
-def _check_options(sigma_deg, min_bearings, force):
-    if sigma_deg is not None and (isinstance(sigma_deg, bool)
-                                  or not isinstance(sigma_deg, int | float)
-                                  or not 0 < sigma_deg < 90):
-        raise ConfigError(f"sigma_deg must be null or a number in (0, 90) degrees, "
-                          f"got '{sigma_deg}'")
-    if isinstance(min_bearings, bool) or not isinstance(min_bearings, int) or min_bearings < 5:
-        raise ConfigError(f"min_bearings must be a whole number >= 5 (4 unknowns and one "
-                          f"degree of freedom for the noise), got '{min_bearings}'")
-    if not isinstance(force, bool):
-        raise ConfigError(f"force must be true or false, got '{force}'")
+def _from_vector(x, y):
+    return np.where((x == 0) & (y == 0), np.nan, np.rad2deg(np.arctan2(x, y)) % 360)
 
 
-def _file(value, option) -> Path:
-    if not isinstance(value, str | Path) or not str(value).strip():
-        raise ConfigError(f"{option} must be a file path, got '{value}'")
-    path = Path(str(value))
-    if not path.is_file():
-        raise InputError(f"{path}: no such file" + ("" if not path.exists() else
-                                                    " (a directory)"))
-    return path
+def radians_guard(recordings, options, where):
+    """Refuse bearings of unstated units that all lie within +-2 pi: radians read as degrees
+    fit a far, slow target with a tiny residual, and no statistic can tell it afterwards."""
+    if options.bearing.units is not None or any(r.contacts.units_stated for r in recordings):
+        return
+    b = np.concatenate([r.contacts.values for r in recordings])
+    if b.size >= RADIANS_MIN_COUNT and np.all(np.abs(b) <= 2 * np.pi):
+        raise InputError(f"{where}: every bearing lies within +-2 pi ({b.min():.3g} to "
+                         f"{b.max():.3g}): they look like radians. Set bearing.units=rad to "
+                         "convert them, or bearing.units=deg if they really are degrees")
 
 
-def read_recordings(path: Path, fmt, navigation: Path | None, options):
-    """The input's (and the navigation file's) recordings, each with own-ship and bearings."""
-    kind = source_kind(path, fmt)
-    if navigation is None:
-        recordings = read_source(path, kind, options, navigation=True, bearings=True)
-        for r in recordings:
-            _require(r, path, kind)
-        return recordings, kind, None
-    nav_kind = source_kind(navigation, "auto", option=None)
-    found = read_source(path, kind, options, navigation=False, bearings=True)
-    nav = read_source(navigation, nav_kind, options, navigation=True, bearings=False)
-    if len(found) != 1 or found[0].bearings is None:
-        raise InputError(f"{path}: no bearings found in the input")
-    if len(nav) != 1 or nav[0].navigation is None:
-        raise InputError(f"{navigation}: no own-ship fixes found in the navigation file")
-    rec = found[0]
-    notes = [*rec.notes, *nav[0].notes]
-    if rec.navigation is not None:
-        notes.append(f"own-ship from navigation={navigation}; the input's own-ship "
-                     f"({rec.navigation.source}) is not used")
-    rec.navigation, rec.notes = nav[0].navigation, notes
-    return [rec], kind, nav_kind
+OBSERVATION = Observation(
+    role="bearing", plural="bearings", column="bearing_deg",
+    columns=("bearing_deg", "bearing_rad", "bearing", "brg", "brg_deg", "brg_rad",
+             "true_bearing_deg", "azimuth_deg", "azimuth_rad", "azimuth"),
+    fields=("bearing_deg", "bearing_rad", "bearing", "data", "vector"),
+    units=(Unit("deg", "degrees", ("deg", "degree", "degrees"), lambda v: v, 360,
+                "[-360, 360]"),
+           Unit("rad", "radians", ("rad", "radian", "radians"), np.rad2deg, 2 * np.pi,
+                "[-2 pi, 2 pi]")),
+    from_vector=_from_vector, vector_rule="atan2(x, y)",
+    topic=BEARINGS_TOPIC, schema=SCHEMAS[BEARINGS_TOPIC], guard=radians_guard)
 
 
-def _require(rec, path, kind):
-    if rec.bearings is None:
-        raise InputError(f"{path}: no bearings found ({kind}); name them with "
-                         + ("columns.bearing=<column>" if kind == "csv" else
-                            "bearing.topic=<topic> [bearing.field=<field>]"))
-    if rec.navigation is None:
-        raise InputError(f"{path}: no own-ship fixes found ({kind}); name them with "
-                         + ("columns.lat/columns.lon or columns.x/columns.y" if kind == "csv"
-                            else "ownship.topic=<topic>")
-                         + ", or give them in a separate file with navigation=FILE")
+@dataclass
+class Settings:
+    """``sigma_deg``: the nominal bearing noise (deg) for covariances, overriding what an
+    MCAP log declares; None: the log's, else estimated from the residuals.
+    ``min_bearings``: each track needs this many (4 unknowns + 1 for the noise)."""
+
+    sigma_deg: float | None = None
+    min_bearings: int = 5
+
+    def __post_init__(self):
+        sigma = self.sigma_deg
+        if sigma is not None and (isinstance(sigma, bool) or not isinstance(sigma, int | float)
+                                  or not 0 < sigma < 90):
+            raise ConfigError(f"sigma_deg must be null or a number in (0, 90) degrees, "
+                              f"got '{sigma}'")
+        if (isinstance(self.min_bearings, bool) or not isinstance(self.min_bearings, int)
+                or self.min_bearings < 5):
+            raise ConfigError(f"min_bearings must be a whole number >= 5 (4 unknowns and one "
+                              f"degree of freedom for the noise), got '{self.min_bearings}'")
 
 
-def ingest(input_path, *, data_dir, name=None, fmt="auto", sigma_deg=None, min_bearings=5,
-           force=False, navigation=None, options=None) -> Path:
-    """Validate a recorded log and write it as a dataset; returns the dataset directory.
-
-    ``fmt``: auto | csv | nmea | mcap (the input's kind); ``navigation``: a separate own-ship
-    file or None; ``options``: ``SourceOptions`` or a config node of its groups (``columns``,
-    ``bearing``, ``ownship``, ``csv``, ``time``, ``nav``, ``origin``), e.g.
-    ``{"bearing": {"units": "rad"}}``."""
-    if input_path is None or not str(input_path).strip():
-        raise ConfigError("ingest needs input=<path to the bearing log: .csv, .tsv or .mcap>")
-    _check_options(sigma_deg, min_bearings, force)
-    options = source_options(options)
-    if fmt not in ("auto", "csv", "nmea", "mcap"):
-        raise ConfigError(f"format must be auto, csv, nmea or mcap, got '{fmt}'")
-    path = Path(str(input_path))
-    name = plain_name(name if name is not None else path.stem, "name")
-    path = _file(input_path, "input")
-    nav_path = None if navigation is None else _file(navigation, "navigation")
-
-    recordings, kind, nav_kind = read_recordings(path, fmt, nav_path, options)
-    logs, summary = assemble(recordings, options, str(path))
-    for note in summary["notes"]:
-        log.info("%s", note)
-    dropped = summary["dropped_bearings"]
-    if dropped["count"]:
-        log.warning("%s: dropped %d bearing(s) (%d before, %d after the own-ship fixes): %s",
-                    path, dropped["count"], dropped["before_navigation"],
-                    dropped["after_navigation"], dropped["why"])
-    gaps = summary["nav_gaps"]
-    if gaps["count"]:
-        log.warning("own-ship navigation has %d gap(s) longer than nav.max_gap_s = %g s "
-                    "(longest %.3g s, the first from t = %.3f s): own-ship is interpolated "
-                    "across them", gaps["count"], gaps["max_gap_s"], gaps["longest_s"],
-                    gaps["gaps"][0]["from_s"])
-    all_ids = np.concatenate([lg.track_id for lg in logs])
+def logs(aligned, settings: Settings, where: str):
+    """``(logs, config, extra)``: one ``BearingsLog`` per own-ship of ``aligned``
+    (``tma.sources.align``), checked; what the dataset's config and manifest record of the
+    settings."""
+    out = []
+    for p in aligned.platforms:
+        sigma = nominal_sigma(p.recording.metadata, where)  # the input's record tma.sensor
+        out += _logs(p.t_s, p.own_x_m, p.own_y_m, p.track_id, p.values, sigma, where)
+    for lg in out:
+        lg.epoch_utc_ns = aligned.epoch_utc_ns
+        lg.origin_deg = aligned.origin_deg
+        if aligned.labels is not None:
+            lg.track_label = aligned.labels[lg.track_id]
+    all_ids = np.concatenate([lg.track_id for lg in out])
     if np.unique(all_ids).size != all_ids.size:
-        raise InputError(f"{path}: a track id appears with two different own-ship paths")
-    for lg in logs:
-        if sigma_deg is not None:  # the option overrides what an MCAP log may declare
-            lg.sigma_deg = float(sigma_deg)
+        raise InputError(f"{where}: a track id appears with two different own-ship paths")
+    for lg in out:
+        if settings.sigma_deg is not None:  # the option overrides what an MCAP log may declare
+            lg.sigma_deg = float(settings.sigma_deg)
         if lg.t_s[-1] > MAX_SPAN_S:
-            raise InputError(f"{path}: the log spans {lg.t_s[-1]:.3g} s (at most "
+            raise InputError(f"{where}: the log spans {lg.t_s[-1]:.3g} s (at most "
                              f"{MAX_SPAN_S:.3g} s): times must be seconds")
-        lg.validate(str(path))
+        lg.validate(where)
         counts = np.isfinite(lg.bearing_deg).sum(axis=1)
-        few = counts < min_bearings
+        few = counts < settings.min_bearings
         if np.any(few):
             shown = lg.track_id[few] if lg.track_label is None else lg.track_label[few]
             raise InputError(
-                f"{path}: track(s) {', '.join(map(str, shown[:10]))} have "
+                f"{where}: track(s) {', '.join(map(str, shown[:10]))} have "
                 f"{counts[few].min()} bearing(s); estimating 4 parameters (x0, y0, vx, vy) "
-                f"needs at least {min_bearings}")
-
-    sources = {"input": {"path": str(path), "sha256": sha256_file(path), "kind": kind}}
-    if nav_path is not None:
-        sources["navigation"] = {"path": str(nav_path), "sha256": sha256_file(nav_path),
-                                 "kind": nav_kind}
-    config = {"format": fmt, "min_bearings": min_bearings, "options": to_plain(options)}
-    root = datasets_dir(data_dir) / name
-    with locked([root]):
-        recover(root)
-        if root.exists() and not is_owned(root):
-            raise InputError(f"{root} exists and was not created by tma: choose another name=")
-        if (root / MANIFEST).exists() and not force:
-            raise InputError(f"dataset {root} exists: choose another name= or set force=true")
-        stage = staging_dir(root, fresh=True)
-        try:
-            _write_dataset(stage, name, logs, config, sources, summary)
-        except BaseException:
-            remove_owned(stage)
-            raise
-        return swap_in(stage, root)
+                f"needs at least {settings.min_bearings}")
+    return out, {"min_bearings": settings.min_bearings}, {"sigma_deg": out[0].sigma_deg}
 
 
-def _write_dataset(stage, name, logs, config, sources, summary):
-    shards = {}
-    for i, lg in enumerate(logs):
-        rel = shard_relpath(i)
-        n_msg = write_bearings_log(stage / rel, lg, {"tma.dataset": {
-            "family": "bearings2d", "source": sources["input"]["path"]}})
-        shards[rel] = file_record(stage / rel, messages=n_msg, tracks=int(lg.n_tracks))
-    write_manifest(
-        stage, family="bearings2d", source="ingest", name=name, config=config, shards=shards,
-        files={}, extra={**sources, **summary, "sigma_deg": logs[0].sigma_deg},
-    )
+def _logs(t, x, y, track, bearing, sigma, where) -> list[BearingsLog]:
+    """One own-ship's bearings on its epoch grid; tracks split into several logs only when
+    the grid (tracks x epochs) would exceed MAX_CELLS."""
+    ids, counts = np.unique(track, return_counts=True)
+    n_epochs = np.count_nonzero(np.diff(np.sort(t))) + 1
+    if ids.size * n_epochs <= MAX_CELLS:
+        groups = [ids]
+    else:  # bound each group's grid by (tracks in it) x (its bearings)
+        groups, start, total = [], 0, 0
+        for k, c in enumerate(counts):
+            if k > start and (k - start + 1) * (total + c) > MAX_CELLS:
+                groups.append(ids[start:k])
+                start, total = k, 0
+            total += c
+        groups.append(ids[start:])
+    logs = []
+    for group in groups:
+        rows = np.isin(track, group) if len(groups) > 1 else slice(None)
+        logs.append(_grid(t[rows], x[rows], y[rows], track[rows], bearing[rows], group, sigma,
+                          where))
+    return logs
+
+
+def _grid(t, x, y, track, bearing, ids, sigma, where) -> BearingsLog:
+    """The (tracks x epochs) bearing array; own-ship at each epoch (equal at equal times)."""
+    order = np.argsort(t, kind="stable")
+    new_epoch = np.r_[True, t[order][1:] != t[order][:-1]]
+    col = np.empty(t.size, dtype=np.int64)
+    col[order] = np.cumsum(new_epoch) - 1
+    first = order[new_epoch]
+    n_epochs = first.size
+    row = np.searchsorted(ids, track)
+    cell = np.sort(row * n_epochs + col)
+    twice = cell[1:] == cell[:-1]
+    if twice.any():
+        k = int(cell[int(np.argmax(twice))])
+        raise InputError(f"{where}: track {ids[k // n_epochs]} has two bearings at one time "
+                         f"({t[first[k % n_epochs]]:.9g} s after the log's start)")
+    grid = np.full((ids.size, n_epochs), np.nan)
+    grid[row, col] = bearing
+    return BearingsLog(t_s=t[first], own_x_m=x[first], own_y_m=y[first], track_id=ids,
+                       bearing_deg=grid, sigma_deg=sigma)
+
+
+def ingest(input_path, **kwargs):
+    """``tma.ingest.ingest`` of a bearing log into a ``bearings2d`` dataset."""
+    from tma.ingest import ingest as ingest_log
+
+    return ingest_log(input_path, family="bearings2d", **kwargs)

@@ -27,30 +27,31 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.errors import InputError
-from tma.families.bearings2d.geo import MAX_MAPPED_M, LocationFix, local_to_geodetic, location_fix
+from tma.geo import MAX_MAPPED_M, LocationFix, local_to_geodetic, location_fix
 from tma.io.mcap_log import (
     COMPRESSION,
-    MAX_EPOCH_NS,
+    GEO,
+    TRACKS,
     Channel,
     LogWriter,
     float_array,
+    geo_origin,
     int_array,
-    integer,
     json_record,
     number,
     read_epoch,
     read_json_record,
     read_log,
     schema_errors,
+    track_labels,
 )
 from tma.io.mcap_writer import Encoded, Ragged
+from tma.utc import MAX_EPOCH_NS
 
 OWNSHIP_TOPIC = "/ownship/navigation"
 BEARINGS_TOPIC = "/sonar/bearings"
 SENSOR = "tma.sensor"  # metadata record: {"sigma_deg": nominal bearing noise}, when known
 TARGET = "tma.target"  # metadata record: {"accel_psd_m2_s3": the targets' motion}, when known
-GEO = "tma.geo"  # metadata record: {origin_lat_deg, origin_lon_deg, epoch_utc_ns}, when known
-TRACKS = "tma.tracks"  # metadata record: {"track_id": [...], "label": [...]}, when labelled
 OWNSHIP_FIX_TOPIC = "/ownship/location_fix"  # foxglove.LocationFix, only with an origin
 OWNSHIP_FRAME = "ownship"
 BLOCK_BEARINGS = 1 << 16  # bearings encoded at once: bounds the memory a long log takes
@@ -232,29 +233,6 @@ def declared_motion(metadata: dict, where: str) -> float | None:
         return None
     with schema_errors(where, f"the metadata record {TARGET}"):
         return number(read_json_record(metadata, TARGET, where)["accel_psd_m2_s3"])
-
-
-def geo_origin(metadata: dict, where: str) -> tuple[float, float] | None:
-    if GEO not in metadata:
-        return None
-    with schema_errors(where, f"the metadata record {GEO}"):
-        geo = read_json_record(metadata, GEO, where)
-        return number(geo["origin_lat_deg"]), number(geo["origin_lon_deg"])
-
-
-def track_labels(metadata: dict, track_id: np.ndarray, where: str) -> np.ndarray | None:
-    """The labels of ``track_id`` from ``tma.tracks``, as an object array, or None."""
-    if TRACKS not in metadata:
-        return None
-    with schema_errors(where, f"the metadata record {TRACKS}"):
-        record = read_json_record(metadata, TRACKS, where)
-        ids = [integer(i) for i in record["track_id"]]
-        labels = dict(zip(ids, record["label"], strict=True))
-    missing = [int(i) for i in track_id if int(i) not in labels]
-    if missing:
-        raise InputError(f"{where}: the metadata record {TRACKS} has no label for track(s) "
-                         f"{', '.join(map(str, missing[:10]))}")
-    return np.array([labels[int(i)] for i in track_id], dtype=object)
 
 
 def read_bearings_log(path) -> BearingsLog:

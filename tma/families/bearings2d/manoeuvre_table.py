@@ -37,7 +37,7 @@ from tma.families.bearings2d.metrics import (  # noqa: E402
     track_metrics,
 )
 from tma.stats import wilson_interval  # noqa: E402
-from tma.tables import markdown_table, save_figure, write_csv, write_markdown  # noqa: E402
+from tma.tables import markdown_table, save_figure, write_csv, write_table  # noqa: E402
 
 log = logging.getLogger(__name__)
 
@@ -213,12 +213,10 @@ def write_manoeuvre_table(entries, tables_dir, name: str) -> list[Path]:
     if table.empty:
         return []
     tables_dir = Path(tables_dir)
-    paths = [tables_dir / f"{name}.{ext}" for ext in ("csv", "md", "png")]
-    write_csv(table, paths[0], float_format="%.6g")
-    detection_md = ""
+    detection_md, extra = "", []
     if not detections.empty:
-        paths.append(tables_dir / f"{name}_detection.csv")
-        write_csv(detections, paths[-1], float_format="%.6g")
+        extra.append(tables_dir / f"{name}_detection.csv")
+        write_csv(detections, extra[0], float_format="%.6g")
         shown = detections[detections["n"] > 0].assign(**{
             "|course change| (deg)": lambda d: [f"{a:g}-{b:g}" for a, b in
                                                 d[["size_lo_deg", "size_hi_deg"]].to_numpy()],
@@ -227,7 +225,9 @@ def write_manoeuvre_table(entries, tables_dir, name: str) -> list[Path]:
         detection_md = ("Detection rate on the manoeuvring targets by manoeuvre size:\n\n"
                         + markdown_table(shown[["estimator", "motion", "|course change| (deg)",
                                                 "n", "detected %"]]))
-    write_markdown(paths[1], "Bearings-only TMA of targets that move like ships", INTRO,
-                   markdown_table(shown_table(table)), detection_md)
-    _plot(table, detections, paths[2])
-    return paths
+    paths = write_table(tables_dir, name, "Bearings-only TMA of targets that move like ships",
+                        INTRO, table, shown_table(table), float_format="%.6g",
+                        notes=detection_md)
+    paths.append(tables_dir / f"{name}.png")
+    _plot(table, detections, paths[-1])
+    return paths + extra

@@ -28,19 +28,19 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from tma.errors import InputError  # noqa: E402
-from tma.families.bearings2d.geo import (  # noqa: E402
-    MAX_MAPPED_M,
-    LocationFix,
-    enu_covariance,
-    local_to_geodetic,
-    location_fix,
-)
 from tma.families.bearings2d.log import (  # noqa: E402
     GEO,
     OWNSHIP_FIX_TOPIC,
     OWNSHIP_FRAME,
     BearingsLog,
     read_bearings_log,
+)
+from tma.geo import (  # noqa: E402
+    MAX_MAPPED_M,
+    LocationFix,
+    enu_covariance,
+    local_to_geodetic,
+    location_fix,
 )
 from tma.io.mcap_log import Channel, LogWriter, json_record  # noqa: E402
 from tma.linalg import scaled_inverse  # noqa: E402

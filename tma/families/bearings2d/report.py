@@ -17,7 +17,6 @@ import pandas as pd  # noqa: E402
 import pyarrow as pa  # noqa: E402
 
 from tma.families.bearings2d import benchmark, manoeuvre_table, paper  # noqa: E402
-from tma.families.bearings2d.geo import local_to_geodetic  # noqa: E402
 from tma.families.bearings2d.map_outputs import (  # noqa: E402
     MAX_PLOTS,
     position_covariance,
@@ -34,10 +33,10 @@ from tma.families.bearings2d.metrics import (  # noqa: E402
     track_metrics,
 )
 from tma.families.bearings2d.status import STATUSES  # noqa: E402
+from tma.geo import local_to_geodetic  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
-from tma.io.mcap_log import format_utc  # noqa: E402
-from tma.paper import write_against_paper  # noqa: E402
-from tma.tables import markdown_table, save_figure, write_csv, write_markdown  # noqa: E402
+from tma.tables import save_figure, write_table  # noqa: E402
+from tma.utc import format_utc  # noqa: E402
 
 INTRO = """Bearings-only TMA of a constant-velocity target from a manoeuvring observer
 (`../shared/specs/bearings2d.md`). Each row: one estimator at one bearing noise sigma over
@@ -68,13 +67,13 @@ def _num(x, fmt="{:.3g}"):
     return "-" if pd.isna(x) else fmt.format(x)
 
 
-def write_table(rows: list[dict], tables_dir, name="bearings2d") -> list[Path]:
-    """Write ``<name>.csv``, ``<name>.md`` and ``<name>.png``; returns their paths."""
+def write_success_table(rows: list[dict], tables_dir, name="bearings2d",
+                        paper_section=None) -> list[Path]:
+    """Write ``<name>.csv``, ``<name>.md`` (with ``paper_section``, ``tables.write_table``)
+    and ``<name>.png``; returns their paths."""
     tables_dir = Path(tables_dir)
     table = pd.DataFrame(rows, columns=TABLE_COLUMNS).sort_values(
         ["estimator", "sigma_deg"], kind="stable").reset_index(drop=True)
-    paths = [tables_dir / f"{name}.{ext}" for ext in ("csv", "md", "png")]
-    write_csv(table, paths[0], float_format="%.6g")
 
     shown = pd.DataFrame({
         "estimator": table["estimator"],
@@ -91,8 +90,10 @@ def write_table(rows: list[dict], tables_dir, name="bearings2d") -> list[Path]:
         "consistent (ok)": [_pct(*v) if pd.notna(v[0]) else "-" for v in
                             table[["consistent", "consistent_lo", "consistent_hi"]].to_numpy()],
     })
-    write_markdown(paths[1], "Bearings-only TMA: success rates by estimator and noise", INTRO,
-                   markdown_table(shown), "Success regions:\n" + REGION_NOTE)
+    paths = write_table(tables_dir, name, "Bearings-only TMA: success rates by estimator and "
+                        "noise", INTRO, table, shown, float_format="%.6g",
+                        notes="Success regions:\n" + REGION_NOTE, paper=paper_section)
+    paths.append(tables_dir / f"{name}.png")
 
     fig, axes = plt.subplots(2, 2, figsize=(10, 7), sharex=True, sharey=True)
     for ax, region in zip(axes.flat, REGIONS, strict=True):
@@ -111,7 +112,7 @@ def write_table(rows: list[dict], tables_dir, name="bearings2d") -> list[Path]:
     axes[0, 0].legend()
     fig.suptitle("Bearings-only TMA: success rate vs noise (95 % Wilson bands)")
     fig.tight_layout()
-    save_figure(fig, paths[2])
+    save_figure(fig, paths[-1])
     plt.close(fig)
     return paths
 
@@ -210,9 +211,6 @@ def track_report(estimates: pd.DataFrame, time_origin_s=0.0, epoch_utc_ns=None,
 
 
 def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str) -> list[Path]:
-    tables_dir = Path(tables_dir)
-    paths = [tables_dir / f"{name}.csv", tables_dir / f"{name}.md"]
-    write_csv(report, paths[0])
     def pm(value, sd, fmt):
         return [f"{v:{fmt}} ± {e:{fmt}}" if np.isfinite(e) else f"{v:{fmt}} ± ? (unobservable)"
                 for v, e in report[[value, sd]].to_numpy()]
@@ -248,8 +246,8 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str)
              "holds the position now in local metres (x east, y north) with its one-sigma "
              f"errors; `{name}-<track>.png` shows each contact on a plan (the first "
              f"{MAX_PLOTS}).")
-    write_markdown(paths[1], f"Bearings-only TMA estimates: {name}", intro, markdown_table(shown))
-    return paths
+    return write_table(tables_dir, name, f"Bearings-only TMA estimates: {name}", intro, report,
+                       shown)
 
 
 def _report_without_truth(entry, tables_dir, name: str) -> list[Path]:
@@ -302,12 +300,6 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
     elif rows and manoeuvre_table.is_manoeuvre_table(table_name):  # targets that manoeuvre
         written += manoeuvre_table.write_manoeuvre_table(entries, tables_dir, table_name)
     elif rows:
-        written += write_table(rows, tables_dir, table_name)
-        written += write_paper_section(runs, Path(tables_dir) / f"{table_name}.md")
+        written += write_success_table(rows, tables_dir, table_name,
+                                       (paper.against_paper(runs), paper.INTRO))
     return written
-
-
-def write_paper_section(runs: list, markdown_path: Path) -> list[Path]:
-    """"Against the paper" (``tma.families.bearings2d.paper``): appended to the table's
-    Markdown, and ``<table>_paper.csv`` beside it."""
-    return write_against_paper(paper.against_paper(runs), markdown_path, paper.INTRO)

@@ -35,8 +35,8 @@ from tma.families.bearings2d import target_motion
 from tma.families.bearings2d.log import BearingsLog, read_bearings_log, write_bearings_log
 from tma.families.bearings2d.target_motion import TargetConfig
 from tma.io import arrow
-from tma.io.mcap_log import config_epoch_ns
-from tma.path import LegPath
+from tma.path import LegPath, leg_config
+from tma.scenario import ScenarioConfig
 from tma.sharding import shard_rng, shard_track_ids
 
 FAMILY = "bearings2d"
@@ -44,16 +44,8 @@ OUTLIER_STREAM = 1  # spawn-key element of the outlier stream under the shard's 
 MANOEUVRE, WANDER = target_motion.MANOEUVRE_STREAM, target_motion.WANDER_STREAM
 
 
-@dataclass
-class LegConfig:
-    """A straight leg ``{course_deg, duration_s}`` or a turn ``{turn_to_deg, rate_deg_s,
-    direction: left|right}``."""
-
-    course_deg: float | None = None
-    duration_s: float | None = None
-    turn_to_deg: float | None = None
-    rate_deg_s: float | None = None
-    direction: str | None = None
+# a straight leg {course_deg, duration_s} or a turn {turn_to_deg, rate_deg_s, direction}
+LegConfig = leg_config("course_deg", "duration_s", "turn_to_deg", "rate_deg_s", "direction")
 
 
 def _default_legs():
@@ -104,7 +96,7 @@ class OutlierConfig:
 
 
 @dataclass
-class Config:
+class Config(ScenarioConfig):
     family: str = FAMILY
     n_tracks: int = 10000  # targets in the dataset
     sigma_deg: float = 0.5  # bearing noise standard deviation
@@ -113,27 +105,22 @@ class Config:
     sample_period_s: float = 2.0  # bearings at t = 0, dt, ..., end of the observer path
     observer: ObserverConfig = field(default_factory=ObserverConfig)
     population: PopulationConfig = field(default_factory=PopulationConfig)
-    epoch_utc: str = "2026-01-01T00:00:00Z"  # UTC of t = 0 (ISO-8601 with zone): MCAP log times
     origin: OriginConfig = field(default_factory=OriginConfig)
     outliers: OutlierConfig = field(default_factory=OutlierConfig)
     target: TargetConfig = field(default_factory=TargetConfig)  # manoeuvres and wander
 
     def __post_init__(self):
-        where = "scenario 'bearings2d'"
+        super().__post_init__()
+        where = self.where
         target_motion.check(self.target, where)
-        config_epoch_ns(self.epoch_utc, where)
         lat, lon = self.origin.lat, self.origin.lon
         require((lat is None) == (lon is None), where,
                 "origin.lat and origin.lon must be given together (or both null)")
         require(lat is None or (-90 < lat < 90 and -180 <= lon <= 180), where,
                 f"origin must be a latitude in (-90, 90) and a longitude in [-180, 180] deg, "
                 f"got ({lat}, {lon})")
-        require(self.family == FAMILY, where, f"family must be '{FAMILY}'")
-        require(self.n_tracks > 0, where, "n_tracks must be positive")
-        require(self.shard_size > 0, where, "shard_size must be positive")
         require(0 <= self.sigma_deg < 90, where,
                 f"sigma_deg must be in [0, 90), got {self.sigma_deg}")
-        require(self.seed >= 0, where, f"seed must be >= 0, got {self.seed}")
         require(0 <= self.outliers.prob <= 1, where,
                 f"outliers.prob must be a probability in [0, 1], got {self.outliers.prob}")
         require(self.sample_period_s > 0, where, "sample_period_s must be positive")
@@ -211,7 +198,7 @@ def simulate_shard(cfg: Config, shard_index: int):
     log = BearingsLog(
         t_s=t, own_x_m=own_x, own_y_m=own_y, track_id=track_id,
         bearing_deg=np.rad2deg(measured) % 360.0, sigma_deg=cfg.sigma_deg,
-        epoch_utc_ns=config_epoch_ns(cfg.epoch_utc, f"scenario '{FAMILY}'"),
+        epoch_utc_ns=cfg.epoch_ns,
         origin_deg=None if origin.lat is None else (origin.lat, origin.lon),
         accel_psd_m2_s3=cfg.target.declared_psd(),
     )

@@ -104,17 +104,17 @@ def per_scan_errors(estimates: pd.DataFrame, truth: pd.DataFrame, segs: Segments
     return df[keep].sort_values(["track_id", "step"], kind="stable").reset_index(drop=True)
 
 
-def _matrix(per_scan: pd.DataFrame, column: str):
-    """(n_runs, n_scans) array of a per-scan column and the scan times."""
+def scan_matrix(per_scan: pd.DataFrame, column: str, dtype=None):
+    """(n_runs, n_scans) array of a per-scan column (in ``dtype``) and the scan times."""
     wide = per_scan.pivot(index="track_id", columns="step", values=column)
     t = per_scan.groupby("step")["t_s"].first().to_numpy()
-    return wide.to_numpy(), t
+    return wide.to_numpy(dtype), t
 
 
 def summary_row(per_scan: pd.DataFrame, estimator: str, speed: float, segs: Segments,
                 memory=None) -> dict:
     """One table row; ``memory``: J of a tracker that selects its memory (else None)."""
-    err, t = _matrix(per_scan, "error_m")
+    err, t = scan_matrix(per_scan, "error_m")
     row = {"estimator": estimator, "speed_m_s": speed, "n_runs": err.shape[0]}
     for name in SEGMENT_NAMES:
         seg = err[:, _in(t, segs.windows[name])]
@@ -126,7 +126,7 @@ def summary_row(per_scan: pd.DataFrame, estimator: str, speed: float, segs: Segm
     row["track_loss"] = float(np.mean(status == "track_lost"))
     row.update(memory_stats(per_scan, memory, segs))
     if "p_turn" in per_scan:
-        p, _ = _matrix(per_scan, "p_turn")
+        p, _ = scan_matrix(per_scan, "p_turn")
         turn = _in(t, segs.windows["turn"])
         row["p_turn_model_in_turn"] = np.nanmean(p[:, turn]) if turn.any() else np.nan
     else:
@@ -139,8 +139,8 @@ def memory_stats(per_scan: pd.DataFrame, memory, segs: Segments) -> dict:
              *map(sigma_column, segs.sigma_times_s)]
     if "m" not in per_scan or memory is None:
         return dict.fromkeys(names, np.nan)
-    m, t = _matrix(per_scan, "m")
-    sigma, _ = _matrix(per_scan, "sigma_hat_m")
+    m, t = scan_matrix(per_scan, "m")
+    sigma, _ = scan_matrix(per_scan, "sigma_hat_m")
     turn = _in(t, segs.windows["turn"])
     straight = _in(t, segs.windows["straight1"]) | _in(t, segs.windows["straight2"])
     after = t >= segs.turn_end_s - EPS_S  # NaN (no turn): nothing to recover from

@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 
 from tma.families.radar2d.estimators.fuzzy_mm import Config as FuzzyConfig
-from tma.families.radar2d.metrics import EPS_S, Segments
+from tma.families.radar2d.metrics import EPS_S, Segments, scan_matrix
 from tma.families.radar2d.scenario import Config as ScenarioConfig
 from tma.paper import (
     by_setting,
@@ -72,11 +72,6 @@ class Run:
     config: dict
 
 
-def _matrix(per_scan: pd.DataFrame, column: str):
-    wide = per_scan.pivot(index="track_id", columns="step", values=column)
-    return wide.to_numpy(float), per_scan.groupby("step")["t_s"].first().to_numpy()
-
-
 def _in(t, window):
     return (t >= window[0] - EPS_S) & (t <= window[1] + EPS_S)
 
@@ -109,9 +104,9 @@ def run_claims(run: Run) -> list[dict]:
     memory = int(run.config.get("memory", FuzzyConfig().memory))
     setting = f"{ESTIMATOR}, {v:g} m/s"
     texts = {row: printed[SPEEDS.index(v)] for row, printed in TABLE.items()}
-    err, t = _matrix(run.per_scan, "error_m")
-    m, _ = _matrix(run.per_scan, "m")
-    sigma, _ = _matrix(run.per_scan, "sigma_hat_m")
+    err, t = scan_matrix(run.per_scan, "error_m", float)
+    m, _ = scan_matrix(run.per_scan, "m", float)
+    sigma, _ = scan_matrix(run.per_scan, "sigma_hat_m", float)
     straight = _in(t, segs.windows["straight1"]) | _in(t, segs.windows["straight2"])
     turn = _in(t, segs.windows["turn"])
     rows = []

@@ -24,8 +24,7 @@ from tma.families.radar2d.metrics import (  # noqa: E402
     table_columns,
 )
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
-from tma.paper import write_against_paper  # noqa: E402
-from tma.tables import markdown_table, save_figure, write_csv, write_markdown  # noqa: E402
+from tma.tables import save_figure, write_table  # noqa: E402
 
 INTRO = """Tracking a small fast boat that turns sharply{radius} in front of a coastal
 radar (`../shared/specs/radar2d.md`); one row per tracker and boat speed over the Monte Carlo
@@ -111,9 +110,7 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
     table = pd.DataFrame(rows, columns=columns).assign(sigma_times=sigma_times).sort_values(
         ["speed_m_s", "estimator"], kind="stable").reset_index(drop=True)
     tables_dir = Path(tables_dir)
-    paths = [tables_dir / f"{table_name}.{ext}" for ext in ("csv", "md", "png")]
-    paths.append(tables_dir / f"{table_name}_memory.png")
-    write_csv(table[columns], paths[0], float_format="%.6g")
+    plots = [tables_dir / f"{table_name}.png", tables_dir / f"{table_name}_memory.png"]
     shared_times = len(set(sigma_times)) == 1
 
     def sigma_cell(row):
@@ -139,16 +136,12 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
             [sigma_cell(row) for _, row in table.iterrows()],
         "P(turn model) in turn": table["p_turn_model_in_turn"].map(lambda x: _f(x, "{:.2f}")),
     })
-    write_markdown(paths[1], "Vessel tracking: fuzzy multi-model alpha-beta vs alpha-beta vs IMM",
-                   _intro(by_dataset), markdown_table(shown))
-    _plot(paths[2], paths[3], curves)
-    return paths + write_paper_section(runs, paths[1])
-
-
-def write_paper_section(runs: list, markdown_path: Path) -> list[Path]:
-    """"Against the paper" (``tma.families.radar2d.paper``): appended to the table's
-    Markdown, and ``<table>_paper.csv`` beside it."""
-    return write_against_paper(paper.against_paper(runs), markdown_path, paper.INTRO)
+    paths = write_table(tables_dir, table_name,
+                        "Vessel tracking: fuzzy multi-model alpha-beta vs alpha-beta vs IMM",
+                        _intro(by_dataset), table[columns], shown, float_format="%.6g",
+                        paper=(paper.against_paper(runs), paper.INTRO))
+    _plot(*plots, curves)
+    return paths + plots
 
 
 def _shade(ax, segs):

@@ -15,8 +15,8 @@ from tma.config import require
 from tma.errors import ConfigError
 from tma.families.radar2d.log import RadarLog, read_radar_log, write_radar_log
 from tma.io import arrow
-from tma.io.mcap_log import config_epoch_ns
-from tma.path import LegPath
+from tma.path import LegPath, leg_config
+from tma.scenario import ScenarioConfig
 from tma.sharding import shard_rng, shard_track_ids
 
 FAMILY = "radar2d"
@@ -26,14 +26,8 @@ MAX_SCANS = 100_000
 MAX_PATH_M = 1e9
 
 
-@dataclass
-class LegConfig:
-    """``{duration_s}`` straight on, or ``{turn_radius_m, duration_s, direction}``."""
-
-    duration_s: float | None = None
-    course_deg: float | None = None
-    turn_radius_m: float | None = None
-    direction: str | None = None
+# {duration_s} straight on, or {turn_radius_m, duration_s, direction}
+LegConfig = leg_config("duration_s", "course_deg", "turn_radius_m", "direction")
 
 
 def _default_legs():
@@ -43,7 +37,7 @@ def _default_legs():
 
 
 @dataclass
-class Config:
+class Config(ScenarioConfig):
     family: str = FAMILY
     n_tracks: int = 1000  # Monte Carlo runs
     speed_m_s: float = 10.0
@@ -57,15 +51,10 @@ class Config:
     bearing_sd_deg: float = 0.18  # polar
     seed: int = 20260103
     shard_size: int = 500
-    epoch_utc: str = "2026-01-01T00:00:00Z"  # UTC of t = 0 (ISO-8601 with zone): MCAP log times
 
     def __post_init__(self):
-        w = "scenario 'radar2d'"
-        config_epoch_ns(self.epoch_utc, w)
-        require(self.family == FAMILY, w, f"family must be '{FAMILY}'")
-        require(self.n_tracks >= 1 and self.shard_size >= 1, w,
-                "n_tracks, shard_size must be >= 1")
-        require(self.seed >= 0, w, "seed must be >= 0")
+        super().__post_init__()
+        w = self.where
         for key in ("speed_m_s", "scan_period_s", "sigma_m", "range_sd_m", "bearing_sd_deg"):
             require(getattr(self, key) > 0, w, f"{key} must be positive")
         require(self.noise in ("cartesian", "polar"), w, "noise must be cartesian or polar")
@@ -117,7 +106,7 @@ def simulate_shard(cfg: Config, shard_index: int):
         bearing = np.arctan2(x - rx, y - ry) + np.deg2rad(cfg.bearing_sd_deg) * noise[..., 1]
         plots = np.stack([rx + rng_m * np.sin(bearing), ry + rng_m * np.cos(bearing)], axis=-1)
     log = RadarLog(t, track_id, plots, sensor_metadata(cfg),
-                   config_epoch_ns(cfg.epoch_utc, f"scenario '{FAMILY}'"))
+                   cfg.epoch_ns)
     course = path.course(t)
     truth = arrow.table({
         "track_id": np.repeat(track_id, t.size), "step": np.tile(np.arange(t.size), n),

@@ -68,7 +68,7 @@ ESTIMATOR_KEYS = {
 
 @dataclass
 class Run:
-    """One estimator's per-run metrics (``report.track_metrics``) with the dataset's scenario
+    """One estimator's per-run metrics (``metrics.track_metrics``) with the dataset's scenario
     and the run's estimator config."""
 
     estimator: str

@@ -16,7 +16,7 @@ import numpy as np
 from tma.config import require
 from tma.families.ranges2d.log import RangesLog, read_ranges_log, write_ranges_log
 from tma.io import arrow
-from tma.io.mcap_log import config_epoch_ns
+from tma.scenario import ScenarioConfig
 from tma.sharding import shard_rng, shard_track_ids
 
 FAMILY = "ranges2d"
@@ -32,7 +32,7 @@ def _article_ranges():
 
 
 @dataclass
-class Config:
+class Config(ScenarioConfig):
     family: str = FAMILY
     mode: str = "concrete"  # concrete | population
     n_tracks: int = 300  # concrete: repeated runs; population: ships
@@ -44,16 +44,11 @@ class Config:
     prior_sd_m: list[float] = field(default_factory=lambda: [100.0, 100.0])
     seed: int = 20260102
     shard_size: int = 50
-    epoch_utc: str = "2026-01-01T00:00:00Z"  # UTC of t = 0 (ISO-8601 with zone): MCAP log times
 
     def __post_init__(self):
-        w = "scenario 'ranges2d'"
-        config_epoch_ns(self.epoch_utc, w)
-        require(self.family == FAMILY, w, f"family must be '{FAMILY}'")
+        super().__post_init__()
+        w = self.where
         require(self.mode in ("concrete", "population"), w, "mode must be concrete|population")
-        require(self.n_tracks >= 1 and self.shard_size >= 1, w,
-                "n_tracks, shard_size must be >= 1")
-        require(self.seed >= 0, w, "seed must be >= 0")
         require(len(self.landmarks_m) >= 1 and all(len(p) == 2 for p in self.landmarks_m), w,
                 "landmarks_m must be a non-empty list of [x, y]")
         require(self.sigma_m > 0, w, "sigma_m must be positive")
@@ -87,7 +82,7 @@ def simulate_shard(cfg: Config, shard_index: int):
     landmarks = np.asarray(cfg.landmarks_m, float)
     model = {"sigma_m": cfg.sigma_m, "prior_mean_m": list(cfg.prior_mean_m),
              "prior_sd_m": list(cfg.prior_sd_m)}
-    epoch = config_epoch_ns(cfg.epoch_utc, f"scenario '{FAMILY}'")
+    epoch = cfg.epoch_ns
     if cfg.mode == "concrete":
         ranges = np.broadcast_to(np.asarray(cfg.ranges_m, float), (n, *np.shape(cfg.ranges_m)))
         log = RangesLog(np.arange(len(cfg.ranges_m[0]), dtype=float), landmarks, track_id,

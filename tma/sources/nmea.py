@@ -1,6 +1,6 @@
 """NMEA 0183 own-ship navigation (``$--GGA``, ``$--RMC``, any talker) -> ``Recording``.
 
-Navigation only: use the file as ``navigation=FILE`` while ``input=`` holds the bearings.
+Navigation only: use the file as ``navigation=FILE`` while ``input=`` holds the contacts.
 RMC carries date, time and position; GGA carries time and position, its date comes from the
 RMC before it (or, for GGA sentences ahead of the first RMC, from that first RMC), with the
 day advanced when the time of day wraps past midnight. A GGA with fix quality 0 and an RMC
@@ -17,7 +17,7 @@ import numpy as np
 import pynmea2
 
 from tma.errors import InputError
-from tma.families.bearings2d.sources.base import Navigation, Recording
+from tma.sources.base import Navigation, Recording
 
 DAY_NS = 86_400 * 10**9
 HALF_DAY_NS = DAY_NS // 2

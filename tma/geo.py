@@ -1,4 +1,4 @@
-"""The geographic reference of a bearing log: local metres to WGS84, and Foxglove fixes.
+"""The geographic reference of a log: WGS84 to local metres and back, and Foxglove fixes.
 
 A log's local plane is the east-north tangent plane at its origin ``(lat, lon)`` (degrees,
 WGS84, height 0): x east, y north in metres, as pymap3d's ``geodetic2enu`` gives them for a
@@ -14,6 +14,17 @@ from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix
 SEA_LEVEL_TOL_M = 1e-6  # height above the sea at which a point counts as on it
 MAX_ITERATIONS = 20  # each shrinks the height by ~(distance / earth radius)^2: 8 at 2000 km
 MAX_MAPPED_M = 2e6  # farther from the origin the tangent plane is no map: NaN
+
+
+def geodetic_to_local(lat_deg, lon_deg, origin_deg) -> tuple[np.ndarray, np.ndarray]:
+    """East and north (m) on the tangent plane at ``origin_deg`` = (lat, lon) of the
+    sea-level points at ``lat_deg``, ``lon_deg`` (deg, WGS84; pymap3d ``geodetic2enu``, h = 0,
+    the up component dropped); vectorised."""
+    import pymap3d
+
+    east, north, _ = pymap3d.geodetic2enu(lat_deg, lon_deg, 0.0, origin_deg[0], origin_deg[1],
+                                          0.0, deg=True)
+    return np.asarray(east, dtype=float), np.asarray(north, dtype=float)
 
 
 def local_to_geodetic(x_m, y_m, origin_deg) -> tuple[np.ndarray, np.ndarray]:

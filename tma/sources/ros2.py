@@ -1,6 +1,6 @@
-"""ROS 2 messages (CDR, decoded by mcap-ros2-support) in a bearing log: own-ship and stamps.
+"""ROS 2 messages (CDR, decoded by mcap-ros2-support) in a recorded log: own-ship and stamps.
 
-Own-ship readers, by schema name (``ownship.topic`` or found by schema, ``sources/mcap.py``),
+Own-ship readers, by schema name (``ownship.topic`` or found by schema, ``mcap.py``),
 each ``reader(msgs, file) -> (t_ns, columns)``:
 
 - ``sensor_msgs/msg/NavSatFix``: latitude, longitude (deg, WGS84); a fix with status
@@ -11,9 +11,9 @@ each ``reader(msgs, file) -> (t_ns, columns)``:
   ``map`` or ``odom`` frame is).
 
 Times are ``file.message_times``: ``header.stamp`` (``header_stamps_ns``), or ``log_time``
-when unset. The caller drops NaN fixes (counted). Bearings on ROS 2 topics
+when unset. The caller drops NaN fixes (counted). Contacts' values on ROS 2 topics
 (``std_msgs/msg/Float64`` ``data``, ``geometry_msgs/msg/Vector3Stamped`` ``vector``...) are
-read by field path in ``sources/mcap.py``.
+read by field path in ``mcap.py``.
 """
 
 import numpy as np
@@ -24,12 +24,6 @@ NAVSATFIX = "sensor_msgs/msg/NavSatFix"
 ODOMETRY = "nav_msgs/msg/Odometry"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 STATUS_NO_FIX = -1  # sensor_msgs/msg/NavSatStatus
-
-
-def schema_name(name: str) -> str:
-    """ROS 2 type names as ``pkg/msg/Type``; some writers drop the ``msg`` (``pkg/Type``)."""
-    parts = name.split("/")
-    return f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 else name
 
 
 def header_stamps_ns(decoded: list) -> np.ndarray | None:

@@ -1,27 +1,35 @@
-"""tma's own schema in a bearing log (JSON or protobuf, ``tma/families/bearings2d/log.py``).
+"""tma's own schemas in a recorded log (JSON or protobuf, ``tma/io/schemas``).
 
 - own-ship ``tma.OwnshipNavigation``: ``{t_s, x_m, y_m}`` (s; x east, y north in m);
-- bearings ``tma.BearingBatch``: ``{t_s, track_id, bearing_deg}``, arrays (one message per
-  epoch) or scalars (one bearing per message).
+- contacts: the family's schema (``Observation.schema``, e.g. ``tma.BearingBatch``)
+  ``{t_s, track_id, <column>}``, arrays (one message per epoch) or scalars (one value per
+  message).
 
 Times come from ``t_s``, never from log times: seconds after the log's epoch (metadata record
 ``tma.time``) when it has one, else on the log's own clock. With a geographic origin (record
-``tma.geo``) own-ship is returned as latitude/longitude (``geo.local_to_geodetic``, the
+``tma.geo``) own-ship is returned as latitude/longitude (``tma.geo.local_to_geodetic``, the
 inverse of the local plane tma writes), so the origin reaches every output. The readers return
-raw fixes and bearings: navigation may start after the first bearing or end before the last
-(``assemble`` decides what to keep).
+raw fixes and values: navigation may start after the first value or end before the last
+(``align`` decides what to keep).
 """
 
 import numpy as np
 
 from tma.errors import InputError
-from tma.families.bearings2d.geo import local_to_geodetic
-from tma.families.bearings2d.log import GEO, geo_origin, track_labels
-from tma.io.mcap_log import float_array, int_array, number, read_epoch, schema_errors
+from tma.geo import local_to_geodetic
+from tma.io.mcap_log import (
+    GEO,
+    float_array,
+    geo_origin,
+    int_array,
+    number,
+    read_epoch,
+    schema_errors,
+    track_labels,
+)
+from tma.utc import MAX_NS
 
 OWNSHIP = "tma.OwnshipNavigation"
-BEARING_BATCH = "tma.BearingBatch"
-MAX_NS = 9.2e18  # int64 nanoseconds: +-292 years around 1970
 
 
 def _times_ns(t_s: np.ndarray, file, topic: str) -> np.ndarray:
@@ -52,25 +60,26 @@ def navigation(msgs, file):
     return t_ns, {"lat_deg": lat, "lon_deg": lon}
 
 
-def bearings(msgs, file):
-    """Bearings from ``tma.BearingBatch``: ``(t_ns, track, bearing)`` one row per bearing;
-    tracks are the int64 ids, or their text labels from the record ``tma.tracks``."""
+def contacts(msgs, file, column: str):
+    """The values ``column`` (``bearing_deg``) of a family's schema: ``(t_ns, track, values)``
+    one row per value; tracks are the int64 ids, or their text labels from the record
+    ``tma.tracks``."""
     obs = msgs.decoded
     with schema_errors(file.where, f"a message on {msgs.topic}"):
         t_msg = np.array([number(m["t_s"]) for m in obs])
         ids = [m["track_id"] for m in obs]
-        values = [m["bearing_deg"] for m in obs]
+        values = [m[column] for m in obs]
         arrays = (list, np.ndarray)  # JSON arrays; protobuf messages' numpy arrays
         if any(type(v) in arrays for v in ids) or any(type(v) in arrays for v in values):
             ids = [int_array(v) for v in ids]  # arrays: one message per epoch
             values = [float_array(v) for v in values]
             sizes = np.array([v.size for v in ids])
             if np.any(sizes != [v.size for v in values]):
-                raise InputError(f"{file.where}: track_id and bearing_deg differ in length in "
+                raise InputError(f"{file.where}: track_id and {column} differ in length in "
                                  f"a message on {msgs.topic}")
             t_msg = np.repeat(t_msg, sizes)
             ids, values = np.concatenate(ids), np.concatenate(values)
-        else:  # scalars, one bearing per message: converted at once
+        else:  # scalars, one value per message: converted at once
             ids, values = int_array(ids), float_array(values)
     known, index = np.unique(ids, return_inverse=True)
     labels = track_labels(file.metadata, known, file.where)

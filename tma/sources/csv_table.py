@@ -1,15 +1,18 @@
-"""CSV / TSV tables of bearings and/or own-ship fixes -> ``Recording``s.
+"""CSV / TSV tables of contacts' values and/or own-ship fixes -> ``Recording``s.
 
-One row per bearing (or per fix in a navigation file); a header row names the columns. What is
-read, and how each choice is made (every automatic choice is noted for the log):
+One row per value (a bearing, for ``bearings2d``; or per fix in a navigation file); a header
+row names the columns. What is read, and how each choice is made (every automatic choice is
+noted for the log):
 
 - columns: ``columns.<role>`` names one; otherwise our documented names (``time_s, own_x_m,
-  own_y_m, bearing_deg, track_id``) or a common name (``timestamp_utc``, ``latitude_deg``,
-  ``lon``...), matched without regard to case;
-- times (``time.format``): relative seconds, Unix time (s, ms, us, ns; told apart by
-  magnitude, or by a ``_ms``/``_us``/``_ns`` name) or ISO-8601 text with a zone;
-- bearings in degrees clockwise from north, or radians when ``bearing.units=rad``, the column
-  is named ``*_rad`` or the units row says ``rad``;
+  own_y_m``, the observation's ``column`` (``bearing_deg``), ``track_id``) or a common name
+  (``timestamp_utc``, ``latitude_deg``, ``lon``..., the observation's ``columns``), matched
+  without regard to case;
+- times (``time.format``, ``tma.utc``): relative seconds, Unix time (s, ms, us, ns; told
+  apart by magnitude, or by a ``_ms``/``_us``/``_ns`` name) or ISO-8601 text with a zone;
+- values in the observation's first unit (bearings: degrees clockwise from north), or
+  another when ``<role>.units`` says so, the column is named ``*_<unit>`` (``bearing_rad``) or
+  the units row says it;
 - own-ship as ``x``/``y`` (metres east/north of any origin) or ``lat``/``lon`` (deg, WGS84);
 - ``csv.delimiter`` (sniffed among ``,`` ``;`` tab), ``csv.decimal`` (``,`` found when the
   numbers are written ``12,5``); a units row under the header (``s,deg,deg`` or ``[s]``) is
@@ -30,10 +33,10 @@ import numpy as np
 import pandas as pd
 
 from tma.errors import InputError
-from tma.families.bearings2d.sources.base import Bearings, Navigation, Recording, SourceOptions
+from tma.sources.base import Contacts, Navigation, Recording
+from tma.utc import MAX_SPAN_S, UNIX_FROM_S, UNIX_MAGNITUDE, UNIX_SCALE_NS, ZONED
 
-DOCUMENTED = {"time": "time_s", "x": "own_x_m", "y": "own_y_m", "bearing": "bearing_deg",
-              "track": "track_id"}
+DOCUMENTED = {"time": "time_s", "x": "own_x_m", "y": "own_y_m", "track": "track_id"}
 COMMON = {  # candidates per role, in order of preference (lower case)
     "time": ("time_s", "timestamp_utc", "timestamp", "time_utc", "utc", "datetime",
              "date_time", "time", "t_s", "t", "unix_time", "unix_time_s", "epoch_s",
@@ -45,61 +48,55 @@ COMMON = {  # candidates per role, in order of preference (lower case)
             "own_latitude", "own_latitude_deg"),
     "lon": ("lon", "lng", "long", "longitude", "longitude_deg", "lon_deg", "own_lon",
             "own_lon_deg", "own_longitude", "own_longitude_deg"),
-    "bearing": ("bearing_deg", "bearing_rad", "bearing", "brg", "brg_deg", "brg_rad",
-                "true_bearing_deg", "azimuth_deg", "azimuth_rad", "azimuth"),
     "track": ("track_id", "track", "track_label", "contact_id", "contact", "target_id",
               "target", "id"),
 }
 SNIFFED = (",", ";", "\t")
 SAMPLE_BYTES = 1 << 16
 SAMPLE_LINES = 50
-MAX_SPAN_S = 9.2e9  # MCAP log times are nanoseconds in 64 bits: about 292 years
 MAX_TRACK_ID = 2**53  # integers beyond this are not exact in a numeric CSV column
-UNIX_FROM_S = 1e8  # seconds: 1973; smaller numbers are relative times
-MAGNITUDE = ((1e17, "unix_ns"), (1e14, "unix_us"), (1e11, "unix_ms"), (UNIX_FROM_S, "unix_s"))
-SCALE_NS = {"unix_s": 10**9, "unix_ms": 10**6, "unix_us": 10**3, "unix_ns": 1}
 SAME_FIX = {"x": 1e-6, "lat": 1e-9}  # m, deg (0.1 mm): rows at one time share one own-ship
 UNIT_WORDS = {"s", "sec", "secs", "second", "seconds", "ms", "us", "ns", "utc", "iso",
               "iso8601", "iso-8601", "deg", "degree", "degrees", "rad", "radian", "radians",
               "m", "km", "nmi", "-", "id", "1", "m/s", "kn", "knots", "unix", "text", "none"}
-ZONED = r"\d\d:\d\d(?::\d\d(?:[.,]\d+)?)?\s*(?:[Zz]|[+-]\d\d(?::?\d\d)?)\s*$"
 
 
-def read_csv_table(path, options: SourceOptions, *, navigation: bool,
-                   bearings: bool) -> list[Recording]:
-    """Read a CSV/TSV table. ``navigation``: own-ship positions are needed (from this file);
-    ``bearings``: bearings are needed. Returns one Recording per own-ship: one, unless the
-    rows of different tracks give different own-ship positions at one time (then one per
-    track, as each track had its own own-ship)."""
+def read_csv_table(path, options, *, navigation: bool, contacts: bool) -> list[Recording]:
+    """Read a CSV/TSV table with a family's reading ``options``. ``navigation``: own-ship
+    positions are needed (from this file); ``contacts``: the contacts' values are needed.
+    Returns one Recording per own-ship: one, unless the rows of different tracks give
+    different own-ship positions at one time (then one per track, as each track had its own
+    own-ship)."""
     path = Path(path)
     table = _Table(path, options)
-    cols = table.columns(navigation=navigation, bearings=bearings)
+    role = options.observation.role
+    cols = table.columns(navigation=navigation, contacts=contacts)
     df = table.read(cols)
     line = table.lines(len(df))
     notes = list(table.notes)
     t, epoch = _times(df, cols["time"], options.time.format, path, line, notes)
     track = None
-    if "bearing" in cols:
-        b, stated = _bearings(df, cols["bearing"], options, table, path, line, notes)
+    if role in cols:
+        b, stated = _values(df, cols[role], options, table, path, line, notes)
         track = _tracks(df, cols.get("track"), path, line)
         _check_increasing(t, track, cols["time"], path, line)
     if not navigation:
-        return [Recording(None, Bearings(t, epoch, track, b, str(path), stated), notes=notes)]
+        return [Recording(None, Contacts(t, epoch, track, b, str(path), stated), notes=notes)]
     geo = "lat" in cols
     pos = (_numbers(df, cols["lat"], path, line), _numbers(df, cols["lon"], path, line)) if geo \
         else (_numbers(df, cols["x"], path, line), _numbers(df, cols["y"], path, line))
     if geo:
         _check_lat_lon(*pos, cols, path, line)
     nav_rows, consistent = _one_fix_per_time(t, pos, SAME_FIX["lat" if geo else "x"])
-    if not consistent.all() and not bearings:
+    if not consistent.all() and not contacts:
         row = nav_rows[int(np.flatnonzero(~consistent)[0])]
         raise InputError(f"{path}: two different own-ship positions at the time of line "
                          f"{line[row]} ({cols['time']}): one fix per time")
-    if not bearings:
+    if not contacts:
         return [Recording(_navigation(t, epoch, pos, nav_rows, geo, path), None, notes=notes)]
     if consistent.all():
         return [Recording(_navigation(t, epoch, pos, nav_rows, geo, path),
-                          Bearings(t, epoch, track, b, str(path), stated), notes=notes)]
+                          Contacts(t, epoch, track, b, str(path), stated), notes=notes)]
     notes.append("tracks report different own-ship positions at one time: each track gets "
                  "its own own-ship (and dataset shard)")
     recordings = []
@@ -108,7 +105,7 @@ def read_csv_table(path, options: SourceOptions, *, navigation: bool,
     starts = np.flatnonzero(np.r_[True, code[order][1:] != code[order][:-1]])
     for rows in np.split(order, starts[1:]):  # times increase within a track (checked)
         nav = _navigation(t, epoch, pos, rows, geo, path)
-        recordings.append(Recording(nav, Bearings(t[rows], epoch, track[rows], b[rows],
+        recordings.append(Recording(nav, Contacts(t[rows], epoch, track[rows], b[rows],
                                                   str(path), stated), notes=notes))
     return recordings
 
@@ -116,7 +113,7 @@ def read_csv_table(path, options: SourceOptions, *, navigation: bool,
 class _Table:
     """The file's layout from its first lines: delimiter, decimal mark, header, units row."""
 
-    def __init__(self, path: Path, options: SourceOptions):
+    def __init__(self, path: Path, options):
         self.path, self.options, self.notes = path, options, []
         try:
             with open(path, "rb") as f:
@@ -145,7 +142,8 @@ class _Table:
         self.decimal = options.csv.decimal or self._decimal(lines[1:])
         if all(_is_number(c, self.decimal) for c in self.header if c):
             raise InputError(f"{path}: the first line holds numbers, not column names: the "
-                             "table needs a header row (time, bearing, own-ship columns)")
+                             f"table needs a header row (time, {options.observation.role}, "
+                             "own-ship columns)")
         self.units = rows[1] if len(rows) > 2 and self._units_row(rows[1], rows[2]) else None
         if self.units is not None:
             self.units = [u.strip() for u in self.units]
@@ -192,11 +190,12 @@ class _Table:
         i = self.header.index(column)
         return self.units[i].strip("[]() ").lower() if i < len(self.units) else None
 
-    def columns(self, *, navigation: bool, bearings: bool) -> dict[str, str]:
-        """Role -> header name of the columns to read (``time``, ``bearing``, ``track``,
-        ``x``/``y`` or ``lat``/``lon``); InputError naming the option when one is missing."""
+    def columns(self, *, navigation: bool, contacts: bool) -> dict[str, str]:
+        """Role -> header name of the columns to read (``time``, the observation's role,
+        ``track``, ``x``/``y`` or ``lat``/``lon``); InputError naming the option when one is
+        missing."""
         chosen = {}
-        roles = ["time"] + (["bearing", "track"] if bearings else [])
+        roles = ["time"] + ([self.options.observation.role, "track"] if contacts else [])
         for role in roles:
             name = self._find(role, required=role != "track")
             if name is not None:
@@ -206,7 +205,7 @@ class _Table:
         return chosen
 
     def _given(self, role):
-        return getattr(self.options.columns, role)
+        return self.options.column(role)
 
     def _find(self, role, required=True, note=True) -> str | None:
         given = self._given(role)
@@ -218,10 +217,12 @@ class _Table:
                 return lower[given.lower()]
             raise InputError(f"{self.path}: columns.{role}={given}: no such column; columns "
                              f"found: {', '.join(self.header)}")
-        for candidate in COMMON[role]:
+        observation = self.options.observation
+        own = observation.column if role == observation.role else DOCUMENTED.get(role)
+        for candidate in observation.columns if role == observation.role else COMMON[role]:
             if candidate in lower:
                 name = lower[candidate]
-                if note and name != DOCUMENTED.get(role):
+                if note and name != own:
                     self.notes.append(f"{self.path.name}: {role} from column '{name}' "
                                       f"(columns.{role}={name})")
                 return name
@@ -335,12 +336,12 @@ def _times(df, col, fmt, path, line, notes) -> tuple[np.ndarray, int | None]:
     if guessed:
         if scaled_name:  # the name says the unit; the magnitude says Unix or relative
             unit = scaled_name.group(1)
-            per_s = SCALE_NS["unix_s"] / SCALE_NS["unix_" + unit]
+            per_s = UNIX_SCALE_NS["unix_s"] / UNIX_SCALE_NS["unix_" + unit]
             fmt = ("unix_" if abs(float(np.median(values))) / per_s >= UNIX_FROM_S
                    else "rel_") + unit
         else:
             magnitude = abs(float(np.median(values)))
-            fmt = next((f for bound, f in MAGNITUDE if magnitude >= bound), "s")
+            fmt = next((f for bound, f in UNIX_MAGNITUDE if magnitude >= bound), "s")
         if fmt != "s":
             notes.append(f"{path.name}: {col} read as "
                          f"{fmt.replace('unix_', 'Unix time in ').replace('rel_', 'relative ')}"
@@ -355,7 +356,7 @@ def _times(df, col, fmt, path, line, notes) -> tuple[np.ndarray, int | None]:
                              f"span {span:.3g} s (at most {MAX_SPAN_S:.3g} s): {col} must be "
                              "seconds (or set time.format)")
         return seconds, None
-    scale = SCALE_NS[fmt]
+    scale = UNIX_SCALE_NS[fmt]
     too_early = values < UNIX_FROM_S * (1e9 / scale)
     if guessed and too_early.any():  # the magnitude chose Unix time: all must be Unix times
         k = int(np.argmax(too_early))
@@ -422,32 +423,36 @@ def _iso_times(series, col, fmt, path, line, notes):
     return _checked_span(seconds, ns, col, path, line), first
 
 
-def _bearings(df, col, options, table, path, line, notes):
-    """Bearings in degrees, and whether radians or degrees were stated: by ``bearing.units``,
-    or radians by the units row or a ``*_rad`` name. A name or units row saying degrees is
-    what a column of radians mislabelled would say too, so ``assemble`` still guards it."""
-    values = _numbers(df, col, path, line)
-    units, stated = options.bearing.units, options.bearing.units is not None
+def _values(df, col, options, table, path, line, notes):
+    """The observation's values in its first unit, and whether a unit was stated: by
+    ``<role>.units``, or another unit than the first by the units row or the column's name. A
+    name or units row saying the first unit is what a column in another unit mislabelled would
+    say too, so the family's guard still checks it."""
+    observation, values = options.observation, _numbers(df, col, path, line)
+    role, plural = observation.role, observation.plural
+    units, stated = options.contact.units, options.contact.units is not None
     if units is None:
-        if table.unit_of(col) in ("rad", "radian", "radians"):
-            units, stated = "rad", True
-            notes.append(f"{path.name}: bearings in radians (units row)")
-        elif col.lower().endswith("_rad"):
-            units, stated = "rad", True
-            notes.append(f"{path.name}: bearings in radians (column name {col})")
-    if units == "rad":
-        outside = np.abs(values) > 2 * np.pi
-        if outside.any():
-            k = int(np.argmax(outside))
-            raise InputError(f"{path}: {col} {values[k]:g} on line {line[k]} is outside "
-                             "[-2 pi, 2 pi]; bearings in radians were stated (bearing.units)")
-        return np.rad2deg(values), stated
-    outside = np.abs(values) > 360
+        in_row = table.unit_of(col)
+        by_row = next((u for u in observation.units[1:] if in_row in u.aliases), None)
+        by_name = observation.unit_of_name(col)
+        if by_row is not None:
+            units, stated = by_row.name, True
+            notes.append(f"{path.name}: {plural} in {by_row.words} (units row)")
+        elif by_name is not None:
+            units, stated = by_name.name, True
+            notes.append(f"{path.name}: {plural} in {by_name.words} (column name {col})")
+    unit = observation.unit(units or observation.units[0].name)
+    outside = np.abs(values) > unit.limit
     if outside.any():
         k = int(np.argmax(outside))
+        if unit is observation.units[0]:
+            others = ", ".join(f"{role}.units={u.name}" for u in observation.units[1:])
+            why = f"{plural} must be in {unit.words} (or set {others})"
+        else:
+            why = f"{plural} in {unit.words} were stated ({role}.units)"
         raise InputError(f"{path}: {col} {values[k]:g} on line {line[k]} is outside "
-                         "[-360, 360]; bearings must be in degrees (or set bearing.units=rad)")
-    return values, stated
+                         f"{unit.range_text}; {why}")
+    return unit.to_first(values), stated
 
 
 def _tracks(df, col, path, line) -> np.ndarray:

@@ -1,11 +1,11 @@
-"""Foxglove messages in a bearing log (protobuf via mcap-protobuf-support, or JSON).
+"""Foxglove messages in a recorded log (protobuf via mcap-protobuf-support, or JSON).
 
 Own-ship: ``foxglove.LocationFix`` (latitude, longitude in deg, WGS84), found by its schema
-whatever its topic (``sources/mcap.py``, which also drops NaN fixes). Times are
+whatever its topic (``mcap.py``, which also drops NaN fixes). Times are
 ``file.message_times``: the Foxglove ``timestamp`` field (``timestamps_ns``: protobuf
-``seconds``/``nanos`` or JSON ``sec``/``nsec``), or ``log_time`` when unset. Bearings on
-Foxglove channels (e.g. a JSON-schema channel ``{"track_id": 1, "bearing_deg": ...}``) are
-read by field path in ``sources/mcap.py``.
+``seconds``/``nanos`` or JSON ``sec``/``nsec``), or ``log_time`` when unset. Contacts' values
+on Foxglove channels (e.g. a JSON-schema channel ``{"track_id": 1, "bearing_deg": ...}``) are
+read by field path in ``mcap.py``.
 """
 
 import numpy as np

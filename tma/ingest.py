@@ -1,0 +1,166 @@
+"""The ingest stage: a recorded log -> a dataset of a family (no truth).
+
+``input=`` holds the contacts (and usually the own-ship): a CSV/TSV table, or an MCAP log
+(ROS 2, Foxglove or tma's own schema); ``navigation=`` may give the own-ship from a separate
+file (CSV with lat/lon or x/y, NMEA 0183 GGA/RMC, MCAP). The readers (``tma.sources``) return
+raw fixes and values, read as the family's observation asks (its ``ingest`` module:
+``OBSERVATION``); ``tma.sources.align`` puts them on one clock and one east-north plane, and
+the family makes its logs (``logs``), which its scenario module writes. Times are shifted so
+the dataset starts at t = 0 at its first value; the UTC time of t = 0, the plane's origin
+(lat, lon), text track labels, the dropped values, the navigation gaps and every automatic
+choice go into the manifest. Bad input raises ``InputError`` naming the file, line or time,
+and the option that would fix it; nothing is written then. The dataset name is a plain name;
+the dataset is built beside its final place and swapped in only when complete, so a failed
+ingest (even with ``force=true``) leaves an existing dataset byte-identical.
+"""
+
+import logging
+from dataclasses import fields
+from pathlib import Path
+
+from tma.config import to_plain
+from tma.errors import ConfigError, InputError
+from tma.families import family as family_named
+from tma.io.atomic import sha256_file
+from tma.io.dataset import MANIFEST, datasets_dir, file_record, shard_relpath, write_manifest
+from tma.io.owned import building, is_owned, plain_name
+from tma.sources import KINDS, read_source, source_kind
+from tma.sources.align import align
+from tma.sources.base import groups, source_options, unknown_option
+
+log = logging.getLogger(__name__)
+
+
+def option_groups(family: str) -> tuple[str, ...]:
+    """The reading option groups of the ingest config for ``family`` (``columns``,
+    ``bearing``, ``ownship``, ``csv``, ``time``, ``nav``, ``origin``)."""
+    return groups(family_named(family).ingest.OBSERVATION)
+
+
+def setting_names(family: str) -> tuple[str, ...]:
+    """The family's own ingest settings (``bearings2d``: ``sigma_deg``, ``min_bearings``)."""
+    return tuple(f.name for f in fields(family_named(family).ingest.Settings))
+
+
+def unknown_option_of(key: str, family: str) -> str | None:
+    """A one-line complaint if the dotted ``key`` is under a reading group of ``family`` but
+    is not an option (``columns.foo``); None otherwise."""
+    return unknown_option(key, family_named(family).ingest.OBSERVATION)
+
+
+def _file(value, option) -> Path:
+    if not isinstance(value, str | Path) or not str(value).strip():
+        raise ConfigError(f"{option} must be a file path, got '{value}'")
+    path = Path(str(value))
+    if not path.is_file():
+        raise InputError(f"{path}: no such file" + ("" if not path.exists() else
+                                                    " (a directory)"))
+    return path
+
+
+def read_recordings(path: Path, fmt, navigation: Path | None, options):
+    """The input's (and the navigation file's) recordings, each with own-ship and contacts."""
+    kind = source_kind(path, fmt)
+    if navigation is None:
+        recordings = read_source(path, kind, options, navigation=True, contacts=True)
+        for r in recordings:
+            _require(r, path, kind, options)
+        return recordings, kind, None
+    nav_kind = source_kind(navigation, "auto", option=None)
+    found = read_source(path, kind, options, navigation=False, contacts=True)
+    nav = read_source(navigation, nav_kind, options, navigation=True, contacts=False)
+    if len(found) != 1 or found[0].contacts is None:
+        raise InputError(f"{path}: no {options.observation.plural} found in the input")
+    if len(nav) != 1 or nav[0].navigation is None:
+        raise InputError(f"{navigation}: no own-ship fixes found in the navigation file")
+    rec = found[0]
+    notes = [*rec.notes, *nav[0].notes]
+    if rec.navigation is not None:
+        notes.append(f"own-ship from navigation={navigation}; the input's own-ship "
+                     f"({rec.navigation.source}) is not used")
+    rec.navigation, rec.notes = nav[0].navigation, notes
+    return [rec], kind, nav_kind
+
+
+def _require(rec, path, kind, options):
+    role = options.observation.role
+    if rec.contacts is None:
+        raise InputError(f"{path}: no {options.observation.plural} found ({kind}); name them "
+                         "with " + (f"columns.{role}=<column>" if kind == "csv" else
+                                    f"{role}.topic=<topic> [{role}.field=<field>]"))
+    if rec.navigation is None:
+        raise InputError(f"{path}: no own-ship fixes found ({kind}); name them with "
+                         + ("columns.lat/columns.lon or columns.x/columns.y" if kind == "csv"
+                            else "ownship.topic=<topic>")
+                         + ", or give them in a separate file with navigation=FILE")
+
+
+def ingest(input_path, *, data_dir, family: str, name=None, fmt="auto", force=False,
+           navigation=None, options=None, **settings) -> Path:
+    """Validate a recorded log and write it as a dataset of ``family``; returns the dataset
+    directory.
+
+    ``fmt``: auto | csv | nmea | mcap (the input's kind); ``navigation``: a separate own-ship
+    file or None; ``options``: the family's reading options or a config node of their groups
+    (``columns``, ``bearing``, ``ownship``, ``csv``, ``time``, ``nav``, ``origin``), e.g.
+    ``{"bearing": {"units": "rad"}}``; ``settings``: the family's own (``bearings2d``:
+    ``sigma_deg``, ``min_bearings``)."""
+    reader = family_named(family).ingest
+    if input_path is None or not str(input_path).strip():
+        raise ConfigError(f"ingest needs input=<path to the {reader.OBSERVATION.role} log: "
+                          ".csv, .tsv or .mcap>")
+    settings = reader.Settings(**settings)
+    if not isinstance(force, bool):
+        raise ConfigError(f"force must be true or false, got '{force}'")
+    options = source_options(options, reader.OBSERVATION)
+    if fmt not in ("auto", *KINDS):
+        raise ConfigError(f"format must be auto, csv, nmea or mcap, got '{fmt}'")
+    path = Path(str(input_path))
+    name = plain_name(name if name is not None else path.stem, "name")
+    path = _file(input_path, "input")
+    nav_path = None if navigation is None else _file(navigation, "navigation")
+
+    recordings, kind, nav_kind = read_recordings(path, fmt, nav_path, options)
+    aligned = align(recordings, options, str(path))
+    summary = aligned.summary
+    for note in summary["notes"]:
+        log.info("%s", note)
+    dropped = summary[f"dropped_{options.observation.plural}"]
+    if dropped["count"]:
+        log.warning("%s: dropped %d %s(s) (%d before, %d after the own-ship fixes): %s",
+                    path, dropped["count"], options.observation.role,
+                    dropped["before_navigation"], dropped["after_navigation"], dropped["why"])
+    gaps = summary["nav_gaps"]
+    if gaps["count"]:
+        log.warning("own-ship navigation has %d gap(s) longer than nav.max_gap_s = %g s "
+                    "(longest %.3g s, the first from t = %.3f s): own-ship is interpolated "
+                    "across them", gaps["count"], gaps["max_gap_s"], gaps["longest_s"],
+                    gaps["gaps"][0]["from_s"])
+    logs, config, extra = reader.logs(aligned, settings, str(path))
+
+    sources = {"input": {"path": str(path), "sha256": sha256_file(path), "kind": kind}}
+    if nav_path is not None:
+        sources["navigation"] = {"path": str(nav_path), "sha256": sha256_file(nav_path),
+                                 "kind": nav_kind}
+    config = {"format": fmt, **config, "options": to_plain(options)}
+    root = datasets_dir(data_dir) / name
+    with building([root], resume=False) as outputs:  # a failure leaves nothing behind
+        if root.exists() and not is_owned(root):
+            raise InputError(f"{root} exists and was not created by tma: choose another name=")
+        if (root / MANIFEST).exists() and not force:
+            raise InputError(f"dataset {root} exists: choose another name= or set force=true")
+        _write_dataset(outputs.stage(root, fresh=True), family, name, logs, config, sources,
+                       {**summary, **extra})
+        return outputs.swap(root)
+
+
+def _write_dataset(stage, family, name, logs, config, sources, extra):
+    write_log = family_named(family).scenario.write_log
+    shards = {}
+    for i, lg in enumerate(logs):
+        rel = shard_relpath(i)
+        n_msg = write_log(stage / rel, lg, {"tma.dataset": {
+            "family": family, "source": sources["input"]["path"]}})
+        shards[rel] = file_record(stage / rel, messages=n_msg, tracks=int(lg.n_tracks))
+    write_manifest(stage, family=family, source="ingest", name=name, config=config,
+                   shards=shards, files={}, extra={**sources, **extra})

@@ -1,0 +1,306 @@
+"""What every log reader returns, what a family asks of it, and the reading options.
+
+A reader turns one file of one source kind (CSV, NMEA, ROS 2 MCAP, Foxglove MCAP, tma's own
+MCAP) into flat arrays: own-platform fixes (``Navigation``) and/or per-contact values
+(``Contacts``). Which value a contact carries is the family's to say, as an ``Observation``
+(``bearings2d``: the bearing, in deg or rad, guarded against radians read as degrees);
+``tma.sources.align`` then puts fixes and values on one time base and one local east-north
+plane, and the family makes its logs from them.
+
+Conventions: times are float seconds since ``epoch_utc_ns`` (UTC nanoseconds since the Unix
+epoch) when the source has absolute times, else seconds from an arbitrary zero with
+``epoch_utc_ns = None`` (``tma.utc``); values in the observation's first unit (readers
+convert the others, and direction vectors when the observation takes them); positions either
+local (x east, y north, metres) or geographic (latitude, longitude in degrees, WGS84).
+"""
+
+import functools
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields, is_dataclass, make_dataclass
+
+import numpy as np
+from omegaconf import DictConfig, OmegaConf
+
+from tma.config import validate
+from tma.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class Unit:
+    """A unit an observation may come in: its name (``deg``), its words (``degrees``), what
+    else a units row may call it, the conversion to the observation's first unit, and the
+    largest magnitude a value may have in it (with that range as text, for messages)."""
+
+    name: str
+    words: str
+    aliases: tuple[str, ...]
+    to_first: Callable
+    limit: float
+    range_text: str
+
+
+@dataclass(frozen=True)
+class Observation:
+    """The value a family reads for each contact, as the readers need to find and check it.
+
+    ``role``: its name in options and messages (``bearing``: ``columns.bearing``, the option
+    group ``bearing.topic|field|units``); ``plural``: for messages (``bearings``);
+    ``column``: tma's own column name, ``columns``: the names a table may give it and
+    ``fields``: the MCAP message fields that may hold it (both in order of preference);
+    ``units``: the first is the one the family computes in (a name ending in another unit's
+    ``_<name>`` states that unit); ``from_vector``: the value of a direction vector (x east,
+    y north), None if the observation is no direction, and ``vector_rule`` that rule as text
+    (``atan2(x, y)``); ``topic`` and ``schema``: the topic
+    and tma schema of the family's own logs (messages ``{t_s, track_id, <column>}``);
+    ``guard(recordings, options, where)``: a check of the values of all the recordings once
+    read, before they are aligned (None: none)."""
+
+    role: str
+    plural: str
+    column: str
+    columns: tuple[str, ...]
+    fields: tuple[str, ...]
+    units: tuple[Unit, ...]
+    from_vector: Callable | None = None
+    vector_rule: str = ""
+    topic: str | None = None
+    schema: str | None = None
+    guard: Callable | None = None
+
+    def unit(self, name: str) -> Unit:
+        return next(u for u in self.units if u.name == name)
+
+    def unit_of_name(self, name: str) -> Unit | None:
+        """The unit a column or field name ends in (``bearing_rad``), other than the first
+        (a name saying the first unit states nothing: a mislabelled column says it too)."""
+        return next((u for u in self.units[1:] if name.lower().endswith(f"_{u.name}")), None)
+
+
+@dataclass
+class Navigation:
+    """Own-platform fixes, sorted by time. Exactly one of (x_m, y_m) or (lat_deg, lon_deg) is
+    set."""
+
+    t_s: np.ndarray
+    epoch_utc_ns: int | None
+    source: str  # for messages: "file.mcap: /gps/fix (sensor_msgs/msg/NavSatFix)"
+    x_m: np.ndarray | None = None
+    y_m: np.ndarray | None = None
+    lat_deg: np.ndarray | None = None
+    lon_deg: np.ndarray | None = None
+
+    @property
+    def geographic(self) -> bool:
+        return self.lat_deg is not None
+
+
+@dataclass
+class Contacts:
+    """One row per observation: time, contact and value (in the observation's first unit)."""
+
+    t_s: np.ndarray
+    epoch_utc_ns: int | None
+    track: np.ndarray  # int64 ids, or str labels (object array) kept as labels in outputs
+    values: np.ndarray
+    source: str
+    # True when the units were stated (an option, or a name or units row naming a unit other
+    # than the first): a family's guard then trusts them
+    units_stated: bool = False
+
+
+@dataclass
+class Recording:
+    """What one file gave: own-platform fixes and/or contacts, and the file's metadata
+    records (MCAP; what it says of its sensor, for the family)."""
+
+    navigation: Navigation | None
+    contacts: Contacts | None
+    metadata: dict = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)  # what was found automatically, for the log
+
+
+# -- the reading options (conf/ingest.yaml) ----------------------------------------------------
+
+POSITION_ROLES = ("time", "x", "y", "lat", "lon")  # table columns besides value and track
+
+
+@dataclass
+class ContactSource:
+    """Where the values are: an MCAP topic and a dotted field path (``data``, ``vector``,
+    ``bearing_deg``), and their units (None: the first unit unless a name says another)."""
+
+    topic: str | None = None
+    field: str | None = None
+    units: str | None = None
+
+
+@dataclass
+class OwnshipSource:
+    topic: str | None = None  # None: found by its schema (NavSatFix, LocationFix, Odometry...)
+
+
+DELIMITER_NAMES = {"comma": ",", "semicolon": ";", "tab": "\t", "\\t": "\t", "pipe": "|",
+                   "space": " "}
+DECIMAL_NAMES = {"dot": ".", "comma": ","}
+
+
+@dataclass
+class CsvFormat:
+    """``delimiter``: one character or its name (comma, semicolon, tab, pipe, space); None:
+    sniffed among ``,`` ``;`` tab. ``decimal``: ``.`` or ``,`` (or dot, comma); None: ``.``,
+    or ``,`` when the delimiter is not a comma and the numbers are written ``12,5``."""
+
+    delimiter: str | None = None
+    decimal: str | None = None
+
+    def __post_init__(self):
+        if self.delimiter is not None:
+            self.delimiter = DELIMITER_NAMES.get(self.delimiter, self.delimiter)
+            if len(self.delimiter) != 1 or self.delimiter in "\"\r\n":
+                raise ConfigError(f"csv.delimiter must be one character or one of "
+                                  f"{', '.join(DELIMITER_NAMES)}, got '{self.delimiter}'")
+        if self.decimal is not None:
+            self.decimal = DECIMAL_NAMES.get(self.decimal, self.decimal)
+            one_of("csv.decimal", self.decimal, (None, ".", ",", "dot", "comma"))
+            if self.decimal == self.delimiter:
+                raise ConfigError(f"csv.decimal and csv.delimiter are both '{self.decimal}'")
+
+
+TIME_FORMATS = ("auto", "s", "unix_s", "unix_ms", "unix_us", "unix_ns", "iso", "iso_utc")
+
+
+@dataclass
+class TimeFormat:
+    """``auto``: numbers by magnitude (Unix seconds from 1e8, ms from 1e11, us from 1e14, ns
+    from 1e17; smaller: relative seconds), text as ISO-8601 with a zone; ``s``: relative
+    seconds; ``unix_s|ms|us|ns``: Unix time; ``iso``: ISO-8601 with a zone (``Z``,
+    ``+01:00``); ``iso_utc``: ISO-8601, a time without zone taken as UTC."""
+
+    format: str = "auto"
+
+    def __post_init__(self):
+        one_of("time.format", self.format, TIME_FORMATS)
+
+
+@dataclass
+class NavLimits:
+    max_extrapolation_s: float = 1.0  # a contact value further outside the nav span is dropped
+    max_gap_s: float = 10.0  # a longer gap between fixes is reported
+
+    def __post_init__(self):
+        if not 0 <= self.max_extrapolation_s < 1e9:
+            raise ConfigError(f"nav.max_extrapolation_s must be a number of seconds in "
+                              f"[0, 1e9), got {self.max_extrapolation_s}")
+        if not 0 < self.max_gap_s < 1e9:
+            raise ConfigError(f"nav.max_gap_s must be a number of seconds in (0, 1e9), "
+                              f"got {self.max_gap_s}")
+
+
+@dataclass
+class Origin:
+    lat: float | None = None  # deg; None: the first own-ship fix
+    lon: float | None = None
+
+    def __post_init__(self):
+        if (self.lat is None) != (self.lon is None):
+            raise ConfigError("origin.lat and origin.lon go together: give both or neither")
+        if self.lat is not None and not (-90 < self.lat < 90 and -180 <= self.lon <= 360):
+            raise ConfigError(f"origin.lat must lie in (-90, 90) and origin.lon in [-180, 360] "
+                              f"degrees, got {self.lat}, {self.lon}")
+
+
+class ReadingOptions:
+    """Base of a family's ``SourceOptions`` (``options_schema``): the groups ``columns``,
+    ``<role>`` (the observation's ``ContactSource``), ``ownship``, ``csv``, ``time``, ``nav``,
+    ``origin``. ``observation`` is the family's; ``contact`` its group."""
+
+    observation: Observation
+
+    @property
+    def contact(self) -> ContactSource:
+        return getattr(self, self.observation.role)
+
+    def column(self, role: str) -> str | None:
+        return getattr(self.columns, role)
+
+    def __post_init__(self):
+        role, units = self.observation.role, self.observation.units
+        one_of(f"{role}.units", self.contact.units, (None, *(u.name for u in units)))
+
+
+@functools.cache
+def options_schema(observation: Observation) -> type:
+    """The reading options (a dataclass) of a family reading ``observation``: its column
+    under ``columns`` and its group named by its role (``bearing.topic|field|units``)."""
+    role = observation.role
+    columns = make_dataclass("Columns", [(r, str | None, None) for r in (
+        *POSITION_ROLES, role, "track")])
+    columns.__doc__ = ("Table column names; None = tma's name or a common one found "
+                       "automatically.")
+    groups = [("columns", columns, field(default_factory=columns)),
+              (role, ContactSource, field(default_factory=ContactSource)),
+              ("ownship", OwnshipSource, field(default_factory=OwnshipSource)),
+              ("csv", CsvFormat, field(default_factory=CsvFormat)),
+              ("time", TimeFormat, field(default_factory=TimeFormat)),
+              ("nav", NavLimits, field(default_factory=NavLimits)),
+              ("origin", Origin, field(default_factory=Origin))]
+    return make_dataclass("SourceOptions", groups, bases=(ReadingOptions,),
+                          namespace={"observation": observation})
+
+
+def one_of(key: str, value, allowed):
+    if value not in allowed:
+        shown = ", ".join("null" if a is None else str(a) for a in allowed)
+        raise ConfigError(f"{key} must be one of {shown}, got '{value}'")
+
+
+def groups(observation: Observation) -> tuple[str, ...]:
+    """The option groups of the ingest config (``columns``, ``bearing``, ``ownship``...)."""
+    return tuple(f.name for f in fields(options_schema(observation)))
+
+
+def option_keys(schema, prefix="") -> list[str]:
+    """Every dotted option key of ``schema`` (``columns.time``, ``nav.max_gap_s``, ...)."""
+    keys = []
+    for f in fields(schema):
+        default = f.default_factory() if callable(f.default_factory) else f.default
+        if is_dataclass(default):
+            keys += option_keys(type(default), f"{prefix}{f.name}.")
+        else:
+            keys.append(f"{prefix}{f.name}")
+    return keys
+
+
+def unknown_option(key: str, observation: Observation) -> str | None:
+    """A one-line complaint if the dotted ``key`` (``columns.foo``) is under one of the
+    reading groups but is not an option; None if it is one (or not under a group)."""
+    keys = option_keys(options_schema(observation))
+    group = key.split(".")[0]
+    if group not in groups(observation) or key in keys or key == group:
+        return None
+    known = [k for k in keys if k.startswith(group + ".")]
+    return f"unknown option {key} (the {group} options: {', '.join(known)})"
+
+
+def source_options(node, observation: Observation):
+    """The reading options from a config node (DictConfig, dict or None) holding some of the
+    groups; an unknown key or a bad value is a ConfigError naming the key."""
+    schema = options_schema(observation)
+    if isinstance(node, schema):
+        return node
+    if isinstance(node, DictConfig):
+        node = OmegaConf.to_container(node, resolve=True)
+    node = {group: OmegaConf.to_container(values, resolve=True)
+            if isinstance(values, DictConfig) else values for group, values in (node or {}).items()}
+    known = groups(observation)
+    for group, values in node.items():
+        if group not in known:
+            raise ConfigError(f"unknown option {group} (known: {', '.join(known)})")
+        if not isinstance(values, dict):
+            raise ConfigError(f"{group} holds options ({group}.<name>=...), not a value: "
+                              f"got {group}='{values}'")
+        for key in values:
+            complaint = unknown_option(f"{group}.{key}", observation)
+            if complaint:
+                raise ConfigError(complaint)
+    return validate(schema, node, "ingest")  # types, finiteness, then the ranges
