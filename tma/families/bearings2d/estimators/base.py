@@ -5,9 +5,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tma.config import require
+from tma.config import param
 from tma.errors import InputError
-from tma.estimator import Estimator
+from tma.estimator import Estimator, EstimatorConfig
 from tma.families.bearings2d.log import BearingsLog
 from tma.families.bearings2d.model import BearingTerms, bearing_residuals
 from tma.families.bearings2d.status import assess, runs_test_p
@@ -26,21 +26,17 @@ def evaluate_in_blocks(terms: BearingTerms, theta, block=BLOCK_TRACKS):
 
 
 @dataclass
-class BearingsConfig:
+class BearingsConfig(EstimatorConfig):
     """Settings every bearings-only estimator shares: what it needs, and how its per-track
     ``status`` is decided (``tma.families.bearings2d.status``)."""
 
-    min_bearings: int = 5
-    max_range_rel_sd: float = 0.5  # unobservable above this range sd / range
-    fit_alpha: float = 1e-3  # poor_fit below this p-value (chi-square, or runs test)
-    singular_rcond: float = 1e-12  # J^T J scaled eigenvalue ratio at or below: singular
-
-    def __post_init__(self):
-        w = f"estimator '{getattr(self, 'name', '?')}'"
-        require(self.min_bearings >= 4, w, "min_bearings must be at least 4")
-        require(self.max_range_rel_sd > 0, w, "max_range_rel_sd must be positive")
-        require(0 < self.fit_alpha < 1, w, "fit_alpha must lie in (0, 1)")
-        require(0 < self.singular_rcond < 1, w, "singular_rcond must lie in (0, 1)")
+    min_bearings: int = param(5, "bearings a track needs (4 unknowns)", "[4, inf)")
+    max_range_rel_sd: float = param(0.5, "unobservable above this range sd / range",
+                                    "(0, inf)")
+    fit_alpha: float = param(1e-3, "poor_fit below this p-value (chi-square, or runs test)",
+                             "(0, 1)")
+    singular_rcond: float = param(1e-12, "J^T J is singular at or below this scaled "
+                                  "eigenvalue ratio", "(0, 1)")
 
 
 class BearingsEstimator(Estimator):
@@ -49,6 +45,7 @@ class BearingsEstimator(Estimator):
     errors and a ``status`` (see ``bearings_status``)."""
 
     family = "bearings2d"
+    conformance_scenario = {"sigma_deg": 0.5, "seed": 3}
 
     def estimate(self, log: BearingsLog) -> dict:
         """Estimate theta for every track of ``log``; returns output columns by name."""
