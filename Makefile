@@ -10,7 +10,7 @@ EXPERIMENTS := $(sort $(basename $(notdir $(wildcard conf/experiment/*_table.yam
 EXPERIMENT ?= $(EXPERIMENTS)
 ARGS ?=
 
-.PHONY: help table test lint bench clean venv
+.PHONY: help table test lint bench options clean venv
 
 help:  ## list the targets
 	@grep -E '^[a-z]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-7s %s\n", $$1, $$2}'
@@ -42,6 +42,9 @@ lint: $(STAMP)  ## ruff
 
 bench: $(STAMP)  ## benchmarks of every family (ratios against named baselines, stage times)
 	$(PY) bench/bench.py $(ARGS)
+
+options: $(STAMP)  ## every scenario and estimator option: key, default, range, meaning (ARGS=lm)
+	$(PY) -m tma.options $(ARGS)
 
 clean:  ## remove generated data, tables, Hydra outputs and caches (keeps .venv)
 	rm -rf data tables outputs multirun .pytest_cache .ruff_cache .hypothesis

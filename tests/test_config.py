@@ -1,5 +1,8 @@
 """Hydra composition of every config group, and clear errors for bad configs."""
 
+import math
+import re
+import typing
 from dataclasses import fields
 from pathlib import Path
 
@@ -10,7 +13,8 @@ from omegaconf import OmegaConf
 
 from pipeline._common import CONF_DIR, engine, estimator_nodes, scenario_nodes
 from tests.conftest import compose_cfg, run_stage_here
-from tma.config import to_plain
+from tma import options
+from tma.config import describe, to_plain, validate
 from tma.errors import ConfigError
 from tma.families import (
     NAMES,
@@ -167,3 +171,62 @@ def test_every_scenario_has_the_base_fields_and_their_checks(name):
                      ("epoch_utc", "noon")):
         with pytest.raises(ConfigError, match=rf"^scenario '{name}': {key}"):
             config(**{key: bad})
+
+
+def _schemas():
+    return ([(f"scenario '{n}'", family(n).scenario.Config) for n in NAMES]
+            + [(f"estimator '{n}'", estimator_class(n).Config) for n in estimator_names()])
+
+
+def _declared(schema, path):
+    """The dataclass field at dotted ``path`` of ``schema`` (nested configs included)."""
+    *parents, last = path.split(".")
+    for part in parents:
+        schema = type(getattr(schema(), part))
+    return schema.__dataclass_fields__[last]
+
+
+def _beyond(interval, field_type):
+    """A value just outside each finite end of ``interval``."""
+    for bound, side in ((interval.lo, -1), (interval.hi, 1)):
+        if bound not in ("inf", "-inf"):
+            value = float(bound) + side * max(1.0, abs(float(bound))) * 0.5
+            whole = field_type is int or int in typing.get_args(field_type)
+            yield (math.floor if side < 0 else math.ceil)(value) if whole else value
+
+
+def _nest(parts, value):
+    return value if not parts else {parts[0]: _nest(parts[1:], value)}
+
+
+@pytest.mark.parametrize("where, schema", _schemas(), ids=lambda v: v if isinstance(v, str)
+                         else "")
+def test_every_parameter_says_what_it_is_and_refuses_what_it_does_not_allow(where, schema):
+    """Declared once (``tma.config.param``): a doc for every key, and for each declared
+    interval with a bound, a value beyond it refused in one line naming the key, the value
+    and the interval."""
+    rows = describe(schema)
+    assert all(doc for *_, doc in rows), [key for key, *_, doc in rows if not doc]
+    checked = 0
+    for key, *_ in rows:
+        if "[i]" in key:
+            continue
+        declared = _declared(schema, key)
+        interval = declared.metadata.get("range")
+        for bad in _beyond(interval, declared.type) if interval else ():
+            checked += 1
+            with pytest.raises(ConfigError, match=rf"^{where}: {re.escape(key)} must be "
+                                                  rf".*{re.escape(str(interval))}, got "):
+                validate(schema, _nest(key.split("."), bad), where)
+    assert checked
+
+
+def test_the_options_of_everything_are_listed(capsys):
+    assert options.main([]) == 0
+    text = capsys.readouterr().out
+    for where, schema in _schemas():
+        for key, *_ in describe(schema):
+            if key not in ("family", "name"):
+                assert key in text, (where, key)
+    assert options.main(["nope"]) == 2
+    assert capsys.readouterr().err.startswith("error: no scenario or estimator 'nope'")

@@ -3,11 +3,17 @@
 
 Each estimator builds from its defaults, refuses a bad value naming the key, is
 deterministic, gives per-track results that do not depend on which other tracks share the
-shard (nor on their order), and handles a one-track shard.
+shard (nor on their order), handles a one-track shard, gives the columns it declares, and has
+its name written once. It runs on the small scenario and with the fast settings it declares
+itself (``conformance_scenario``, ``conformance_config``): a new family or estimator needs no
+edit here.
 """
 
 import dataclasses
+import re
+import sys
 from dataclasses import fields
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -18,27 +24,20 @@ from tma.errors import ConfigError
 from tma.families import build_estimator, estimator_class, estimator_names, family
 
 N_TRACKS = 7  # differs from every other dimension of the logs below
-SMALL = {  # a small, fast scenario of each family
-    "bearings2d": {"sigma_deg": 0.5, "seed": 3},
-    "ranges2d": {"seed": 3},
-    "radar2d": {"seed": 3},
-    "bearing_doppler3d": {"duration_s": 10.0, "seed": 3},
-}
-FAST = {  # settings that keep each check to a fraction of a second
-    "prior_is": {"accuracy_m": 2.0},
-    "adaptive_is": {"accuracy_m": 2.0},
-    "cmnf": {"training_paths": 100},
-    "prior_mean": {"bundle_paths": 100},
-}
 
 
 @pytest.fixture(scope="module")
 def logs():
+    """A small log of each family, the scenario its estimators declare
+    (``Estimator.conformance_scenario``)."""
     out = {}
-    for name, params in SMALL.items():
-        scenario = family(name).scenario
-        cfg = scenario.Config(n_tracks=N_TRACKS, shard_size=N_TRACKS, **params)
-        out[name] = (cfg, scenario.simulate_shard(cfg, 0)[0])
+    for name in estimator_names():
+        cls = estimator_class(name)
+        if cls.family not in out:
+            scenario = family(cls.family).scenario
+            cfg = scenario.Config(n_tracks=N_TRACKS, shard_size=N_TRACKS,
+                                  **cls.conformance_scenario)
+            out[cls.family] = (cfg, scenario.simulate_shard(cfg, 0)[0])
     return out
 
 
@@ -51,8 +50,9 @@ def estimators(logs, tmp_path_factory):
         cls = estimator_class(name)
         cfg, _ = logs[cls.family]
         dataset = SimpleNamespace(family=cls.family, manifest={"config": to_plain(cfg)})
-        config = cls.prepare(to_plain(build_estimator({"name": name, **FAST.get(name, {})})
-                                      .config), dataset, data_dir)
+        config = cls.prepare(to_plain(build_estimator({"name": name,
+                                                       **cls.conformance_config}).config),
+                             dataset, data_dir)
         estimator = build_estimator(config)
         estimator.data_dir = data_dir
         built[name] = estimator
@@ -108,3 +108,25 @@ def test_a_track_does_not_depend_on_its_batch(name, logs, estimators):
     for rows in ([5, 2, 0], [3]):  # other companions, another order, and a one-track shard
         rows = np.array(rows)
         _assert_rows_equal(full, _run(estimators[name], _subset(log, rows)), rows)
+
+
+@pytest.mark.parametrize("name", estimator_names())
+def test_its_declared_outputs_appear(name, logs, estimators):
+    cls = estimator_class(name)
+    out = estimators[name].estimate(logs[cls.family][1])
+    assert set(cls.outputs) <= set(out), set(cls.outputs) - set(out)
+    assert set(cls.side_tables) <= set(out.get("extras", {})), cls.side_tables
+
+
+@pytest.mark.parametrize("name", estimator_names())
+def test_its_name_is_written_once(name):
+    """The name is its module's file name: no registry key, ``Config.name`` or class
+    attribute spells it again (``tma.estimator.module_name``)."""
+    cls = estimator_class(name)
+    module = sys.modules[cls.__module__]
+    assert Path(module.__file__).stem == name == cls.name == cls.Config().name
+    package = Path(sys.modules[f"tma.families.{cls.family}"].__file__).parent
+    spelled = [str(p.relative_to(package)) for p in package.rglob("*.py")
+               if re.search(rf"[\"']{re.escape(name)}[\"']", p.read_text())
+               and p.name in (f"{name}.py", "__init__.py")]
+    assert spelled == [], f"'{name}' written again in {spelled}"

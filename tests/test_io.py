@@ -320,7 +320,7 @@ def test_an_ownship_beyond_the_local_plane_is_refused(tmp_path):
 def test_a_scenario_origin_is_validated():
     with pytest.raises(ConfigError, match="origin.lat and origin.lon must be given together"):
         load_scenario({"family": "bearings2d", "origin": {"lat": 59.9}})
-    with pytest.raises(ConfigError, match=r"origin must be a latitude in \(-90, 90\)"):
+    with pytest.raises(ConfigError, match=r"origin.lat must be in \(-90, 90\), got 95"):
         load_scenario({"family": "bearings2d", "origin": {"lat": 95.0, "lon": 10.0}})
     assert load_scenario({"family": "bearings2d"})[1].origin.lat is None  # none by default
 

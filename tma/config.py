@@ -1,18 +1,23 @@
-"""Typed validation of config nodes against declared parameter dataclasses.
+"""Parameters declared once, and typed validation of config nodes against them.
 
-Each scenario and estimator declares its parameters as a dataclass (names with units, defaults,
-docs). A Hydra node is merged onto it, so unknown keys and wrong types fail with a message that
-names the key, instead of surfacing later as a numpy error. Every float anywhere in the config
-(nested dataclasses and lists included) must be finite; a field declared with
-``field(metadata={"nonfinite": True})`` may be +-inf (e.g. "no limit"), never NaN. The
-dataclass's ``__post_init__`` then checks ranges and consistency.
+Each scenario and estimator declares its parameters as a dataclass whose every field is a
+``param``: its default, its doc (meaning and units) and the values it allows (an interval, or
+choices), written in one place. A Hydra node is merged onto it, so unknown keys and wrong
+types fail with a message that names the key, instead of surfacing later as a numpy error.
+Every float anywhere in the config (nested dataclasses and lists included) must be finite; a
+``param(..., nonfinite=True)`` may be +-inf (e.g. "no limit"), never NaN. ``Params`` (the
+base of every scenario and estimator config) then checks every declared range, in nested
+configs too (``check_params``: one line naming the key, the value and the range), before the
+class's own ``__post_init__`` checks what relates several fields. ``describe`` lists them
+(``python -m tma.options``).
 """
 
 import copy
 import functools
 import json
 import math
-from dataclasses import asdict, fields, is_dataclass
+import re
+from dataclasses import MISSING, Field, asdict, dataclass, field, fields, is_dataclass
 
 from omegaconf import DictConfig, ListConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
@@ -122,6 +127,155 @@ def to_plain(obj):
     if isinstance(obj, DictConfig):
         return OmegaConf.to_container(obj, resolve=True)
     return obj
+
+
+@dataclass(frozen=True)
+class Interval:
+    """Allowed values from ``lo`` to ``hi`` (as written: ``"1e9"``, ``"inf"`` for no bound),
+    each end open or closed."""
+
+    lo: str
+    hi: str
+    lo_open: bool
+    hi_open: bool
+
+    @classmethod
+    def parse(cls, text: str) -> "Interval":
+        """``"[0, 90)"``, ``"(0, inf)"``, ``"[1, 64]"``..."""
+        match = re.fullmatch(r"\s*([\[(])\s*([^,]+?)\s*,\s*([^,]+?)\s*([\])])\s*", text)
+        if match is None:
+            raise ValueError(f"not an interval: {text!r}")
+        left, lo, hi, right = match.groups()
+        float(lo), float(hi)  # numbers, or a ValueError where they are declared
+        return cls(lo, hi, left == "(", right == ")")
+
+    def __contains__(self, value) -> bool:
+        lo, hi = float(self.lo), float(self.hi)
+        return ((value > lo if self.lo_open else value >= lo)
+                and (value < hi if self.hi_open else value <= hi))
+
+    def __str__(self) -> str:
+        no_lo, no_hi = math.isinf(float(self.lo)), math.isinf(float(self.hi))
+        if no_lo and no_hi:
+            return "any number"
+        if no_hi:
+            return f"{'>' if self.lo_open else '>='} {self.lo}"
+        if no_lo:
+            return f"{'<' if self.hi_open else '<='} {self.hi}"
+        return (f"{'(' if self.lo_open else '['}{self.lo}, {self.hi}"
+                f"{')' if self.hi_open else ']'}")
+
+
+def param(default=MISSING, doc: str = "", range: str | None = None, *, choices=None,
+          each: str | None = None, factory=None, nonfinite: bool = False):
+    """A config field, declared once: its ``default`` (or ``factory``, a default factory),
+    its ``doc`` (meaning and units) and the values it allows: ``range``, an interval such as
+    ``"[0, 90)"`` or ``"(0, inf)"``; ``choices``, the allowed values; ``each``, the interval
+    of every element of a list. None passes where the field's type allows it. ``nonfinite``:
+    the value may be +-inf. ``check_params`` checks them all."""
+    metadata = {"doc": doc, "nonfinite": nonfinite}
+    if range is not None:
+        metadata["range"] = Interval.parse(range)
+    if each is not None:
+        metadata["each"] = Interval.parse(each)
+    if choices is not None:
+        metadata["choices"] = tuple(choices)
+    if factory is not None:
+        return field(default_factory=factory, metadata=metadata)
+    return field(default=default, metadata=metadata)
+
+
+def _shown(value) -> str:
+    if value is None:
+        return "null"
+    return f"{value:g}" if isinstance(value, float) else repr(value) if isinstance(
+        value, str) else str(value)
+
+
+def check_params(config, where: str, prefix: str = ""):
+    """ConfigError naming the dotted key (``observer.legs[0].duration_s``), the value and
+    what is allowed, for the first field of ``config`` (a dataclass, nested ones and lists of
+    them included) outside its declared ``range``, ``each`` or ``choices``."""
+    for f in fields(config):
+        value, key = getattr(config, f.name), f"{prefix}{f.name}"
+        if is_dataclass(value):
+            check_params(value, where, f"{key}.")
+            continue
+        if isinstance(value, list) and value and all(is_dataclass(v) for v in value):
+            for i, item in enumerate(value):
+                check_params(item, where, f"{key}[{i}].")
+            continue
+        if value is None or isinstance(value, bool):
+            continue
+        interval, choices, each = (f.metadata.get(k) for k in ("range", "choices", "each"))
+        if choices is not None and value not in choices:
+            raise ConfigError(f"{where}: {key} must be one of "
+                              f"{', '.join(map(str, choices))}, got {_shown(value)}")
+        if interval is not None and value not in interval:
+            raise ConfigError(f"{where}: {key} must be {_in(interval)}, got {_shown(value)}")
+        for i, item in enumerate(value if each is not None else ()):
+            if item not in each:
+                raise ConfigError(f"{where}: {key}[{i}] must be {_in(each)}, got "
+                                  f"{_shown(item)}")
+
+
+def _in(interval: Interval) -> str:
+    text = str(interval)
+    return text if text[0] in "<>a" else f"in {text}"
+
+
+class Params:
+    """Base of every scenario and estimator config (a dataclass of ``param`` fields): on
+    construction the declared ranges are checked (``check_params``), then whatever a
+    subclass's ``__post_init__`` adds after calling this one (rules between fields). A
+    subclass that declares a field again with a plain default (``n_tracks: int = 1000``)
+    changes the default only: the doc and range stay those declared first."""
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        declared = {}
+        for base in reversed(cls.__mro__[1:]):
+            declared.update(getattr(base, "__dataclass_fields__", {}))
+        for name in cls.__dict__.get("__annotations__", {}):
+            value = cls.__dict__.get(name, MISSING)
+            if name in declared and declared[name].metadata and value is not MISSING \
+                    and not isinstance(value, Field):
+                setattr(cls, name, field(default=value, metadata=declared[name].metadata))
+
+    @property
+    def where(self) -> str:
+        """How messages name the config (``scenario 'bearings2d'``, ``estimator 'lm'``)."""
+        return type(self).__name__
+
+    def __post_init__(self):
+        check_params(self, self.where)
+
+
+def describe(schema, prefix: str = "") -> list[tuple[str, str, str, str]]:
+    """``(key, default, allowed, doc)`` of every parameter of dataclass ``schema``, nested
+    ones dotted (a list of configs as ``key[i].``)."""
+    rows = []
+    for f in fields(schema):
+        default = f.default_factory() if f.default_factory is not MISSING else f.default
+        key = f"{prefix}{f.name}"
+        if is_dataclass(default):
+            rows += describe(type(default), f"{key}.")
+            continue
+        if isinstance(default, list) and default and is_dataclass(default[0]):
+            rows += describe(type(default[0]), f"{key}[i].")
+            continue
+        allowed = []
+        if "choices" in f.metadata:
+            allowed.append(" | ".join(map(str, f.metadata["choices"])))
+        if "range" in f.metadata:
+            allowed.append(str(f.metadata["range"]))
+        if "each" in f.metadata:
+            allowed.append(f"each {f.metadata['each']}")
+        if "None" in str(f.type):
+            allowed.append("or null")
+        rows.append((key, "???" if default is MISSING else _shown(default),
+                     " ".join(allowed), f.metadata.get("doc", "")))
+    return rows
 
 
 def require(condition: bool, where: str, message: str):

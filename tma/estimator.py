@@ -1,5 +1,35 @@
 """The estimator interface shared by every family."""
 
+from dataclasses import dataclass, field
+
+from tma.config import Params, param
+
+
+def module_name(module: str) -> str:
+    """An estimator's name: the name of its module's file (``.../estimators/lm.py``: ``lm``),
+    where it is written once; the registry, its class and its ``Config`` read it there."""
+    return module.rpartition(".")[2]
+
+
+@dataclass
+class EstimatorConfig(Params):
+    """Base of every estimator's ``Config`` (the base of its family's, if any): ``name``,
+    whose default is the estimator's name (``module_name``), and every parameter's checks."""
+
+    name: str = param("", "the estimator's name (its module's file name)")
+
+    def __init_subclass__(cls, **kwargs):
+        if "__annotations__" not in cls.__dict__:
+            cls.__annotations__ = {}
+        cls.__annotations__.setdefault("name", str)
+        cls.name = field(default=module_name(cls.__module__),
+                         metadata=EstimatorConfig.__dataclass_fields__["name"].metadata)
+        super().__init_subclass__(**kwargs)
+
+    @property
+    def where(self) -> str:
+        return f"estimator '{self.name}'"
+
 
 class Estimator:
     """One interface for every estimator, built from its validated ``Config`` dataclass:
@@ -7,7 +37,8 @@ class Estimator:
     ``(n_tracks, n_steps)``). A family's base class implements ``estimate`` and calls the one
     hook a concrete estimator writes, ``solve`` (its arguments are the family's).
 
-    Declared, so that the core and the reports never test estimator names:
+    Its name is its module's file name (``module_name``), written nowhere else. Declared, so
+    that the core and the reports never test estimator names:
 
     - ``family``: the scenario family whose logs it reads;
     - ``outputs``: columns it adds beyond its family's common ones (e.g. the fuzzy
@@ -25,6 +56,16 @@ class Estimator:
     side_tables: tuple[str, ...] = ()
     reference = False
     data_dir = None  # where artefacts live; set by the estimate stage before ``estimate``
+
+    # what the conformance suite (tests/test_conformance.py) runs it on: keys of a small
+    # scenario of its family (besides n_tracks), and settings that keep each check fast
+    conformance_scenario: dict = {}
+    conformance_config: dict = {}
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if "Config" in cls.__dict__:  # a concrete estimator: named as its module
+            cls.name = module_name(cls.__module__)
 
     def __init__(self, config):
         self.config = config

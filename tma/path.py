@@ -11,21 +11,25 @@ current course), ``{turn_to_deg, rate_deg_s, direction}`` and
 """
 
 import sys
-from dataclasses import dataclass, field, make_dataclass
+from dataclasses import dataclass, make_dataclass
 
 import numpy as np
 
+from tma.config import param
 from tma.errors import ConfigError
 
-# Every key a leg may have (the module docstring's forms), with its type and meaning.
+# Every key a leg may have (the module docstring's forms): its type, meaning and values.
 LEG_KEYS = {
-    "course_deg": (float | None, "course of a straight leg (deg clockwise from north); none: "
-                                 "keep the current course"),
-    "duration_s": (float | None, "duration of a straight leg or a turn of given radius (s)"),
-    "turn_to_deg": (float | None, "course a turn ends on (deg)"),
-    "rate_deg_s": (float | None, "turn rate of a turn to a course (deg/s)"),
-    "turn_radius_m": (float | None, "radius of a turn of given duration (m)"),
-    "direction": (str | None, "direction of a turn: left or right"),
+    "course_deg": (float | None, param(None, "course of a straight leg (deg clockwise from "
+                                       "north); null: keep the current course", "[-360, 360]")),
+    "duration_s": (float | None, param(None, "duration of a straight leg or of a turn of given "
+                                       "radius (s)", "(0, 1e7)")),
+    "turn_to_deg": (float | None, param(None, "course a turn ends on (deg)", "[-360, 360]")),
+    "rate_deg_s": (float | None, param(None, "turn rate of a turn to a course (deg/s)",
+                                       "(0, 1e7)")),
+    "turn_radius_m": (float | None, param(None, "radius of a turn of given duration (m)",
+                                          "(0, inf)")),
+    "direction": (str | None, param(None, "direction of a turn", choices=("left", "right"))),
 }
 
 
@@ -34,9 +38,7 @@ def leg_config(*keys: str) -> type:
     a family's paths use, each None unless given: the one leg config of every scenario (a
     family lists only its keys, so its configs and their hashes hold no key it never
     uses). ``build_segments`` reads it and checks what the keys make."""
-    cls = make_dataclass("LegConfig", [
-        (key, LEG_KEYS[key][0], field(default=None, metadata={"doc": LEG_KEYS[key][1]}))
-        for key in keys])
+    cls = make_dataclass("LegConfig", [(key, *LEG_KEYS[key]) for key in keys])
     cls.__module__ = sys._getframe(1).f_globals["__name__"]  # the family's: picklable there
     return cls
 

@@ -1,41 +1,36 @@
 """What every scenario config holds: ``ScenarioConfig``, the base of each family's
-``scenario.Config`` (which sets its own defaults by declaring a field again)."""
+``scenario.Config`` (which sets its own defaults by declaring a field again: the doc and range
+stay the ones declared here)."""
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
-from tma.config import require
+from tma.config import Params, param, require
 from tma.utc import config_epoch_ns
 
 
 @dataclass
-class ScenarioConfig:
-    """``family``: the family's name (its one allowed value); ``n_tracks``: tracks (targets,
-    Monte Carlo runs, paths) in the dataset; ``seed``: of every random draw
-    (``tma.sharding``); ``shard_size``: tracks per log shard and per estimation task;
-    ``epoch_utc``: the UTC of t = 0 (ISO-8601 with a zone), the logs' absolute times."""
-
-    family: str = ""
-    n_tracks: int = 1
-    seed: int = 0
-    shard_size: int = 1
-    epoch_utc: str = "2026-01-01T00:00:00Z"
+class ScenarioConfig(Params):
+    family: str = param("", "the scenario family (its one allowed value)")
+    n_tracks: int = param(1, "tracks in the dataset (targets, Monte Carlo runs, paths)",
+                          "[1, inf)")
+    seed: int = param(0, "seed of every random draw (tma.sharding)", "[0, inf)")
+    shard_size: int = param(1, "tracks per log shard and per estimation task", "[1, inf)")
+    epoch_utc: str = param("2026-01-01T00:00:00Z", "UTC of t = 0 (ISO-8601 with a zone): the "
+                           "logs' absolute times")
 
     @property
     def where(self) -> str:
-        """``scenario '<family>'``, for messages."""
         return f"scenario '{self.own_family()}'"
 
     @classmethod
     def own_family(cls) -> str:
-        return next(f.default for f in fields(cls) if f.name == "family")
+        return cls.__dataclass_fields__["family"].default
 
     def __post_init__(self):
         where, own = self.where, self.own_family()
         config_epoch_ns(self.epoch_utc, where)
         require(self.family == own, where, f"family must be '{own}'")
-        require(self.n_tracks >= 1, where, f"n_tracks must be >= 1, got {self.n_tracks}")
-        require(self.shard_size >= 1, where, f"shard_size must be >= 1, got {self.shard_size}")
-        require(self.seed >= 0, where, f"seed must be >= 0, got {self.seed}")
+        super().__post_init__()
 
     @property
     def epoch_ns(self) -> int:

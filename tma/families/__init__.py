@@ -14,10 +14,11 @@ tables_dir, table_name)``; an ``ingest`` module, when the family reads recorded 
 
 import functools
 import importlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from tma.config import defaults, to_plain, validate
 from tma.errors import ConfigError
+from tma.estimator import module_name
 from tma.io.atomic import sha256_json
 
 NAMES = ("bearings2d", "ranges2d", "radar2d", "bearing_doppler3d")
@@ -26,10 +27,16 @@ NAMES = ("bearings2d", "ranges2d", "radar2d", "bearing_doppler3d")
 @dataclass(frozen=True)
 class Family:
     """What the core knows of a family: its name, where its scenario and report live, and
-    its estimators (``name -> "module:Class"``); modules are imported when first used."""
+    its estimators (``"module:Class"`` each; an estimator's name is its module's file name,
+    ``tma.estimator.module_name``); modules are imported when first used."""
 
     name: str
-    estimators: dict[str, str] = field(default_factory=dict)
+    estimator_paths: tuple[str, ...] = ()
+
+    @functools.cached_property
+    def estimators(self) -> dict[str, str]:
+        """name -> ``"module:Class"``, read off the paths without importing them."""
+        return {module_name(path.split(":")[0]): path for path in self.estimator_paths}
 
     @property
     def scenario(self):

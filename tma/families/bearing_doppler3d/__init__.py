@@ -3,9 +3,9 @@
 
 from tma.families import Family
 
-FAMILY = Family("bearing_doppler3d", estimators={
-    "ekf": "tma.families.bearing_doppler3d.estimators.ekf:EKF",
-    "srekf": "tma.families.bearing_doppler3d.estimators.srekf:SquareRootEKF",
-    "cmnf": "tma.families.bearing_doppler3d.estimators.cmnf:CMNF",
-    "prior_mean": "tma.families.bearing_doppler3d.estimators.prior_mean:PriorMean",
-})
+FAMILY = Family("bearing_doppler3d", estimator_paths=(
+    "tma.families.bearing_doppler3d.estimators.ekf:EKF",
+    "tma.families.bearing_doppler3d.estimators.srekf:SquareRootEKF",
+    "tma.families.bearing_doppler3d.estimators.cmnf:CMNF",
+    "tma.families.bearing_doppler3d.estimators.prior_mean:PriorMean",
+))

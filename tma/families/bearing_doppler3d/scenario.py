@@ -9,11 +9,11 @@ and the observation noise (Doppler noise is drawn even without Doppler, so both 
 truth and angle noise) from ``SeedSequence(seed, spawn_key=(shard,))``.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from tma.config import require
+from tma.config import param, require
 from tma.families.bearing_doppler3d.log import (
     HydrophoneLog,
     read_hydrophone_log,
@@ -41,43 +41,46 @@ class InitialConfig:
     """Initial distribution (``model.InitialDistribution``): Gaussian position, uniform speed,
     Gaussian heading, uniform a."""
 
-    position_mean_m: list[float] = field(default_factory=lambda: [0.0, 20000.0, -1000.0])
-    position_sd_m: list[float] = field(default_factory=lambda: [1000.0, 1000.0, 100.0])
-    speed_min_m_s: float = 5.0
-    speed_max_m_s: float = 12.0
-    heading_mean_rad: float = -np.pi / 2
-    heading_sd_rad: float = 0.1
-    accel_min_m_s2: float = -0.2
-    accel_max_m_s2: float = 0.2
+    position_mean_m: list[float] = param(doc="mean position X, Y, Z (m)",
+                                         factory=lambda: [0.0, 20000.0, -1000.0])
+    # the filters start from this distribution's covariance: every variance positive
+    position_sd_m: list[float] = param(doc="position standard deviations (m)", each="(0, inf)",
+                                       factory=lambda: [1000.0, 1000.0, 100.0])
+    speed_min_m_s: float = param(5.0, "smallest speed (m/s)", "(0, inf)")
+    speed_max_m_s: float = param(12.0, "largest speed (m/s); above speed_min_m_s", "(0, inf)")
+    heading_mean_rad: float = param(-np.pi / 2, "mean heading (rad)")
+    heading_sd_rad: float = param(0.1, "heading standard deviation (rad)", "(0, inf)")
+    accel_min_m_s2: float = param(-0.2, "smallest a (m/s^2)")
+    accel_max_m_s2: float = param(0.2, "largest a (m/s^2); above accel_min_m_s2")
 
 
 @dataclass
 class Config(ScenarioConfig):
     family: str = FAMILY
     n_tracks: int = 10000  # test paths
-    no_doppler: bool = False
-    duration_s: float = 100.0  # T
-    obs_period_s: float = 1.0
-    truth_step_s: float = 1e-3  # Euler-Maruyama
-    filter_step_s: float = 1e-2  # the filters' Euler prediction step
-    lam: float = 0.01  # 1/s
-    nu: float = 0.0
-    mu: float = 0.01
-    sensors_m: list[list[float]] = field(default_factory=_sensors)
-    omega0_hz: float = 20.0
-    sound_speed_m_s: float = 1500.0
-    sd_angle: float = 0.017452406437283512  # sin(1 deg), on xi and eta
-    sd_doppler_hz: float = 0.005
-    initial: InitialConfig = field(default_factory=InitialConfig)
+    no_doppler: bool = param(False, "drop the Doppler readings (bearings alone)")
+    duration_s: float = param(100.0, "T, the observation time (s)", "(0, inf)")
+    obs_period_s: float = param(1.0, "time between readings (s)", "(0, inf)")
+    truth_step_s: float = param(1e-3, "Euler-Maruyama step of the truth (s)", "(0, inf)")
+    filter_step_s: float = param(1e-2, "the filters' Euler prediction step (s)", "(0, inf)")
+    lam: float = param(0.01, "decay rate of the acceleration a (1/s)", "[0, inf)")
+    nu: float = param(0.0, "mean-reversion level of a (m/s^2)")
+    mu: float = param(0.01, "diffusion of a (m/s^2/sqrt(s))", "[0, inf)")
+    sensors_m: list[list[float]] = param(doc="hydrophone positions [x, y, z] (m)",
+                                         factory=_sensors)
+    omega0_hz: float = param(20.0, "emitted frequency (Hz)", "(0, inf)")
+    sound_speed_m_s: float = param(1500.0, "speed of sound (m/s)", "(0, inf)")
+    sd_angle: float = param(0.017452406437283512, "noise standard deviation of the elevation "
+                            "sine and bearing cosine (sin(1 deg))", "(0, 1]")
+    sd_doppler_hz: float = param(0.005, "Doppler noise standard deviation (Hz)", "(0, inf)")
+    initial: InitialConfig = param(doc="initial distribution of the AUV",
+                                   factory=InitialConfig)
     seed: int = 20260104
     shard_size: int = 2500
 
     def __post_init__(self):
         super().__post_init__()
         w = self.where
-        for name in ("duration_s", "obs_period_s", "truth_step_s", "filter_step_s",
-                     "omega0_hz", "sound_speed_m_s", "sd_angle", "sd_doppler_hz"):
-            require(getattr(self, name) > 0, w, f"{name} must be positive")
         # whole numbers of steps: the simulation and the filters round step counts silently
         for num, den in (("duration_s", "obs_period_s"), ("obs_period_s", "truth_step_s"),
                          ("obs_period_s", "filter_step_s")):
@@ -88,12 +91,9 @@ class Config(ScenarioConfig):
                 f"duration_s / obs_period_s must be <= {MAX_EPOCHS}")
         require(self.obs_period_s <= MAX_STEPS_PER_EPOCH * self.truth_step_s, w,
                 f"obs_period_s / truth_step_s must be <= {MAX_STEPS_PER_EPOCH}")
-        require(self.lam >= 0, w, "lam must be >= 0 (the acceleration decays)")
         # an Euler step of da = -lam a dt must not overshoot zero
         require(self.lam * max(self.truth_step_s, self.filter_step_s) < 1, w,
                 "lam x max(truth_step_s, filter_step_s) must be < 1")
-        require(self.mu >= 0, w, "mu must be >= 0")
-        require(self.sd_angle <= 1, w, "sd_angle must be <= 1 (the std of a sine or cosine)")
         # the Doppler reading is a frequency near omega0; the training bundle stores it in
         # float32 (relative resolution 6e-8), which must resolve its noise
         require(1e-5 * self.omega0_hz <= self.sd_doppler_hz <= self.omega0_hz, w,
@@ -106,10 +106,7 @@ class Config(ScenarioConfig):
         i = self.initial
         require(len(i.position_mean_m) == 3 and len(i.position_sd_m) == 3, w,
                 "initial.position_mean_m and initial.position_sd_m need 3 values (X, Y, Z)")
-        # the filters start from this distribution's covariance: every variance positive
-        require(min(i.position_sd_m) > 0 and i.heading_sd_rad > 0, w,
-                "initial.position_sd_m and initial.heading_sd_rad must be positive")
-        require(0 < i.speed_min_m_s < i.speed_max_m_s, w,
+        require(i.speed_min_m_s < i.speed_max_m_s, w,
                 "need 0 < initial.speed_min_m_s < initial.speed_max_m_s")
         require(i.accel_min_m_s2 < i.accel_max_m_s2, w,
                 "need initial.accel_min_m_s2 < initial.accel_max_m_s2")

@@ -3,10 +3,10 @@
 
 from tma.families import Family
 
-FAMILY = Family("bearings2d", estimators={
-    "lm": "tma.families.bearings2d.estimators.lm:LevenbergMarquardt",
-    "nbearings": "tma.families.bearings2d.estimators.nbearings:NBearings",
-    "iv": "tma.families.bearings2d.estimators.iv:InstrumentalVariable",
-    "mpekf": "tma.families.bearings2d.estimators.mpekf:ModifiedPolarEKF",
-    "last_leg": "tma.families.bearings2d.estimators.last_leg:LastLeg",
-})
+FAMILY = Family("bearings2d", estimator_paths=(
+    "tma.families.bearings2d.estimators.lm:LevenbergMarquardt",
+    "tma.families.bearings2d.estimators.nbearings:NBearings",
+    "tma.families.bearings2d.estimators.iv:InstrumentalVariable",
+    "tma.families.bearings2d.estimators.mpekf:ModifiedPolarEKF",
+    "tma.families.bearings2d.estimators.last_leg:LastLeg",
+))

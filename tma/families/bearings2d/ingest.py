@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tma.config import Params, param
 from tma.errors import ConfigError, InputError
 from tma.families.bearings2d.log import BEARINGS_TOPIC, SCHEMAS, BearingsLog, nominal_sigma
 from tma.sources.base import Observation, Unit
@@ -53,24 +54,28 @@ OBSERVATION = Observation(
 
 
 @dataclass
-class Settings:
-    """``sigma_deg``: the nominal bearing noise (deg) for covariances, overriding what an
-    MCAP log declares; None: the log's, else estimated from the residuals.
-    ``min_bearings``: each track needs this many (4 unknowns + 1 for the noise)."""
+class Settings(Params):
+    """The family's own ingest settings (given as they come from the command line)."""
 
-    sigma_deg: float | None = None
-    min_bearings: int = 5
+    sigma_deg: float | None = param(None, "nominal bearing noise (deg) for covariances, over "
+                                    "what an MCAP log declares; null: the log's, else "
+                                    "estimated from the residuals", "(0, 90)")
+    min_bearings: int = param(5, "bearings each track needs (4 unknowns and one degree of "
+                              "freedom for the noise)", "[5, inf)")
+
+    @property
+    def where(self) -> str:
+        return "ingest"
 
     def __post_init__(self):
-        sigma = self.sigma_deg
-        if sigma is not None and (isinstance(sigma, bool) or not isinstance(sigma, int | float)
-                                  or not 0 < sigma < 90):
+        sigma, count = self.sigma_deg, self.min_bearings
+        if sigma is not None and (isinstance(sigma, bool) or not isinstance(sigma, int | float)):
             raise ConfigError(f"sigma_deg must be null or a number in (0, 90) degrees, "
                               f"got '{sigma}'")
-        if (isinstance(self.min_bearings, bool) or not isinstance(self.min_bearings, int)
-                or self.min_bearings < 5):
+        if isinstance(count, bool) or not isinstance(count, int):
             raise ConfigError(f"min_bearings must be a whole number >= 5 (4 unknowns and one "
-                              f"degree of freedom for the noise), got '{self.min_bearings}'")
+                              f"degree of freedom for the noise), got '{count}'")
+        super().__post_init__()
 
 
 def logs(aligned, settings: Settings, where: str):

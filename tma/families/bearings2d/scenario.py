@@ -25,12 +25,12 @@ truth adds ``manoeuvring`` and the last manoeuvre's ``manoeuvre_start_s``,
 ``manoeuvre_end_s``, ``course_change_deg`` (signed, > 0 right) and ``speed_change_rel``.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from tma.angles import bearing_from_north, wrap_to_pi
-from tma.config import require
+from tma.config import param, require
 from tma.families.bearings2d import target_motion
 from tma.families.bearings2d.log import BearingsLog, read_bearings_log, write_bearings_log
 from tma.families.bearings2d.target_motion import TargetConfig
@@ -60,23 +60,24 @@ def _default_legs():
 
 @dataclass
 class ObserverConfig:
-    start_x_m: float = 0.0
-    start_y_m: float = 0.0
-    speed_m_s: float = 5.0
-    legs: list[LegConfig] = field(default_factory=_default_legs)
+    start_x_m: float = param(0.0, "own-ship's position x at t = 0 (m east)")
+    start_y_m: float = param(0.0, "own-ship's position y at t = 0 (m north)")
+    speed_m_s: float = param(5.0, "own-ship's speed (m/s)", "(0, 1e4)")
+    legs: list[LegConfig] = param(doc="own-ship's legs (tma.path)", factory=_default_legs)
 
 
 @dataclass
 class PopulationConfig:
     """Uniform population of true targets, relative to the observer at t = 0."""
 
-    initial_bearing_deg: float = 0.0
-    distance_min_m: float = 5000.0
-    distance_max_m: float = 50000.0
-    course_min_deg: float = 0.0
-    course_max_deg: float = 180.0
-    speed_min_m_s: float = 5.0
-    speed_max_m_s: float = 15.0
+    initial_bearing_deg: float = param(0.0, "every target's bearing from own-ship at t = 0 "
+                                       "(deg)")
+    distance_min_m: float = param(5000.0, "nearest distance at t = 0 (m)", "(0, 1e9)")
+    distance_max_m: float = param(50000.0, "farthest distance at t = 0 (m)", "(0, 1e9)")
+    course_min_deg: float = param(0.0, "smallest course (deg)")
+    course_max_deg: float = param(180.0, "largest course (deg)")
+    speed_min_m_s: float = param(5.0, "slowest speed (m/s)", "[0, 1e4)")
+    speed_max_m_s: float = param(15.0, "fastest speed (m/s)", "[0, 1e4)")
 
 
 @dataclass
@@ -84,59 +85,48 @@ class OriginConfig:
     """WGS84 position (deg) of the local plane's origin (x = y = 0); null: none. With one,
     each log carries it and own-ship as ``foxglove.LocationFix`` (Foxglove's Map panel)."""
 
-    lat: float | None = None
-    lon: float | None = None
+    lat: float | None = param(None, "latitude of the origin (deg)", "(-90, 90)")
+    lon: float | None = param(None, "longitude of the origin (deg)", "[-180, 180]")
 
 
 @dataclass
 class OutlierConfig:
     """Share ``prob`` of bearings replaced by draws uniform on the circle (module docstring)."""
 
-    prob: float = 0.0
+    prob: float = param(0.0, "share of the bearings replaced by draws uniform on the circle",
+                        "[0, 1]")
 
 
 @dataclass
 class Config(ScenarioConfig):
     family: str = FAMILY
     n_tracks: int = 10000  # targets in the dataset
-    sigma_deg: float = 0.5  # bearing noise standard deviation
+    sigma_deg: float = param(0.5, "bearing noise standard deviation (deg)", "[0, 90)")
     seed: int = 20260101
     shard_size: int = 2000  # tracks per MCAP shard (and per estimation task)
-    sample_period_s: float = 2.0  # bearings at t = 0, dt, ..., end of the observer path
-    observer: ObserverConfig = field(default_factory=ObserverConfig)
-    population: PopulationConfig = field(default_factory=PopulationConfig)
-    origin: OriginConfig = field(default_factory=OriginConfig)
-    outliers: OutlierConfig = field(default_factory=OutlierConfig)
-    target: TargetConfig = field(default_factory=TargetConfig)  # manoeuvres and wander
+    sample_period_s: float = param(2.0, "bearings at t = 0, dt, ..., the end of the observer "
+                                   "path (s)", "(0, inf)")
+    observer: ObserverConfig = param(doc="the own-ship", factory=ObserverConfig)
+    population: PopulationConfig = param(doc="the targets", factory=PopulationConfig)
+    origin: OriginConfig = param(doc="the local plane's WGS84 origin", factory=OriginConfig)
+    outliers: OutlierConfig = param(doc="wild bearings", factory=OutlierConfig)
+    target: TargetConfig = param(doc="how the targets move beyond constant velocity "
+                                 "(manoeuvres, wander), and whether the log says so",
+                                 factory=TargetConfig)
 
     def __post_init__(self):
         super().__post_init__()
         where = self.where
         target_motion.check(self.target, where)
-        lat, lon = self.origin.lat, self.origin.lon
-        require((lat is None) == (lon is None), where,
+        require((self.origin.lat is None) == (self.origin.lon is None), where,
                 "origin.lat and origin.lon must be given together (or both null)")
-        require(lat is None or (-90 < lat < 90 and -180 <= lon <= 180), where,
-                f"origin must be a latitude in (-90, 90) and a longitude in [-180, 180] deg, "
-                f"got ({lat}, {lon})")
-        require(0 <= self.sigma_deg < 90, where,
-                f"sigma_deg must be in [0, 90), got {self.sigma_deg}")
-        require(0 <= self.outliers.prob <= 1, where,
-                f"outliers.prob must be a probability in [0, 1], got {self.outliers.prob}")
-        require(self.sample_period_s > 0, where, "sample_period_s must be positive")
         p = self.population
-        require(0 < p.distance_min_m <= p.distance_max_m < 1e9, where,
+        require(p.distance_min_m <= p.distance_max_m, where,
                 "population distances must satisfy 0 < distance_min_m <= distance_max_m < 1e9")
-        require(0 <= p.speed_min_m_s <= p.speed_max_m_s < 1e4, where,
+        require(p.speed_min_m_s <= p.speed_max_m_s, where,
                 "population speeds must satisfy 0 <= speed_min_m_s <= speed_max_m_s < 1e4")
         require(p.course_min_deg <= p.course_max_deg, where,
                 "population.course_min_deg must not exceed course_max_deg")
-        require(0 < self.observer.speed_m_s < 1e4, where, "observer.speed_m_s must be in (0, 1e4)")
-        for i, leg in enumerate(self.observer.legs):
-            for name in ("duration_s", "rate_deg_s"):
-                value = getattr(leg, name)
-                require(value is None or 0 < value < 1e7, where,
-                        f"observer.legs[{i}].{name} must be in (0, 1e7), got {value}")
         duration = sum(leg.duration_s or 0.0 for leg in self.observer.legs)
         require(duration / self.sample_period_s < 1e7, where,
                 "the observer path holds more than 1e7 bearing epochs")

@@ -24,11 +24,11 @@ a dataset's bearings are as without them), a manoeuvre of a target is the same a
 ``prob`` that makes it manoeuvre, and the wander at two q differs by its scale alone.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from tma.config import require
+from tma.config import param, require
 
 MANOEUVRE_STREAM, WANDER_STREAM = 2, 3  # spawn-key elements under the shard's (shard,)
 GAUSS_NODES = (0.5 - np.sqrt(15) / 10, 0.5, 0.5 + np.sqrt(15) / 10)  # on [0, 1]
@@ -39,27 +39,34 @@ GAUSS_WEIGHTS = (5 / 18, 8 / 18, 5 / 18)
 class ManoeuvreConfig:
     """Course and speed changes (module docstring); ``prob`` 0: none."""
 
-    prob: float = 0.0  # share of the targets that manoeuvre
-    count: int = 1  # manoeuvres of each manoeuvring target
-    start_frac: float = 0.3  # manoeuvres start within [start_frac, end_frac] of the observation
-    end_frac: float = 0.8
-    course_change_min_deg: float = 20.0  # turn angle, left or right alike
-    course_change_max_deg: float = 120.0
-    turn_rate_min_deg_s: float = 0.2  # ships turn at 0.2-1 deg/s, small craft up to 3
-    turn_rate_max_deg_s: float = 1.0
-    speed_change_rel: float = 0.3  # speed factor uniform in [1 - this, 1 + this]
-    accel_m_s2: float = 0.05  # while changing speed (merchant ships 0.01-0.05)
+    prob: float = param(0.0, "share of the targets that manoeuvre", "[0, 1]")
+    count: int = param(1, "manoeuvres of each manoeuvring target", "[1, 100]")
+    start_frac: float = param(0.3, "manoeuvres start within [start_frac, end_frac] of the "
+                              "observation", "[0, 1]")
+    end_frac: float = param(0.8, "see start_frac", "[0, 1]")
+    course_change_min_deg: float = param(20.0, "smallest turn (deg), left or right alike",
+                                         "[0, 360]")
+    course_change_max_deg: float = param(120.0, "largest turn (deg)", "[0, 360]")
+    turn_rate_min_deg_s: float = param(0.2, "slowest turn rate (deg/s; ships turn at 0.2-1, "
+                                       "small craft up to 3)", "(0, 90]")
+    turn_rate_max_deg_s: float = param(1.0, "fastest turn rate (deg/s)", "(0, 90]")
+    speed_change_rel: float = param(0.3, "speed factor uniform in [1 - this, 1 + this]",
+                                    "[0, 1)")
+    accel_m_s2: float = param(0.05, "while changing speed (m/s^2; merchant ships 0.01-0.05)",
+                              "(0, 100]")
 
 
 @dataclass
 class TargetConfig:
     """How the targets move beyond constant velocity, and whether the log says so."""
 
-    accel_psd_m2_s3: float = 0.0  # wander: random acceleration spectral density per axis
-    manoeuvres: ManoeuvreConfig = field(default_factory=ManoeuvreConfig)
-    # the log declares the targets' motion (accel_psd) when it is a motion model (no
-    # manoeuvres): estimators then assume it; false: as a recording, which declares none
-    declared: bool = True
+    accel_psd_m2_s3: float = param(0.0, "wander: random acceleration spectral density per "
+                                   "axis (m^2/s^3); 0: none", "[0, 1e3)")
+    manoeuvres: ManoeuvreConfig = param(doc="course and speed changes",
+                                        factory=ManoeuvreConfig)
+    declared: bool = param(True, "the log declares the targets' motion (accel_psd) when it is "
+                           "a motion model (no manoeuvres): estimators then assume it; false: "
+                           "as a recording, which declares none")
 
     @property
     def moving(self) -> bool:
@@ -72,22 +79,14 @@ class TargetConfig:
 
 
 def check(cfg: TargetConfig, where: str):
+    """The rules between fields (each field's own range is its ``param``'s)."""
     m = cfg.manoeuvres
-    require(0 <= cfg.accel_psd_m2_s3 < 1e3, where,
-            f"target.accel_psd_m2_s3 must lie in [0, 1e3) m^2/s^3, got {cfg.accel_psd_m2_s3}")
-    require(0 <= m.prob <= 1, where, f"target.manoeuvres.prob must lie in [0, 1], got {m.prob}")
-    require(1 <= m.count <= 100, where,
-            f"target.manoeuvres.count must lie in [1, 100], got {m.count}")
-    require(0 <= m.start_frac <= m.end_frac <= 1, where,
-            "target.manoeuvres needs 0 <= start_frac <= end_frac <= 1")
-    require(0 <= m.course_change_min_deg <= m.course_change_max_deg <= 360, where,
-            "target.manoeuvres needs 0 <= course_change_min_deg <= course_change_max_deg <= 360")
-    require(0 < m.turn_rate_min_deg_s <= m.turn_rate_max_deg_s <= 90, where,
-            "target.manoeuvres needs 0 < turn_rate_min_deg_s <= turn_rate_max_deg_s <= 90")
-    require(0 <= m.speed_change_rel < 1, where,
-            f"target.manoeuvres.speed_change_rel must lie in [0, 1), got {m.speed_change_rel}")
-    require(0 < m.accel_m_s2 <= 100, where,
-            f"target.manoeuvres.accel_m_s2 must lie in (0, 100], got {m.accel_m_s2}")
+    require(m.start_frac <= m.end_frac, where,
+            "target.manoeuvres needs start_frac <= end_frac")
+    require(m.course_change_min_deg <= m.course_change_max_deg, where,
+            "target.manoeuvres needs course_change_min_deg <= course_change_max_deg")
+    require(m.turn_rate_min_deg_s <= m.turn_rate_max_deg_s, where,
+            "target.manoeuvres needs turn_rate_min_deg_s <= turn_rate_max_deg_s")
 
 
 def _ramp(t, start, duration):

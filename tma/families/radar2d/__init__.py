@@ -3,8 +3,8 @@
 
 from tma.families import Family
 
-FAMILY = Family("radar2d", estimators={
-    "alphabeta": "tma.families.radar2d.estimators.alphabeta:AlphaBeta",
-    "fuzzy_mm": "tma.families.radar2d.estimators.fuzzy_mm:FuzzyMultiModel",
-    "imm": "tma.families.radar2d.estimators.imm:IMM",
-})
+FAMILY = Family("radar2d", estimator_paths=(
+    "tma.families.radar2d.estimators.alphabeta:AlphaBeta",
+    "tma.families.radar2d.estimators.fuzzy_mm:FuzzyMultiModel",
+    "tma.families.radar2d.estimators.imm:IMM",
+))

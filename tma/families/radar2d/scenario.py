@@ -7,11 +7,11 @@ measurement noise: isotropic Cartesian (``sigma_m`` per axis) or ``polar`` (rang
 bearing noise at a radar at ``radar_xy_m``, converted to Cartesian plots).
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from tma.config import require
+from tma.config import param, require
 from tma.errors import ConfigError
 from tma.families.radar2d.log import RadarLog, read_radar_log, write_radar_log
 from tma.io import arrow
@@ -40,24 +40,26 @@ def _default_legs():
 class Config(ScenarioConfig):
     family: str = FAMILY
     n_tracks: int = 1000  # Monte Carlo runs
-    speed_m_s: float = 10.0
-    initial_course_deg: float = 90.0  # heading +x (clockwise from north)
-    legs: list[LegConfig] = field(default_factory=_default_legs)
-    scan_period_s: float = 3.0
-    noise: str = "cartesian"  # cartesian | polar
-    sigma_m: float = 10.0  # cartesian: std per axis
-    radar_xy_m: list[float] = field(default_factory=lambda: [0.0, -4000.0])  # polar
-    range_sd_m: float = 6.0  # polar
-    bearing_sd_deg: float = 0.18  # polar
+    speed_m_s: float = param(10.0, "the vessel's speed (m/s)", "(0, inf)")
+    initial_course_deg: float = param(90.0, "its course at t = 0 (deg clockwise from north: 90 "
+                                      "heads +x)", "[-360, 360]")
+    legs: list[LegConfig] = param(doc="the vessel's legs (tma.path)", factory=_default_legs)
+    scan_period_s: float = param(3.0, "radar scan period (s)", "(0, inf)")
+    noise: str = param("cartesian", "plot noise: isotropic cartesian, or polar at the radar",
+                       choices=("cartesian", "polar"))
+    sigma_m: float = param(10.0, "cartesian noise: standard deviation per axis (m)",
+                           "(0, inf)")
+    radar_xy_m: list[float] = param(doc="polar noise: the radar's position x, y (m)",
+                                    factory=lambda: [0.0, -4000.0])
+    range_sd_m: float = param(6.0, "polar noise: range standard deviation (m)", "(0, inf)")
+    bearing_sd_deg: float = param(0.18, "polar noise: bearing standard deviation (deg)",
+                                  "(0, inf)")
     seed: int = 20260103
     shard_size: int = 500
 
     def __post_init__(self):
         super().__post_init__()
         w = self.where
-        for key in ("speed_m_s", "scan_period_s", "sigma_m", "range_sd_m", "bearing_sd_deg"):
-            require(getattr(self, key) > 0, w, f"{key} must be positive")
-        require(self.noise in ("cartesian", "polar"), w, "noise must be cartesian or polar")
         require(len(self.radar_xy_m) == 2, w, "radar_xy_m needs two values (x, y)")
         try:
             with np.errstate(over="ignore", invalid="ignore"):  # checked just below

@@ -3,8 +3,8 @@
 
 from tma.families import Family
 
-FAMILY = Family("ranges2d", estimators={
-    "quadrature": "tma.families.ranges2d.estimators.quadrature:Quadrature",
-    "prior_is": "tma.families.ranges2d.estimators.prior_is:PriorIS",
-    "adaptive_is": "tma.families.ranges2d.estimators.adaptive_is:AdaptiveIS",
-})
+FAMILY = Family("ranges2d", estimator_paths=(
+    "tma.families.ranges2d.estimators.quadrature:Quadrature",
+    "tma.families.ranges2d.estimators.prior_is:PriorIS",
+    "tma.families.ranges2d.estimators.adaptive_is:AdaptiveIS",
+))

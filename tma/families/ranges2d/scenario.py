@@ -9,11 +9,11 @@ See ``../shared/specs/ranges2d.md``. Two modes:
   landmark each; truth in Parquet.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from tma.config import require
+from tma.config import param, require
 from tma.families.ranges2d.log import RangesLog, read_ranges_log, write_ranges_log
 from tma.io import arrow
 from tma.scenario import ScenarioConfig
@@ -34,27 +34,28 @@ def _article_ranges():
 @dataclass
 class Config(ScenarioConfig):
     family: str = FAMILY
-    mode: str = "concrete"  # concrete | population
+    mode: str = param("concrete", "concrete: the article's ranges repeated n_tracks times; "
+                      "population: ships drawn from the prior", choices=("concrete", "population"))
     n_tracks: int = 300  # concrete: repeated runs; population: ships
-    landmarks_m: list[list[float]] = field(default_factory=_landmarks)  # (x, y) per landmark
-    ranges_m: list[list[float]] = field(default_factory=_article_ranges)  # concrete: per landmark
-    n_pairs: int = 5  # population: ranges per landmark
-    sigma_m: float = 30.0  # range noise std
-    prior_mean_m: list[float] = field(default_factory=lambda: [0.0, 0.0])
-    prior_sd_m: list[float] = field(default_factory=lambda: [100.0, 100.0])
+    landmarks_m: list[list[float]] = param(doc="(x, y) of each landmark (m)", factory=_landmarks)
+    ranges_m: list[list[float]] = param(doc="concrete: the measured ranges to each landmark (m)",
+                                        factory=_article_ranges)
+    n_pairs: int = param(5, "population: ranges per landmark", f"[1, {MAX_PAIRS}]")
+    sigma_m: float = param(30.0, "range noise standard deviation (m)", "(0, inf)")
+    prior_mean_m: list[float] = param(doc="prior mean of the position x, y (m)",
+                                      factory=lambda: [0.0, 0.0])
+    prior_sd_m: list[float] = param(doc="prior standard deviation of x, y (m)", each="(0, inf)",
+                                    factory=lambda: [100.0, 100.0])
     seed: int = 20260102
     shard_size: int = 50
 
     def __post_init__(self):
         super().__post_init__()
         w = self.where
-        require(self.mode in ("concrete", "population"), w, "mode must be concrete|population")
         require(len(self.landmarks_m) >= 1 and all(len(p) == 2 for p in self.landmarks_m), w,
                 "landmarks_m must be a non-empty list of [x, y]")
-        require(self.sigma_m > 0, w, "sigma_m must be positive")
         require(len(self.prior_mean_m) == 2 and len(self.prior_sd_m) == 2, w,
                 "prior_mean_m and prior_sd_m need two values (x, y)")
-        require(min(self.prior_sd_m) > 0, w, "prior_sd_m must be positive")
         if self.mode == "concrete":
             require(len(self.ranges_m) == len(self.landmarks_m), w,
                     f"ranges_m needs one list of ranges per landmark (landmarks_m has "
@@ -65,7 +66,6 @@ class Config(ScenarioConfig):
                     "ranges_m must be >= 0 (distances)")
             pairs = len(self.ranges_m[0])
         else:
-            require(1 <= self.n_pairs <= MAX_PAIRS, w, f"n_pairs must be in [1, {MAX_PAIRS}]")
             pairs = self.n_pairs
         require(pairs * len(self.landmarks_m) >= 2, w,
                 "a position (2 coordinates) needs at least 2 ranges: add landmarks or "

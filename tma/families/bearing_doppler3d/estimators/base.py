@@ -19,9 +19,12 @@ NEES); ``filter_ok`` is False for a path whose estimate or covariance became non
 whose covariance has a negative variance (it is kept, the others go on).
 """
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from tma.estimator import Estimator
+from tma.config import param
+from tma.estimator import Estimator, EstimatorConfig
 from tma.families.bearing_doppler3d.log import HydrophoneLog
 from tma.families.bearing_doppler3d.model import STATE_NAMES, AuvModel, model_record
 
@@ -35,9 +38,18 @@ def dataset_model_record(dataset) -> dict:
     return model_record(dataset.manifest["config"])
 
 
+@dataclass
+class AuvConfig(EstimatorConfig):
+    """What every ``bearing_doppler3d`` filter's config holds."""
+
+    covariance_every: int = param(10, "store the full covariance every this many epochs "
+                                  "(for the NEES)", "[1, inf)")
+
+
 class AuvEstimator(Estimator):
     side_tables = ("covariance",)  # full covariances every covariance_every epochs
     family = "bearing_doppler3d"
+    conformance_scenario = {"duration_s": 10.0, "seed": 3}
     training_size = None  # the config field holding the paths it was trained on, if any
 
     def estimate(self, log: HydrophoneLog) -> dict:

@@ -16,30 +16,30 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tma.config import require
-from tma.families.bearing_doppler3d.estimators.base import AuvEstimator, dataset_model_record
+from tma.config import param, require
+from tma.families.bearing_doppler3d.estimators.base import (
+    AuvConfig,
+    AuvEstimator,
+    dataset_model_record,
+)
 from tma.families.bearing_doppler3d.estimators.bundle import MAX_PATHS, training_bundle
 from tma.families.bearing_doppler3d.model import AuvModel
 from tma.io.artefacts import is_record, load_arrays, load_or_build
 
 
 @dataclass
-class Config:
-    name: str = "cmnf"
-    training_paths: int = 10000
-    training_seed: int = 7
-    pinv_rtol: float = 1e-12
-    covariance_every: int = 10
-    artefact: dict[str, str] | None = None  # filled in by the estimate stage
+class Config(AuvConfig):
+    training_paths: int = param(10000, "simulated paths the gains are trained on",
+                                f"[100, {MAX_PATHS}]")
+    training_seed: int = param(7, "seed of the training paths", "[0, inf)")
+    pinv_rtol: float = param(1e-12, "relative threshold of the pseudo-inverses of the gains",
+                             "(0, 1)")
+    artefact: dict[str, str] | None = param(None, "the trained gains {kind, key, sha256}: set "
+                                            "by the estimate stage")
 
     def __post_init__(self):
-        w = "estimator 'cmnf'"
-        require(100 <= self.training_paths <= MAX_PATHS, w,
-                f"training_paths must be in [100, {MAX_PATHS}]")
-        require(self.training_seed >= 0, w, "training_seed must be >= 0")
-        require(0 < self.pinv_rtol < 1, w, "pinv_rtol must lie in (0, 1) (relative threshold)")
-        require(self.covariance_every >= 1, w, "covariance_every must be >= 1")
-        require(self.artefact is None or is_record(self.artefact), w,
+        super().__post_init__()
+        require(self.artefact is None or is_record(self.artefact), self.where,
                 "artefact must be null or {kind, key, sha256} (set by the estimate stage)")
 
 
@@ -120,7 +120,7 @@ def model_functions(model, t):
 
 class CMNF(AuvEstimator):
     training_size = "training_paths"
-    name = "cmnf"
+    conformance_config = {"training_paths": 100}
     Config = Config
 
     @classmethod
@@ -141,7 +141,7 @@ class CMNF(AuvEstimator):
                 return train(arrays["truth"], obs, *model_functions(model, model.epochs()),
                              config["pinv_rtol"])
 
-        return {**config, "artefact": load_or_build(data_dir, "cmnf", spec, build)}
+        return {**config, "artefact": load_or_build(data_dir, cls.name, spec, build)}
 
     def solve(self, model, t, obs):
         gains = load_arrays(self.config.artefact, self.data_dir)

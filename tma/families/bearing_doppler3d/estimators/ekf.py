@@ -9,8 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tma.config import require
-from tma.families.bearing_doppler3d.estimators.base import KalmanFilterBase
+from tma.families.bearing_doppler3d.estimators.base import AuvConfig, KalmanFilterBase
 from tma.families.bearing_doppler3d.model import (
     PHI,
     A,
@@ -24,13 +23,8 @@ STATE_ROWS = np.arange(6)  # the covariance holds the states in the model's orde
 
 
 @dataclass
-class Config:
-    name: str = "ekf"
-    covariance_every: int = 10  # store the full covariance every this many epochs (NEES)
-
-    def __post_init__(self):
-        require(self.covariance_every >= 1, f"estimator '{self.name}'",
-                "covariance_every must be >= 1")
+class Config(AuvConfig):
+    pass  # what every filter of the family has (base.AuvConfig)
 
 
 @njit(error_model="numpy", depends=(jacobian_columns, transition, euler_columns))
@@ -96,7 +90,6 @@ def update(x, P, h, H, obs, r):
 
 
 class EKF(KalmanFilterBase):
-    name = "ekf"
     Config = Config
     predict = staticmethod(predict)
     update = staticmethod(update)

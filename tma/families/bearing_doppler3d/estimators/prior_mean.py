@@ -6,33 +6,34 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tma.config import require
-from tma.families.bearing_doppler3d.estimators.base import AuvEstimator, dataset_model_record
+from tma.config import param, require
+from tma.families.bearing_doppler3d.estimators.base import (
+    AuvConfig,
+    AuvEstimator,
+    dataset_model_record,
+)
 from tma.families.bearing_doppler3d.estimators.bundle import MAX_PATHS, training_bundle
 from tma.io.artefacts import is_record, load_arrays
 
 
 @dataclass
-class Config:
-    name: str = "prior_mean"
-    bundle_paths: int = 10000
-    bundle_seed: int = 7  # the same bundle as cmnf's by default
-    covariance_every: int = 10
-    artefact: dict[str, str] | None = None  # filled in by the estimate stage
+class Config(AuvConfig):
+    bundle_paths: int = param(10000, "simulated paths whose mean is the estimate",
+                              f"[100, {MAX_PATHS}]")
+    bundle_seed: int = param(7, "seed of the bundle (by default the same bundle as cmnf's)",
+                             "[0, inf)")
+    artefact: dict[str, str] | None = param(None, "the bundle's mean {kind, key, sha256}: set "
+                                            "by the estimate stage")
 
     def __post_init__(self):
-        w = "estimator 'prior_mean'"
-        require(100 <= self.bundle_paths <= MAX_PATHS, w,
-                f"bundle_paths must be in [100, {MAX_PATHS}]")
-        require(self.bundle_seed >= 0, w, "bundle_seed must be >= 0")
-        require(self.covariance_every >= 1, w, "covariance_every must be >= 1")
-        require(self.artefact is None or is_record(self.artefact), w,
+        super().__post_init__()
+        require(self.artefact is None or is_record(self.artefact), self.where,
                 "artefact must be null or {kind, key, sha256} (set by the estimate stage)")
 
 
 class PriorMean(AuvEstimator):
     training_size = "bundle_paths"  # the simulated paths its mean and covariance come from
-    name = "prior_mean"
+    conformance_config = {"bundle_paths": 100}
     Config = Config
 
     @classmethod

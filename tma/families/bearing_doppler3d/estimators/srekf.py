@@ -14,8 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tma.config import require
-from tma.families.bearing_doppler3d.estimators.base import KalmanFilterBase
+from tma.families.bearing_doppler3d.estimators.base import AuvConfig, KalmanFilterBase
 from tma.families.bearing_doppler3d.model import (
     PHI,
     A,
@@ -31,12 +30,8 @@ SA = int(INVERSE[A])  # the row of a, the state the manoeuvre noise drives
 
 
 @dataclass
-class Config:
-    name: str = "srekf"
-    covariance_every: int = 10
-
-    def __post_init__(self):
-        require(self.covariance_every >= 1, "estimator 'srekf'", "covariance_every must be >= 1")
+class Config(AuvConfig):
+    pass  # what every filter of the family has (base.AuvConfig)
 
 
 @njit(error_model="numpy")
@@ -121,7 +116,6 @@ def update(x, S, h, H, obs, r):
 
 
 class SquareRootEKF(KalmanFilterBase):
-    name = "srekf"
     Config = Config
     predict = staticmethod(predict)
     update = staticmethod(update)

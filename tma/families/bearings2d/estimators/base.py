@@ -5,9 +5,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tma.config import require
+from tma.config import param
 from tma.errors import InputError
-from tma.estimator import Estimator
+from tma.estimator import Estimator, EstimatorConfig
 from tma.families.bearings2d import ncv
 from tma.families.bearings2d.log import BearingsLog
 from tma.families.bearings2d.model import BearingTerms
@@ -33,38 +33,28 @@ MOTION_TESTS = ("auto", "on", "off")
 
 
 @dataclass
-class BearingsConfig:
+class BearingsConfig(EstimatorConfig):
     """Settings every bearings-only estimator shares: what it needs, the targets' motion it
     assumes, and how its per-track ``status`` is decided (``tma.families.bearings2d.status``)."""
 
-    min_bearings: int = 5
-    max_range_rel_sd: float = 0.2  # unobservable above this range sd / range
-    fit_alpha: float = 1e-3  # poor_fit below this p-value of the noise test
-    singular_rcond: float = 1e-12  # J^T J scaled eigenvalue ratio at or below: singular
-    # the targets' random acceleration, power spectral density per axis (m^2/s^3); 0:
-    # constant velocity; null: the log's declared one, else (a recording) real-ship motion
-    # (ncv.RECORDED_ACCEL_PSD)
-    accel_psd_m2_s3: float | None = None
-    # the trend test of the residual sequence (status manoeuvring): auto runs it on a log
-    # that declares its targets' motion or its noise not (a recording), on|off always|never
-    motion_test: str = "auto"
-    motion_alpha: float = 1e-3  # manoeuvring below this p-value of the trend test
-    motion_terms: int = 8  # cosines of the trend test's smooth bias (1: a constant bias)
-
-    def __post_init__(self):
-        w = f"estimator '{getattr(self, 'name', '?')}'"
-        require(self.min_bearings >= 4, w, "min_bearings must be at least 4")
-        require(self.max_range_rel_sd > 0, w, "max_range_rel_sd must be positive")
-        require(0 < self.fit_alpha < 1, w, "fit_alpha must lie in (0, 1)")
-        require(0 < self.singular_rcond < 1, w, "singular_rcond must lie in (0, 1)")
-        q = self.accel_psd_m2_s3
-        require(q is None or 0 <= q < 1e6, w,
-                f"accel_psd_m2_s3 must be null or in [0, 1e6) m^2/s^3, got {q}")
-        require(self.motion_test in MOTION_TESTS, w,
-                f"motion_test must be one of {', '.join(MOTION_TESTS)}, got {self.motion_test!r}")
-        require(0 < self.motion_alpha < 1, w, "motion_alpha must lie in (0, 1)")
-        require(1 <= self.motion_terms <= 64, w,
-                f"motion_terms must lie in [1, 64], got {self.motion_terms}")
+    min_bearings: int = param(5, "bearings a track needs (4 unknowns)", "[4, inf)")
+    max_range_rel_sd: float = param(0.2, "unobservable above this range sd / range",
+                                    "(0, inf)")
+    fit_alpha: float = param(1e-3, "poor_fit below this p-value of the noise test (chi-square)",
+                             "(0, 1)")
+    singular_rcond: float = param(1e-12, "J^T J is singular at or below this scaled "
+                                  "eigenvalue ratio", "(0, 1)")
+    accel_psd_m2_s3: float | None = param(
+        None, "the targets' random acceleration, spectral density per axis (m^2/s^3; 0: "
+        "constant velocity); null: the log's declared one, else (a recording) real-ship "
+        "motion, ncv.RECORDED_ACCEL_PSD", "[0, 1e6)")
+    motion_test: str = param("auto", "the trend test of the residual sequence (status "
+                             "manoeuvring): auto runs it on a log that declares its targets' "
+                             "motion or its noise not (a recording)", choices=MOTION_TESTS)
+    motion_alpha: float = param(1e-3, "manoeuvring below this p-value of the trend test",
+                                "(0, 1)")
+    motion_terms: int = param(8, "cosines of the trend test's smooth bias (1: a constant bias)",
+                              "[1, 64]")
 
 
 class BearingsEstimator(Estimator):
@@ -87,6 +77,7 @@ class BearingsEstimator(Estimator):
     models_motion = False
     honest_errors = True
     tests_motion = False  # runs the trend test even where the log declares its motion
+    conformance_scenario = {"sigma_deg": 0.5, "seed": 3}
 
     def estimate(self, log: BearingsLog) -> dict:
         """Estimate theta for every track of ``log``; returns output columns by name."""

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tma.config import require
+from tma.config import param
 from tma.families.bearings2d.estimators.base import BearingsConfig, BearingsEstimator
 from tma.families.bearings2d.estimators.nbearings import NBearings
 from tma.families.bearings2d.model import relative_position
@@ -39,16 +39,10 @@ from tma.families.bearings2d.model import relative_position
 
 @dataclass
 class Config(BearingsConfig):
-    name: str = "iv"
-    iterations: int = 10  # instrumental-variable passes after the N-bearings start
-    rcond: float = 1e-12  # a scaled IV system with 1 / condition number below this is singular
-
-    def __post_init__(self):
-        super().__post_init__()
-        w = "estimator 'iv'"
-        require(1 <= self.iterations <= 1000, w,
-                f"iterations must lie in [1, 1000], got {self.iterations}")
-        require(0 < self.rcond < 1, w, "rcond must lie in (0, 1)")
+    iterations: int = param(10, "instrumental-variable passes after the N-bearings start",
+                            "[1, 1000]")
+    rcond: float = param(1e-12, "a scaled IV system with 1 / condition number below this is "
+                         "singular", "(0, 1)")
 
 
 def pseudo_linear_terms(t, own_x, own_y, measured_rad):
@@ -99,7 +93,6 @@ def solve_scaled(M, v, rcond):
 
 
 class InstrumentalVariable(BearingsEstimator):
-    name = "iv"
     Config = Config
 
     def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:

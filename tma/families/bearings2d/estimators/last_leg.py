@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tma.config import require
+from tma.config import param, require
 from tma.families.bearings2d import ncv
 from tma.families.bearings2d.estimators.lm import MAX_INT, LevenbergMarquardt
 from tma.families.bearings2d.estimators.lm import Config as LmConfig
@@ -43,31 +43,25 @@ from tma.families.bearings2d.status import trend_test_p
 
 @dataclass
 class Config(LmConfig):
-    name: str = "last_leg"
-    step_s: float = 30.0  # candidate change times every this many seconds
-    min_leg_s: float = 120.0  # a leg (before or after a change) lasts at least this long
-    max_rounds: int = 3  # change searches per track (each within the last leg found)
-    settle_alpha: float = 0.2  # a leg whose CV trend test rejects at this starts step_s later
-    leg_starts: int = 4  # initial distances along the leg's first bearing, besides the track's
+    step_s: float = param(30.0, "candidate change times every this many seconds", "(0, 1e7)")
+    min_leg_s: float = param(120.0, "a leg (before or after a change) lasts at least this long "
+                             "(s)", "(0, 1e7)")
+    max_rounds: int = param(3, "change searches per track (each within the last leg found)",
+                            "[1, 20]")
+    settle_alpha: float = param(0.2, "a leg whose constant-velocity trend test rejects at this "
+                                "level starts step_s later", "(0, 1)")
+    leg_starts: int = param(4, "initial distances along the leg's first bearing, besides the "
+                            "track's solution", "[1, 16]")
 
     def __post_init__(self):
         super().__post_init__()
-        w = "estimator 'last_leg'"
-        require(0 < self.step_s < 1e7, w, f"step_s must lie in (0, 1e7) s, got {self.step_s}")
-        require(0 < self.min_leg_s < 1e7, w,
-                f"min_leg_s must lie in (0, 1e7) s, got {self.min_leg_s}")
-        require(0 < self.settle_alpha < 1, w, "settle_alpha must lie in (0, 1)")
-        require(1 <= self.max_rounds <= 20, w,
-                f"max_rounds must lie in [1, 20], got {self.max_rounds}")
-        require(1 <= self.leg_starts <= 16, w,
-                f"leg_starts must lie in [1, 16], got {self.leg_starts}")
-        require(self.loss == "squared", w, f"loss must be squared, got {self.loss!r}")
+        require(self.loss == "squared", self.where, f"loss must be squared, got {self.loss!r}")
 
 
 class LastLeg(LevenbergMarquardt):
-    name = "last_leg"
     Config = Config
-    outputs = ("start_won", "cost_robust_rad2", "n_downweighted", "n_rounds")
+    outputs = ("start_won", "n_rounds")
+    conformance_config = {"starts": 2}  # every output present (the loss is squared)
     tests_motion = True  # its legs are tested whatever the log declares
 
     def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tma.config import require
+from tma.config import param, require
 from tma.families.bearings2d.estimators.base import (
     GROSS_SIGMAS,
     BearingsConfig,
@@ -59,51 +59,38 @@ MAD_PASSES = 2  # re-estimations of a MAD scale at the solution
 
 @dataclass
 class Config(BearingsConfig):
-    name: str = "lm"
     # Prior guess: target at this bearing/distance from own-ship at t = 0 with this
-    # course/speed. initial_bearing_deg = null uses each track's first measured bearing.
-    initial_bearing_deg: float | None = 0.0
-    initial_distance_m: float = 25000.0
-    initial_course_deg: float = 90.0
-    initial_speed_m_s: float = 10.0
-    lambda0: float = 10.0
-    lambda_up: float = 10.0
-    lambda_down: float = 0.1
-    f_tol_rad2: float = 1e-10
-    max_iter: int = 200  # accepted steps
-    lambda_max: float = 1e16  # a track whose lambda exceeds this stops (stalled)
-    pd_rtol: float = 1e-12  # A is positive definite if its smallest scaled eigenvalue > this
-    loss: str = "squared"  # squared | huber | cauchy
-    scale: str = "sigma"  # robust scale s: sigma (nominal) | mad (from the residuals)
-    starts: int = 1  # initial distances per track; the lowest F wins
-    start_min_m: float = 5000.0  # range of the extra starts (geometric)
-    start_max_m: float = 50000.0
+    # course/speed.
+    initial_bearing_deg: float | None = param(0.0, "initial guess: bearing from own-ship at "
+                                              "t = 0 (deg); null: each track's first bearing",
+                                              "[-360, 360]")
+    initial_distance_m: float = param(25000.0, "initial guess: distance at t = 0 (m)",
+                                      "(0, 1e9)")
+    initial_course_deg: float = param(90.0, "initial guess: course (deg)", "[-360, 360]")
+    initial_speed_m_s: float = param(10.0, "initial guess: speed (m/s)", "[0, 1e4)")
+    lambda0: float = param(10.0, "initial Marquardt lambda; below lambda_max", "(0, inf)")
+    lambda_up: float = param(10.0, "lambda's factor after a rejected step", "(1, inf)")
+    lambda_down: float = param(0.1, "lambda's factor after an accepted step", "(0, 1)")
+    f_tol_rad2: float = param(1e-10, "stop when F falls by less than this (rad^2)", "(0, inf)")
+    max_iter: int = param(200, "accepted steps at most", "[1, inf)")
+    lambda_max: float = param(1e16, "a track whose lambda exceeds this stops (stalled)",
+                              "(0, inf)")
+    pd_rtol: float = param(1e-12, "A is positive definite if its smallest scaled eigenvalue "
+                           "exceeds this", "(0, 1)")
+    loss: str = param("squared", "loss of the residuals", choices=LOSSES)
+    scale: str = param("sigma", "robust scale s: sigma (nominal) or mad (from the residuals)",
+                       choices=SCALES)
+    starts: int = param(1, "initial distances per track; the lowest F wins",
+                        f"[1, {MAX_STARTS}]")
+    start_min_m: float = param(5000.0, "nearest extra start (m; geometric up to start_max_m)",
+                               "(0, 1e9)")
+    start_max_m: float = param(50000.0, "farthest extra start (m)", "(0, 1e9)")
 
     def __post_init__(self):
         super().__post_init__()
-        w = "estimator 'lm'"
-        b = self.initial_bearing_deg
-        require(b is None or -360 <= b <= 360, w,
-                f"initial_bearing_deg must be null or in [-360, 360], got {b}")
-        require(0 < self.initial_distance_m < 1e9, w,
-                f"initial_distance_m must lie in (0, 1e9) m, got {self.initial_distance_m}")
-        require(-360 <= self.initial_course_deg <= 360, w,
-                f"initial_course_deg must lie in [-360, 360], got {self.initial_course_deg}")
-        require(0 <= self.initial_speed_m_s < 1e4, w,
-                f"initial_speed_m_s must lie in [0, 1e4) m/s, got {self.initial_speed_m_s}")
-        require(0 < self.lambda0 < self.lambda_max, w, "lambda0 must lie in (0, lambda_max)")
-        require(self.lambda_up > 1, w, "lambda_up must exceed 1")
-        require(0 < self.lambda_down < 1, w, "lambda_down must lie in (0, 1)")
-        require(self.f_tol_rad2 > 0, w, "f_tol_rad2 must be positive")
-        require(self.max_iter > 0, w, "max_iter must be positive")
-        require(0 < self.pd_rtol < 1, w, "pd_rtol must lie in (0, 1)")
-        require(self.loss in LOSSES, w,
-                f"loss must be one of {', '.join(LOSSES)}, got {self.loss!r}")
-        require(self.scale in SCALES, w,
-                f"scale must be one of {', '.join(SCALES)}, got {self.scale!r}")
-        require(1 <= self.starts <= MAX_STARTS, w,
-                f"starts must lie in [1, {MAX_STARTS}], got {self.starts}")
-        require(0 < self.start_min_m <= self.start_max_m < 1e9, w,
+        w = self.where
+        require(self.lambda0 < self.lambda_max, w, "lambda0 must lie in (0, lambda_max)")
+        require(self.start_min_m <= self.start_max_m, w,
                 "start_min_m and start_max_m must satisfy 0 < start_min_m <= start_max_m < 1e9"
                 f" m, got {self.start_min_m}, {self.start_max_m}")
 
@@ -180,11 +167,11 @@ def sandwich_information(residuals, jac, scale, loss):
 
 
 class LevenbergMarquardt(BearingsEstimator):
-    name = "lm"
     Config = Config
     models_motion = True  # a target that is not at constant velocity: the NCV MAP state
     # present when starts > 1 / when the loss is robust (the default run adds none)
     outputs = ("start_won", "cost_robust_rad2", "n_downweighted")
+    conformance_config = {"starts": 2, "loss": "huber"}  # every output present
 
     def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
         cfg = self.config

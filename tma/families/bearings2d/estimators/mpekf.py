@@ -52,7 +52,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tma.config import require
+from tma.config import param
 from tma.errors import InputError
 from tma.families.bearings2d.estimators.base import (
     BLOCK_TRACKS,
@@ -67,34 +67,21 @@ SINGULAR_RCOND = 1e-14  # J^T J with a smaller scaled eigenvalue ratio: no covar
 
 @dataclass
 class Config(BearingsConfig):
-    name: str = "mpekf"
-    initial_range_m: float = 15000.0  # prior range at the first bearing
-    initial_range_sd_m: float = 10000.0  # its standard deviation (as one of 1 / range)
-    initial_speed_sd_m_s: float = 10.0  # prior target velocity 0 with this sd per axis
-    sigma_deg: float | None = None  # bearing noise the filter assumes; null: the log's
-    min_sigma_deg: float = 0.001  # the assumed noise is at least this (a noiseless log)
-    gate_sigmas: float | None = None  # skip a bearing whose innovation exceeds this many sd
-    gate_reset: int = 5  # this many bearings skipped in a row restart the filter (with a gate)
-    passes: int = 2  # filter passes; each after the first starts its prior about the last answer
-
-    def __post_init__(self):
-        super().__post_init__()
-        w = "estimator 'mpekf'"
-        require(0 < self.initial_range_m < 1e9, w,
-                f"initial_range_m must lie in (0, 1e9) m, got {self.initial_range_m}")
-        require(0 < self.initial_range_sd_m < 1e9, w,
-                f"initial_range_sd_m must lie in (0, 1e9) m, got {self.initial_range_sd_m}")
-        require(0 < self.initial_speed_sd_m_s < 1e4, w,
-                f"initial_speed_sd_m_s must lie in (0, 1e4) m/s, got {self.initial_speed_sd_m_s}")
-        require(self.sigma_deg is None or 0 <= self.sigma_deg < 90, w,
-                f"sigma_deg must be null or in [0, 90), got {self.sigma_deg}")
-        require(0 < self.min_sigma_deg < 90, w,
-                f"min_sigma_deg must lie in (0, 90), got {self.min_sigma_deg}")
-        require(self.gate_sigmas is None or 0 < self.gate_sigmas < 1e6, w,
-                f"gate_sigmas must be null or in (0, 1e6), got {self.gate_sigmas}")
-        require(1 <= self.gate_reset <= 1e9, w,
-                f"gate_reset must lie in [1, 1e9], got {self.gate_reset}")
-        require(1 <= self.passes <= 10, w, f"passes must lie in [1, 10], got {self.passes}")
+    initial_range_m: float = param(15000.0, "prior range at the first bearing (m)", "(0, 1e9)")
+    initial_range_sd_m: float = param(10000.0, "its standard deviation (m; as one of 1 / range)",
+                                      "(0, 1e9)")
+    initial_speed_sd_m_s: float = param(10.0, "prior target velocity 0 with this standard "
+                                        "deviation per axis (m/s)", "(0, 1e4)")
+    sigma_deg: float | None = param(None, "bearing noise the filter assumes (deg); null: the "
+                                    "log's", "[0, 90)")
+    min_sigma_deg: float = param(0.001, "the assumed noise is at least this (deg; a noiseless "
+                                 "log)", "(0, 90)")
+    gate_sigmas: float | None = param(None, "skip a bearing whose innovation exceeds this many "
+                                      "standard deviations; null: no gate", "(0, 1e6)")
+    gate_reset: int = param(5, "this many bearings skipped in a row restart the filter (with a "
+                            "gate)", "[1, 1e9]")
+    passes: int = param(2, "filter passes; each after the first starts its prior about the "
+                        "last answer", "[1, 10]")
 
 
 def reference_velocity(t, own_x, own_y):
@@ -280,7 +267,6 @@ def consistent_information(t, own_x, own_y, measured_rad, valid, theta, sigma_ra
 
 
 class ModifiedPolarEKF(BearingsEstimator):
-    name = "mpekf"
     Config = Config
     outputs = ("n_gated",)  # bearings the innovation gate skipped (0 without a gate)
 

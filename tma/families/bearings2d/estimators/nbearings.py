@@ -16,23 +16,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tma.config import require
+from tma.config import param
 from tma.families.bearings2d.estimators.base import BearingsConfig, BearingsEstimator
 from tma.linalg import jacobi_scaled_eigh, solve_shifted
 
 
 @dataclass
 class Config(BearingsConfig):
-    name: str = "nbearings"
-    rcond: float = 1e-12  # scaled normal matrix with eigenvalues below rcond*max is singular
-
-    def __post_init__(self):
-        super().__post_init__()
-        require(0 < self.rcond < 1, "estimator 'nbearings'", "rcond must lie in (0, 1)")
+    rcond: float = param(1e-12, "the scaled normal matrix with eigenvalues below rcond x max "
+                         "is singular", "(0, 1)")
 
 
 class NBearings(BearingsEstimator):
-    name = "nbearings"
     Config = Config
     honest_errors = False  # biased by the noise of its first bearing: never ok, approximate
 

@@ -5,8 +5,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tma.config import require
+from tma.config import param
 from tma.families.radar2d.estimators.base import (
+    RadarConfig,
     RadarEstimator,
     alpha_beta_step,
     initial_state,
@@ -15,20 +16,12 @@ from tma.families.radar2d.estimators.base import (
 
 
 @dataclass
-class Config:
-    name: str = "alphabeta"
-    memory: int = 10  # J
-    scan_period_s: float | None = None  # null = the log's; if set, must agree with the log
-
-    def __post_init__(self):
-        w = "estimator 'alphabeta'"
-        require(self.memory >= 2, w, "memory must be >= 2")
-        require(self.scan_period_s is None or self.scan_period_s > 0, w,
-                "scan_period_s must be null or positive")
+class Config(RadarConfig):
+    memory: int = param(10, "J, the longest memory (scans) of the growing-memory gains",
+                        "[2, inf)")
 
 
 class AlphaBeta(RadarEstimator):
-    name = "alphabeta"
     Config = Config
 
     def solve(self, log, tau):

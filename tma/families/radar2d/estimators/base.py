@@ -7,11 +7,22 @@ when its estimate is non-finite at any scan from the run's first plot on (a wrec
 or a tracker that cannot start from the plots it got).
 """
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from tma.config import param
 from tma.errors import InputError
-from tma.estimator import Estimator
+from tma.estimator import Estimator, EstimatorConfig
 from tma.families.radar2d.log import RadarLog
+
+
+@dataclass
+class RadarConfig(EstimatorConfig):
+    """What every ``radar2d`` tracker's config holds."""
+
+    scan_period_s: float | None = param(None, "scan period (s); null: the log's (if set, it "
+                                        "must agree with the log)", "(0, inf)")
 
 
 def scan_period(log: RadarLog, configured: float | None) -> float:
@@ -81,6 +92,7 @@ def run_status(plots, out) -> np.ndarray:
 
 
 class RadarEstimator(Estimator):
+    conformance_scenario = {"seed": 3}
     family = "radar2d"
 
     def estimate(self, log: RadarLog) -> dict:

@@ -15,8 +15,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tma.config import require
-from tma.families.radar2d.estimators.base import RadarEstimator, alpha_beta_window, state_columns
+from tma.config import param, require
+from tma.families.radar2d.estimators.base import (
+    RadarConfig,
+    RadarEstimator,
+    alpha_beta_window,
+    state_columns,
+)
 from tma.families.radar2d.fuzzy import memory_length_selector
 
 # The bank refits J - 1 windows of up to J scans at every scan (cost ~ J^2 per scan) and the
@@ -25,28 +30,21 @@ MAX_MEMORY = 200
 
 
 @dataclass
-class Config:
-    name: str = "fuzzy_mm"
-    memory: int = 10  # J: longest memory in the bank
-    bad_slope: float = 5.0  # a in Bad(u) = 1 / (1 + exp(-a (u - c)))
-    bad_centre: float = 1.5  # c
-    residual_clip: float = 3.0
-    sigma_prior_m: float = 15.0  # weak prior of sigma_hat, worth one sample
-    sigma_hat_m: float | None = None  # fix sigma_hat instead of estimating it
-    scan_period_s: float | None = None
+class Config(RadarConfig):
+    memory: int = param(10, "J, the longest memory (scans) in the bank", f"[3, {MAX_MEMORY}]")
+    bad_slope: float = param(5.0, "a in Bad(u) = 1 / (1 + exp(-a (u - c))) (Bad rises with the "
+                             "normalised residual u)", "(0, inf)")
+    bad_centre: float = param(1.5, "c in Bad(u); below residual_clip", "(0, inf)")
+    residual_clip: float = param(3.0, "normalised residuals are clipped at this", "(0, inf)")
+    sigma_prior_m: float = param(15.0, "weak prior of sigma_hat (m), worth one sample",
+                                 "(0, inf)")
+    sigma_hat_m: float | None = param(None, "a fixed plot noise sigma_hat (m); null: estimated",
+                                      "(0, inf)")
 
     def __post_init__(self):
-        w = "estimator 'fuzzy_mm'"
-        require(3 <= self.memory <= MAX_MEMORY, w, f"memory must be in [3, {MAX_MEMORY}]")
-        require(self.bad_slope > 0, w, "bad_slope must be positive (Bad rises with the residual)")
-        require(self.residual_clip > 0, w, "residual_clip must be positive")
-        require(0 < self.bad_centre < self.residual_clip, w,
+        super().__post_init__()
+        require(self.bad_centre < self.residual_clip, self.where,
                 "bad_centre must lie in (0, residual_clip): residuals are clipped there")
-        require(self.sigma_prior_m > 0, w, "sigma_prior_m must be positive")
-        require(self.sigma_hat_m is None or self.sigma_hat_m > 0, w,
-                "sigma_hat_m must be null or positive")
-        require(self.scan_period_s is None or self.scan_period_s > 0, w,
-                "scan_period_s must be null or positive")
 
 
 def bank_estimates(plots, tau, J):
@@ -62,7 +60,6 @@ def bank_estimates(plots, tau, J):
 
 class FuzzyMultiModel(RadarEstimator):
     outputs = ("m", "sigma_hat_m")  # selected memory length, noise estimate (m)
-    name = "fuzzy_mm"
     Config = Config
 
     def solve(self, log, tau):

@@ -7,12 +7,12 @@ covariance converted to Cartesian at each plot. Starts from the two-point line o
 two plots; records the model probabilities per scan.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from tma.config import is_probability_vector, require
-from tma.families.radar2d.estimators.base import RadarEstimator, state_columns
+from tma.config import is_probability_vector, param, require
+from tma.families.radar2d.estimators.base import RadarConfig, RadarEstimator, state_columns
 from tma.families.radar2d.turn import constant_velocity, coordinated_turn, white_acceleration_noise
 
 H = np.zeros((2, 5))
@@ -20,25 +20,23 @@ H[0, 0] = H[1, 2] = 1.0
 
 
 @dataclass
-class Config:
-    name: str = "imm"
-    p_stay: float = 0.95  # Markov probability of keeping the model between scans
-    cv_accel_psd: float = 0.01  # m^2/s^3, constant-velocity model
-    ct_accel_psd: float = 0.1  # m^2/s^3, coordinated-turn model
-    ct_omega_psd: float = 1e-4  # rad^2/s^3, turn-rate random walk
-    initial_omega_sd: float = 0.1  # rad/s
-    initial_probs: list[float] = field(default_factory=lambda: [0.9, 0.1])  # CV, CT
-    scan_period_s: float | None = None
+class Config(RadarConfig):
+    p_stay: float = param(0.95, "Markov probability of keeping the model between scans",
+                          "(0, 1]")
+    cv_accel_psd: float = param(0.01, "acceleration noise PSD of the constant-velocity model "
+                                "(m^2/s^3)", "[0, inf)")
+    ct_accel_psd: float = param(0.1, "acceleration noise PSD of the coordinated-turn model "
+                                "(m^2/s^3)", "[0, inf)")
+    ct_omega_psd: float = param(1e-4, "PSD of the turn-rate random walk (rad^2/s^3)", "[0, inf)")
+    initial_omega_sd: float = param(0.1, "initial turn-rate standard deviation (rad/s)",
+                                    "[0, inf)")
+    initial_probs: list[float] = param(doc="initial model probabilities (CV, CT): two, summing "
+                                       "to 1", each="[0, 1]", factory=lambda: [0.9, 0.1])
 
     def __post_init__(self):
-        w = "estimator 'imm'"
-        require(0 < self.p_stay <= 1, w, "p_stay must lie in (0, 1]")
-        for key in ("cv_accel_psd", "ct_accel_psd", "ct_omega_psd", "initial_omega_sd"):
-            require(getattr(self, key) >= 0, w, f"{key} must be >= 0")
-        require(is_probability_vector(self.initial_probs, 2), w,
+        super().__post_init__()
+        require(is_probability_vector(self.initial_probs, 2), self.where,
                 "initial_probs must be two probabilities in [0, 1] summing to 1 (CV, CT)")
-        require(self.scan_period_s is None or self.scan_period_s > 0, w,
-                "scan_period_s must be null or positive")
 
 
 def measurement_covariance(sensor: dict, plots):
@@ -58,7 +56,6 @@ def measurement_covariance(sensor: dict, plots):
 
 class IMM(RadarEstimator):
     outputs = ("p_cv", "p_turn")  # model probabilities
-    name = "imm"
     Config = Config
 
     def solve(self, log, tau):

@@ -7,57 +7,44 @@ with ``check_samples`` draws from the prior and, above ``max_mass_outside``, the
 status ``box_too_small`` and no estimate (a logged warning names the share).
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from tma.config import require
+from tma.config import param, require
 from tma.families.ranges2d.bisection import BisectionDensity
 from tma.families.ranges2d.estimators.base import (
     RangesEstimator,
     no_estimate_columns,
     sampling_columns,
 )
-from tma.families.ranges2d.estimators.prior_is import budget
-from tma.families.ranges2d.estimators.ratio import SamplingBudget
+from tma.families.ranges2d.estimators.ratio import SamplerConfig
 
 MAX_CHECK = 10_000_000  # prior draws held in memory at once by the mass check
 MAX_BISECTIONS = 10_000_000  # cells, tree and heap take ~200 B per bisection
 
 
 @dataclass
-class Config:
-    name: str = "adaptive_is"
-    # square K holding the prior's 99.99 % region: [x0, x1, y0, y1] (m)
-    box_m: list[float] = field(default_factory=lambda: [-400.0, 400.0, -400.0, 400.0])
-    n_bisections: int = 10_000
-    shift: float = 5e-4  # c in g = f2/max f2 + c
-    split: str = "heaviest"  # heaviest | draw
-    n_samples: int | None = None
-    accuracy_m: float = 0.1
-    confidence: float = 0.95
-    batch: int = 10_000  # draws between checks of the stopping rule
-    min_samples: int = 50_000
-    plot_points: int = 3000  # draws of track 0 kept for the sample plot
-    max_samples: int = 100_000_000
-    check_samples: int = 200_000  # prior draws to measure the posterior mass outside the box
-    max_mass_outside: float = 1e-3
+class Config(SamplerConfig):
+    box_m: list[float] = param(doc="the square K of the density, [x0, x1, y0, y1] (m): the "
+                               "prior's 99.99 % region", factory=lambda: [-400.0, 400.0,
+                                                                         -400.0, 400.0])
+    n_bisections: int = param(10_000, "bisections of the density (one f2 evaluation each)",
+                              f"[0, {MAX_BISECTIONS}]")
+    # without the shift a cell whose point misses the peak is never drawn: biased
+    shift: float = param(5e-4, "c in the density g = f2 / max f2 + c", "(0, inf)")
+    split: str = param("heaviest", "which cell is bisected next", choices=("heaviest", "draw"))
+    check_samples: int = param(200_000, "prior draws that measure the posterior mass outside "
+                               "the box", f"[1, {MAX_CHECK}]")
+    max_mass_outside: float = param(1e-3, "mass outside the box above which a track is "
+                                    "box_too_small", "[0, 1]")
     seed: int = 2
 
     def __post_init__(self):
-        w = "estimator 'adaptive_is'"
+        super().__post_init__()
         require(len(self.box_m) == 4 and self.box_m[0] < self.box_m[1]
-                and self.box_m[2] < self.box_m[3], w,
+                and self.box_m[2] < self.box_m[3], self.where,
                 "box_m must be [x0, x1, y0, y1] with x0 < x1 and y0 < y1")
-        require(0 <= self.n_bisections <= MAX_BISECTIONS, w,
-                f"n_bisections must be in [0, {MAX_BISECTIONS}]")
-        # without the shift a cell whose point misses the peak is never drawn: biased
-        require(self.shift > 0, w, "shift must be positive")
-        require(self.split in ("heaviest", "draw"), w, "split must be heaviest or draw")
-        require(1 <= self.check_samples <= MAX_CHECK, w,
-                f"check_samples must be in [1, {MAX_CHECK}]")
-        require(0 <= self.max_mass_outside <= 1, w, "max_mass_outside must lie in [0, 1]")
-        SamplingBudget.check(self, w)
 
 
 def mass_outside(model, box, n, rng) -> float:
@@ -72,7 +59,7 @@ def mass_outside(model, box, n, rng) -> float:
 
 class AdaptiveIS(RangesEstimator):
     side_tables = ("samples",)  # its first draws of one track, for the plot
-    name = "adaptive_is"
+    conformance_config = {"accuracy_m": 2.0}
     Config = Config
 
     def solve(self, model, rng, keep=0):
@@ -94,7 +81,7 @@ class AdaptiveIS(RangesEstimator):
                 density.cell_density(cell))
             return points, log_w
 
-        moments, reached = budget(cfg).run(draw, rng, keep)
+        moments, reached = cfg.budget().run(draw, rng, keep)
         out = sampling_columns(moments, reached, density.n_evaluations)
         out["mass_outside"] = outside
         return out

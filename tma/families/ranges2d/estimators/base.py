@@ -25,6 +25,7 @@ logger = logging.getLogger(__name__)
 
 class RangesEstimator(Estimator):
     family = "ranges2d"
+    conformance_scenario = {"seed": 3}
     def estimate(self, log: RangesLog) -> dict:
         """Columns per track, plus ``extras['samples']``: the first draws of the track
         ``plot_track`` (if in this shard and the estimator samples)."""

@@ -12,8 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tma.config import require
+from tma.config import param, require
 from tma.errors import InputError
+from tma.estimator import EstimatorConfig
 from tma.families.ranges2d.estimators.base import RangesEstimator, no_estimate_columns
 from tma.families.ranges2d.model import RangeModel
 
@@ -22,24 +23,20 @@ MAX_LOG_CUT = 700.0  # exp(-700) ~ 1e-304: a deeper cut neglects nothing more in
 
 
 @dataclass
-class Config:
-    name: str = "quadrature"
-    n_panels: int = 40  # per axis
-    n_nodes: int = 12  # Gauss-Legendre nodes per panel and axis
-    search_sd: float = 8.0  # search box: prior mean +- search_sd prior standard deviations
-    search_points: int = 801  # coarse grid points per axis
-    log_cut: float = 40.0  # mass with log f2 < max - log_cut is neglected (e^-40)
+class Config(EstimatorConfig):
+    n_panels: int = param(40, "panels per axis", "[1, inf)")
+    n_nodes: int = param(12, "Gauss-Legendre nodes per panel and axis", "[1, inf)")
+    # at 1000 prior sds the prior density is exp(-5e5): nothing is further out
+    search_sd: float = param(8.0, "search box: prior mean +- search_sd prior standard "
+                             "deviations", "(0, 1000]")
+    search_points: int = param(801, "coarse grid points per axis", f"[11, {MAX_AXIS_POINTS}]")
+    log_cut: float = param(40.0, "mass with log f2 < max - log_cut is neglected (e^-log_cut)",
+                           f"(0, {MAX_LOG_CUT:g}]")
 
     def __post_init__(self):
-        w = "estimator 'quadrature'"
-        require(self.n_panels >= 1 and self.n_nodes >= 1, w, "n_panels, n_nodes must be >= 1")
-        require(self.n_panels * self.n_nodes <= MAX_AXIS_POINTS, w,
+        super().__post_init__()
+        require(self.n_panels * self.n_nodes <= MAX_AXIS_POINTS, self.where,
                 f"n_panels x n_nodes must be <= {MAX_AXIS_POINTS} (nodes per axis)")
-        require(11 <= self.search_points <= MAX_AXIS_POINTS, w,
-                f"search_points must be in [11, {MAX_AXIS_POINTS}]")
-        # at 1000 prior sds the prior density is exp(-5e5): nothing is further out
-        require(0 < self.search_sd <= 1000, w, "search_sd must lie in (0, 1000]")
-        require(0 < self.log_cut <= MAX_LOG_CUT, w, f"log_cut must lie in (0, {MAX_LOG_CUT:g}]")
 
 
 def integration_box(model: RangeModel, cfg: Config):
@@ -83,7 +80,6 @@ def posterior_mean(model: RangeModel, cfg: Config):
 
 class Quadrature(RangesEstimator):
     reference = True  # the exact posterior mean the samplers are measured against
-    name = "quadrature"
     Config = Config
 
     def __init__(self, config):

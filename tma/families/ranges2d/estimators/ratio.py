@@ -13,7 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tma.config import require
+from tma.config import param, require
+from tma.estimator import EstimatorConfig
 
 # A weight above exp(RESCALE_LOG) times the reference rescales the sums to the new maximum:
 # squared weights then stay below exp(2 x 300), far from overflow (exp(709)).
@@ -91,6 +92,36 @@ class RatioMoments:
 
 
 @dataclass
+class SamplerConfig(EstimatorConfig):
+    """The settings every importance sampler shares: its budget (``SamplingBudget``), the
+    draws kept for the plot and its seed."""
+
+    n_samples: int | None = param(None, "a fixed count of draws per track (>= 2: the error "
+                                  "estimate needs two); null: sample to the accuracy target",
+                                  "[2, inf)")
+    accuracy_m: float = param(0.1, "target half-width of the confidence interval of each "
+                              "coordinate (m)", "(0, inf)")
+    confidence: float = param(0.95, "confidence of that interval", "(0, 1)")
+    batch: int = param(10_000, "draws between checks of the stopping rule", f"[1, {MAX_BATCH}]")
+    min_samples: int = param(50_000, "draws before the stopping rule is first checked",
+                             "[2, inf)")
+    plot_points: int = param(3000, "draws of track 0 kept for the sample plot", "[0, inf)")
+    max_samples: int = param(100_000_000, "draws per track at most (the run then stops "
+                             "not_converged); >= min_samples", "[2, inf)")
+    seed: int = param(1, "seed of each track's stream (SeedSequence(seed, spawn_key=(track,)))",
+                      "[0, inf)")
+
+    def __post_init__(self):
+        super().__post_init__()
+        require(self.max_samples >= self.min_samples, self.where,
+                "max_samples must be >= min_samples (else the stopping rule is never checked)")
+
+    def budget(self) -> "SamplingBudget":
+        return SamplingBudget(self.n_samples, self.accuracy_m, self.confidence, self.batch,
+                              self.max_samples, self.min_samples)
+
+
+@dataclass
 class SamplingBudget:
     """Fixed ``n_samples`` (if set) or sampling until every coordinate's half-width at
     ``confidence`` is within ``accuracy_m`` (after ``min_samples``, at most ``max_samples``),
@@ -102,20 +133,6 @@ class SamplingBudget:
     batch: int
     max_samples: int
     min_samples: int = 50_000  # the error estimate needs enough draws before it can stop
-
-    @staticmethod
-    def check(cfg, where: str):
-        """Range checks of a sampler config's budget fields (and ``plot_points``, ``seed``)."""
-        require(cfg.n_samples is None or cfg.n_samples >= 2, where,
-                "n_samples must be null or >= 2 (the error estimate needs two draws)")
-        require(cfg.accuracy_m > 0, where, "accuracy_m must be positive")
-        require(0 < cfg.confidence < 1, where, "confidence must lie in (0, 1)")
-        require(1 <= cfg.batch <= MAX_BATCH, where, f"batch must be in [1, {MAX_BATCH}]")
-        require(cfg.min_samples >= 2, where, "min_samples must be >= 2")
-        require(cfg.max_samples >= cfg.min_samples, where,
-                "max_samples must be >= min_samples (else the stopping rule is never checked)")
-        require(cfg.plot_points >= 0, where, "plot_points must be >= 0")
-        require(cfg.seed >= 0, where, "seed must be >= 0")
 
     def run(self, draw, rng, keep=0) -> tuple[RatioMoments, bool]:
         """``draw(k, rng) -> (points, log_weight)``; returns the moments and whether the
