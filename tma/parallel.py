@@ -8,14 +8,18 @@ mid-task leaves no half-written file; Dask runs the task again elsewhere (``retr
 run that stops anyway resumes from its finished shards.
 """
 
+import asyncio
 import atexit
 import ctypes
 import functools
 import gc
 import logging
 import os
+import socket
+import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, fields, replace
+from urllib.parse import urlsplit
 
 from threadpoolctl import threadpool_limits
 
@@ -25,6 +29,9 @@ log = logging.getLogger(__name__)
 M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc mallopt parameters
 ENGINES = ("joblib", "dask")
 MAX_THREADS = 4  # for in_threads: files checked or read at once
+SCHEMES = ("tcp", "tls", "ws", "wss")  # the transports of a Dask scheduler's address
+CONNECT_TIMEOUT = 10.0  # s: parallel.connect_timeout's default
+ADDRESS_FORM = "a scheduler address looks like tcp://scheduler:8786"
 
 
 @dataclass(frozen=True)
@@ -37,6 +44,10 @@ class Engine:
     retries: dask only; how often a task that raised (e.g. an OSError of a flaky shared disk)
     is run again. A task whose worker died is run again on another worker by Dask itself, up
     to ``distributed.scheduler.allowed-failures`` (3) times.
+    connect_timeout: dask only; seconds to wait for the scheduler at ``address`` to accept a
+    connection, then as long for it to answer as a Dask scheduler.
+    verbose: dask only; True shows Dask's own INFO logging (scheduler, nannies, workers);
+    False shows its warnings only, and nothing from the workers of a LocalCluster.
     """
 
     kind: str = "joblib"
@@ -44,6 +55,8 @@ class Engine:
     address: str | None = None
     n_workers: int = 2
     retries: int = 2
+    connect_timeout: float = CONNECT_TIMEOUT
+    verbose: bool = False
 
     def __post_init__(self):
         if self.kind not in ENGINES:
@@ -57,10 +70,18 @@ class Engine:
                 or self.retries < 0:
             raise ConfigError(f"parallel.retries must be a whole number >= 0, "
                               f"got '{self.retries}'")
-        if self.address is not None and (not isinstance(self.address, str)
-                                         or "://" not in self.address):
-            raise ConfigError(f"parallel.address must be null or a scheduler address such as "
-                              f"tcp://host:8786, got '{self.address}'")
+        timeout = self.connect_timeout
+        if isinstance(timeout, bool) or not isinstance(timeout, int | float) \
+                or not 0 < timeout < float("inf"):
+            raise ConfigError(f"parallel.connect_timeout must be a number of seconds > 0, "
+                              f"got '{timeout}'")
+        if not isinstance(self.verbose, bool):
+            raise ConfigError(f"parallel.verbose must be true or false, got '{self.verbose}'")
+        if self.address is not None:
+            problem = address_problem(self.address)
+            if problem:
+                raise ConfigError(f"parallel.address={self.address}: {problem}; {ADDRESS_FORM} "
+                                  f"(null starts a LocalCluster here)")
 
     @property
     def in_process(self) -> bool:
@@ -180,7 +201,8 @@ def in_threads(fn, items) -> list:
 def _on_dask(engine: Engine, fn, tasks, bar):
     from distributed import as_completed
 
-    client = dask_client(engine.address, engine.n_workers)
+    client = dask_client(engine.address, engine.n_workers,
+                         connect_timeout=engine.connect_timeout, verbose=engine.verbose)
     # pure=False: a task is a side effect (it writes its shard), never deduplicated by Dask
     futures = client.map(_single_threaded, [fn] * len(tasks), tasks, pure=False,
                          retries=engine.retries)
@@ -195,6 +217,98 @@ def _on_dask(engine: Engine, fn, tasks, bar):
         raise
 
 
+def address_problem(address) -> str:
+    """What is wrong with a Dask scheduler address as written ('' if nothing): its scheme,
+    host and port, checked before any connection."""
+    if not isinstance(address, str) or "://" not in address:
+        return "not a scheduler address"
+    scheme, _, rest = address.partition("://")
+    if scheme not in SCHEMES:
+        return f"unknown scheme '{scheme}://' (Dask's are {', '.join(f'{s}://' for s in SCHEMES)})"
+    try:
+        parts = urlsplit(address)
+    except ValueError as exc:  # e.g. an unclosed [ of an IPv6 host
+        return f"not a scheduler address ({exc})"
+    if parts.path or parts.query or parts.fragment or parts.username is not None:
+        return f"unexpected text around host:port in '{rest}'"
+    if not parts.hostname:
+        return "no host"
+    port = parts.netloc.rpartition("]")[2].rpartition(":")[2] if ":" in parts.netloc else ""
+    if not port:
+        return "no port (a Dask scheduler listens on 8786 unless told otherwise)"
+    if not (port.isascii() and port.isdigit() and 1 <= int(port) <= 65535):
+        return f"port '{port}' is not a number from 1 to 65535"
+    return ""
+
+
+async def _dask_identity(address: str, connection_args: dict) -> dict:
+    from distributed.comm import connect
+
+    # connect() bounds the TCP connection by its timeout, but then waits for the other end's
+    # handshake with no bound at all: the caller bounds the whole exchange
+    comm = await connect(address, **connection_args)
+    try:
+        await comm.write({"op": "identity"})
+        return await comm.read()
+    finally:
+        comm.abort()
+
+
+def _tcp_reachable(address: str, timeout: float) -> None:
+    """Return once something at ``address`` accepts a TCP connection; retried (a scheduler
+    may be starting) until ``timeout`` s, then a ConfigError with the last reason."""
+    parts = urlsplit(address)
+    host, port = parts.hostname, parts.port
+    deadline = time.monotonic() + timeout
+    while True:
+        left = deadline - time.monotonic()
+        try:
+            socket.create_connection((host, port), timeout=max(left, 0.01)).close()
+            return
+        except socket.gaierror as exc:
+            reason = f"host '{host}' not found ({exc.strerror})"
+        except ConnectionRefusedError:
+            reason = f"nothing listens on port {port} of {host} (connection refused)"
+        except TimeoutError:
+            reason = f"{host}:{port} accepts no connection"
+        except OSError as exc:
+            reason = f"cannot connect to {host}:{port} ({exc.strerror or exc})"
+        if time.monotonic() + 0.1 > deadline:
+            raise ConfigError(f"parallel.address={address}: {reason} after "
+                              f"{timeout:g} s (parallel.connect_timeout)")
+        time.sleep(0.1)
+
+
+def check_scheduler(address: str, timeout: float, connection_args: dict) -> None:
+    """Make sure a Dask scheduler answers at ``address``: a ConfigError naming the address and
+    what is wrong, within about twice ``timeout`` s, whatever listens there.
+
+    ``distributed.Client(address, timeout=...)`` alone would wait forever for a service that
+    accepts the connection and never speaks Dask's protocol (its handshake read is unbounded);
+    an HTTP server reads Dask's first frame as a request line and waits for its end."""
+    _tcp_reachable(address, timeout)
+    probe = asyncio.wait_for(_dask_identity(address, connection_args), timeout)
+    try:
+        with ThreadPoolExecutor(1) as thread:  # its own event loop, whatever runs in this one
+            reply = thread.submit(asyncio.run, probe).result()
+    except TimeoutError:
+        reason = (f"something there accepts connections but sends no Dask handshake within "
+                  f"{timeout:g} s: not a Dask scheduler (or one too busy to answer: "
+                  f"parallel.connect_timeout)")
+    except OSError:  # CommClosedError among them
+        reason = ("something there accepts connections but closes them without a Dask "
+                  "handshake: not a Dask scheduler")
+    except Exception:  # bytes that are no Dask message (e.g. an absurd frame length)
+        reason = "something there answers, but not in Dask's protocol: not a Dask scheduler"
+    else:
+        kind = reply.get("type") if isinstance(reply, dict) else None
+        if kind == "Scheduler" or isinstance(reply, dict) and "n_workers" in reply:
+            return
+        reason = (f"that is a Dask {kind.lower()}, not the scheduler" if kind in {"Worker", "Nanny"}
+                  else f"it speaks Dask's protocol but is not a scheduler ({kind or reply!r})")
+    raise ConfigError(f"parallel.address={address}: {reason}")
+
+
 def close_dask_clients():
     """Close the clients (and local clusters) ``dask_client`` started."""
     for client in _clients:
@@ -202,30 +316,60 @@ def close_dask_clients():
         if client.cluster is not None:
             client.cluster.close()
     _clients.clear()
-    dask_client.cache_clear()
+    _dask_client.cache_clear()
 
 
 _clients = []
 
 
-@functools.cache
-def dask_client(address: str | None, n_workers: int):
+def dask_client(address: str | None = None, n_workers: int = 2, *,
+                connect_timeout: float = CONNECT_TIMEOUT, verbose: bool = False):
     """A client of the scheduler at ``address``, or of a LocalCluster of ``n_workers``
-    single-threaded worker processes started once per process (closed at exit)."""
+    single-threaded worker processes started once per process (closed at exit); a scheduler
+    that does not answer in ``connect_timeout`` s, or a service that is not one, is a
+    ConfigError. ``verbose``: Dask's own INFO logging (else its warnings only)."""
     try:
-        from distributed import Client, LocalCluster
+        import distributed  # noqa: F401 (sets the level of its logger when first imported)
     except ImportError:
         raise ConfigError("parallel=dask needs Dask: pip install 'tma[dask]'") from None
+    # distributed sets its logger to INFO and, under Hydra (the root logger has handlers),
+    # adds no handler of its own: every record reaches Hydra's console and log file, and
+    # LocalCluster's silence_logs, which sets the level of that missing handler, has no effect
+    logging.getLogger("distributed").setLevel(logging.INFO if verbose else logging.WARNING)
+    return _dask_client(address, n_workers, float(connect_timeout), bool(verbose))
+
+
+@functools.cache
+def _dask_client(address: str | None, n_workers: int, connect_timeout: float, verbose: bool):
+    from distributed import Client, LocalCluster
+    from distributed.security import Security
+
     if address is None:
+        # silence_logs (a level) goes to every worker process: a worker that closes while its
+        # heartbeat to the scheduler is in flight logs that CommClosedError with its traceback
+        # at ERROR (a race in distributed's Worker.close); task errors reach the client anyway.
+        # The scheduler's HTTP server on a free port of 127.0.0.1, not 8787: a second cluster
+        # on this machine would print "Port 8787 is already in use"
         cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None)
+                               dashboard_address=None,
+                               scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+                               silence_logs=False if verbose else logging.CRITICAL)
         client = Client(cluster)
     else:
+        problem = address_problem(address)
+        if problem:
+            raise ConfigError(f"parallel.address={address}: {problem}; {ADDRESS_FORM}")
+        connection_args = Security().get_connection_args("client")
+        if address.startswith(("tls://", "wss://")) and connection_args["ssl_context"] is None:
+            raise ConfigError(f"parallel.address={address}: TLS needs Dask's TLS settings "
+                              f"(distributed.comm.tls.ca-file, .client.cert, .client.key in "
+                              f"Dask's configuration)")
+        check_scheduler(address, connect_timeout, connection_args)
         try:
-            client = Client(address, timeout="10s")
-        except OSError as exc:
-            raise ConfigError(f"parallel.address={address}: no Dask scheduler answers "
-                              f"({exc})") from None
+            client = Client(address, timeout=connect_timeout)
+        except (OSError, TimeoutError) as exc:
+            raise ConfigError(f"parallel.address={address}: the Dask scheduler stopped "
+                              f"answering ({exc})") from None
     if not _clients:
         atexit.register(close_dask_clients)
     _clients.append(client)
