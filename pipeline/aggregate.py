@@ -5,15 +5,13 @@ name of several runs, gets the job number: ``<table>-<N>``), and when the sweep 
 ``pipeline._common.SweepTable`` writes one table of all its jobs: ``<table>`` (default
 ``<family>-sweep``)."""
 
-import hydra
-
 from pipeline._common import (
-    CONF_DIR,
     estimator_nodes,
     log,
     open_datasets,
     record_sweep_job,
     run_stage,
+    stage_main,
     sweep_job,
 )
 from tma.aggregate import aggregate
@@ -33,9 +31,7 @@ def aggregate_stage(cfg):
     record_sweep_job(cfg, jobs)
 
 
-@hydra.main(config_path=CONF_DIR, config_name="config", version_base="1.3")
-def main(cfg):
-    run_stage(aggregate_stage, cfg)
+main = stage_main(lambda cfg: run_stage(aggregate_stage, cfg))
 
 
 if __name__ == "__main__":

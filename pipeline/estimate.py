@@ -1,15 +1,6 @@
 """Run estimators over stored datasets: ``python -m pipeline.estimate [overrides]``."""
 
-import hydra
-
-from pipeline._common import (
-    CONF_DIR,
-    engine,
-    estimator_nodes,
-    log,
-    open_datasets,
-    run_stage,
-)
+from pipeline._common import engine, estimator_nodes, log, open_datasets, run_stage, stage_main
 from tma.runs import estimate_runs
 
 
@@ -22,9 +13,7 @@ def estimate_stage(cfg):
         log.info("run %s", root)
 
 
-@hydra.main(config_path=CONF_DIR, config_name="config", version_base="1.3")
-def main(cfg):
-    run_stage(estimate_stage, cfg)
+main = stage_main(lambda cfg: run_stage(estimate_stage, cfg))
 
 
 if __name__ == "__main__":

@@ -1,8 +1,6 @@
 """Simulate datasets from scenario configs: ``python -m pipeline.simulate [overrides]``."""
 
-import hydra
-
-from pipeline._common import CONF_DIR, engine, estimator_nodes, log, run_stage, scenario_nodes
+from pipeline._common import engine, estimator_nodes, log, run_stage, scenario_nodes, stage_main
 from tma.errors import ConfigError
 from tma.simulate import simulate_datasets
 
@@ -18,9 +16,7 @@ def simulate_stage(cfg):
         log.info("dataset %s", root)
 
 
-@hydra.main(config_path=CONF_DIR, config_name="config", version_base="1.3")
-def main(cfg):
-    run_stage(simulate_stage, cfg)
+main = stage_main(lambda cfg: run_stage(simulate_stage, cfg))
 
 
 if __name__ == "__main__":

@@ -11,9 +11,7 @@ stops the command with its own error; what the stages before it wrote stays comp
 import threading
 from time import perf_counter
 
-import hydra
-
-from pipeline._common import CONF_DIR, log, run_stage
+from pipeline._common import log, run_stage, stage_main
 from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
 from pipeline.simulate import simulate_stage
@@ -56,9 +54,7 @@ def table_stage(cfg):
         log.info("stage %s: %.2f s", name, perf_counter() - start)
 
 
-@hydra.main(config_path=CONF_DIR, config_name="config", version_base="1.3")
-def main(cfg):
-    run_stage(table_stage, cfg)
+main = stage_main(lambda cfg: run_stage(table_stage, cfg))
 
 
 if __name__ == "__main__":

@@ -94,6 +94,15 @@ def sweep_record(sweep: str | None, job: int, data_dir, tables_dir, jobs) -> dic
                      for ds, est in jobs]}
 
 
+def sweep_table(sweep_dir, sweep: str, record_name: str, table: str | None = None
+                ) -> list[Path]:
+    """``aggregate_sweep`` of the records (files ``record_name`` under ``sweep_dir``, written
+    by the aggregate jobs of a sweep) tagged ``sweep``."""
+    records = [record for path in Path(sweep_dir).rglob(record_name)
+               if (record := json.loads(path.read_text())).get("sweep") == sweep]
+    return aggregate_sweep(records, table)
+
+
 def aggregate_sweep(records: list[dict], table: str | None = None) -> list[Path]:
     """One table of every run the aggregate jobs of a sweep read (their ``sweep_record``s):
     ``table``, default ``<family>-sweep``; each run once, in job order."""
