@@ -131,7 +131,7 @@ def run_stage(fn, cfg: DictConfig):
 
 def _checked_stage(fn, cfg):
     experiment.check_stage_options(plain(cfg), KNOWN_KEYS)
-    engine(cfg)
+    engine_from(plain_value(cfg, "parallel"))  # checked; the stage's engine(cfg) logs its choice
     return fn(cfg)
 
 
@@ -164,7 +164,8 @@ def _save_traceback() -> str:
 class CheckOutputDir(Callback):
     """Hydra callback: before Hydra writes anything under ``paths.data_dir``, check that the
     directory can be written (a read-only or full disk, a file on the path: one line) and that
-    a sweep's launcher can run here."""
+    a sweep's launcher can run here; when a sweep of submitit's launchers ends, show its jobs'
+    logs, which they wrote to files."""
 
     @staticmethod
     def _check(config, directory):
@@ -180,6 +181,12 @@ class CheckOutputDir(Callback):
     def on_multirun_start(self, config, **kwargs):
         guarded(experiment.check_launcher, str(config.hydra.launcher.get("_target_")))
         guarded(self._check, config, config.hydra.sweep.dir)
+
+    def on_multirun_end(self, config, **kwargs):
+        if "submitit" in str(config.hydra.launcher.get("_target_")):
+            for line in experiment.job_logs(str(config.hydra.sweep.dir),
+                                            f"{config.hydra.job.name}.log"):
+                print(line)
 
 
 class SweepTable(Callback):

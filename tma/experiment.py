@@ -372,3 +372,12 @@ def check_launcher(target: str):
                           f"has no {' or '.join(missing)}: run the sweep where SLURM is, or "
                           "try it here with hydra/launcher=slurm_local")
 
+
+def job_logs(sweep_dir, log_name: str) -> list[str]:
+    """The lines of the jobs' logs of a sweep (``<sweep_dir>/<job number>/<log_name>``), in
+    job order, each after ``#<job number>``; submitit's own lines left out."""
+    logs = [p for p in Path(sweep_dir).glob(f"*/{log_name}") if p.parent.name.isdigit()]
+    return [f"#{path.parent.name} {line}"
+            for path in sorted(logs, key=lambda p: int(p.parent.name))
+            for line in path.read_text(errors="replace").splitlines()
+            if "][submitit][" not in line]
