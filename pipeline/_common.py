@@ -285,6 +285,13 @@ def estimator_nodes(cfg: DictConfig, checked: bool = False) -> list[dict]:
     return make(plain_value(cfg, "estimator"), plain_value(cfg, "grid"), overrides(cfg))
 
 
+def jobs(cfg: DictConfig) -> list:
+    """The command's ``(dataset, estimator config)`` pairs (``tma.experiment.dataset_jobs``);
+    a bad estimator config fails before any I/O."""
+    estimators = estimator_nodes(cfg, checked=True)
+    return experiment.dataset_jobs(open_datasets(cfg), estimators, overrides(cfg))
+
+
 def open_datasets(cfg: DictConfig):
     scenarios = [] if cfg.dataset else scenario_nodes(cfg)
     hydra_cfg = stage_hydra(cfg)

@@ -11,14 +11,19 @@ from tma.ingest import ingest, option_groups, setting_names
 INGEST_YAML = Path(CONF_DIR) / "ingest.yaml"
 
 
+def ingest_arguments(cfg) -> dict:
+    """``tma.ingest.ingest``'s arguments from the composed config."""
+    return dict(input_path=cfg.input, data_dir=cfg.paths.data_dir, family=cfg.family,
+                name=cfg.name, fmt=cfg.format, force=cfg.force, navigation=cfg.navigation,
+                options={group: cfg[group] for group in option_groups(cfg.family)},
+                **{key: cfg[key] for key in setting_names(cfg.family)})
+
+
 def ingest_stage(cfg):
-    root = ingest(cfg.input, data_dir=cfg.paths.data_dir, family=cfg.family, name=cfg.name,
-                  fmt=cfg.format, force=cfg.force, navigation=cfg.navigation,
-                  options={group: cfg[group] for group in option_groups(cfg.family)},
-                  **{key: cfg[key] for key in setting_names(cfg.family)})
+    root = ingest(**ingest_arguments(cfg))
     log.info("dataset %s", root)
-    print(f"dataset {root.name}: run  python -m pipeline.estimate dataset={root.name} "
-          f"estimator=lm  then  python -m pipeline.aggregate dataset={root.name} estimator=lm")
+    print(f"dataset {root.name}: estimate and aggregate it with  python -m pipeline.table "
+          f"dataset={root.name}  (estimator=lm; estimator=NAME for another)")
 
 
 def check_option_keys(arguments):

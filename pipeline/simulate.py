@@ -8,7 +8,8 @@ from tma.simulate import simulate_datasets
 def simulate_stage(cfg):
     if cfg.dataset:
         raise ConfigError("simulate creates datasets from the scenario config; "
-                          "'dataset=' names an existing one (use it with estimate/aggregate)")
+                          "'dataset=' names an existing one (use it with estimate, aggregate or "
+                          "table)")
     estimator_nodes(cfg)  # the command line's estimator overrides fail here too, not later
     roots = simulate_datasets(scenario_nodes(cfg), cfg.paths.data_dir, engine=engine(cfg),
                               force=cfg.force, progress=cfg.progress)

@@ -185,6 +185,9 @@ class LevenbergMarquardt(BearingsEstimator):
     models_motion = True  # a target that is not at constant velocity: the NCV MAP state
     # present when starts > 1 / when the loss is robust (the default run adds none)
     outputs = ("start_won", "cost_robust_rad2", "n_downweighted")
+    # a recording has no prior on the bearing of its targets (the simulated one, north): start
+    # from each track's first bearing unless the command line says otherwise
+    recorded_defaults = {"initial_bearing_deg": None}
 
     def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
         cfg = self.config
