@@ -3,17 +3,20 @@ callbacks, and the hand-over of the composed config to the core (``tma.experimen
 
 import logging
 import os
+import re
 import sys
 import traceback
 import uuid
 from pathlib import Path
 
+import hydra
+from hydra import errors as hydra_errors
 from hydra.core.hydra_config import HydraConfig
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.experimental.callback import Callback
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
-from omegaconf.errors import OmegaConfBaseException
+from omegaconf.errors import ConfigAttributeError, ConfigKeyError, OmegaConfBaseException
 
 from tma import experiment
 from tma.errors import TmaError
@@ -26,14 +29,79 @@ _stage_hydra = None  # Hydra's config of the stage run_stage is running (else No
 SWEEP_ENV = "TMA_SWEEP_ID"  # set by SweepTable while a multirun runs
 SWEEP_RECORD = "tma-aggregate.json"  # what an aggregate job of a multirun read
 PROBE_BYTES = 1 << 16  # more than Hydra writes of its own before the stage starts
-# the top-level keys of conf/config.yaml and conf/ingest.yaml and their config groups (+key
-# adds none)
+# the top-level keys of conf/config.yaml and conf/ingest.yaml and their groups (+key adds none)
 KNOWN_KEYS = {key for conf in ("config", "ingest")
               for key in OmegaConf.load(Path(CONF_DIR) / f"{conf}.yaml")} - {"defaults", "hydra"} \
     | {"scenario", "estimator", "parallel"}
 
 
-# -- the error policy --------------------------------------------------------------------------
+# -- the entry point and the error policy -----------------------------------------------------
+
+def stage_main(task, config_name="config", bare=None, check=None):
+    """``main`` of ``python -m pipeline.<verb>``: Hydra's app running ``task`` on the config
+    ``config_name`` (or ``config_name(arguments)``). Hydra is told to raise its own errors
+    (``HYDRA_FULL_ERROR``) instead of printing them, and each becomes one ``error:`` line
+    (``hydra_error_line``); a bare argument is ``<bare>=ARG`` (``tma.experiment.bare_as``);
+    ``check(arguments)`` runs before Hydra starts."""
+    def main():
+        os.environ["HYDRA_FULL_ERROR"] = "1"  # this process's Hydra: raise, we say it
+        sys.argv[1:] = guarded(experiment.bare_as, bare, sys.argv[1:], _overrides(sys.argv[1:]))
+        if check is not None:
+            check(sys.argv[1:])
+        name = config_name(sys.argv[1:]) if callable(config_name) else config_name
+        try:
+            hydra.main(config_path=CONF_DIR, config_name=name, version_base="1.3")(task)()
+        except Exception as exc:
+            fail(guarded(hydra_error_line, exc, sys.argv[1:]) or guarded(_raise, exc))
+    return main
+
+
+def _raise(exc):
+    raise exc
+
+
+def _overrides(arguments: list[str]) -> list[str]:
+    """The overrides among the command's arguments, as Hydra's own parser reads them."""
+    from hydra._internal.utils import get_args_parser
+
+    parser = get_args_parser()
+    parser.error = lambda message: fail(message + (
+        " (Hydra's flags such as -m go before the overrides)" if "unrecognized" in message
+        else ""))
+    return parser.parse_args(arguments).overrides
+
+
+NOTES = {"hydra.launcher.partition": "this launcher runs the jobs on this machine, which has "
+                                     "no partitions: drop it; hydra/launcher=slurm takes it"}
+
+
+def hydra_error_line(exc: Exception, arguments: list[str]) -> str | None:
+    """Hydra's error ``exc`` on the command line ``arguments`` as one line naming the override
+    (and for an unknown key or option the nearest valid one); None when it is not Hydra's."""
+    cause, first = exc.__cause__, (str(exc).strip().splitlines() or [""])[0]
+    group, _, value = str(getattr(exc, "missing_cfg_file", "")).rpartition("/")
+    if isinstance(exc, hydra_errors.MissingConfigException) and group and exc.options:
+        return experiment.unknown_choice_line(group, value, exc.options)
+    if isinstance(exc, hydra_errors.OverrideParseException):
+        why = "" if exc.override in first else f" ({first})"
+        return (f"{exc.override}: cannot parse this override{why}; quote a value holding "
+                "quotes, brackets, commas or spaces: key='a value' (for the shell: "
+                "\"key='a value'\")")
+    key = getattr(cause, "full_key", None) or next(iter(re.findall(r"'([^']+)'", first)), "")
+    dotted, override = experiment.override_of(key, _overrides(arguments))
+    if isinstance(exc, hydra_errors.ConfigCompositionException) and isinstance(
+            cause, OmegaConfBaseException):
+        if isinstance(cause, ConfigAttributeError | ConfigKeyError) and cause.parent_node:
+            return experiment.unknown_key_line(OmegaConf.to_container(cause.parent_node),
+                                               key, override, dotted, NOTES.get(dotted))
+        return f"{override}: {str(cause).splitlines()[0]}"
+    if isinstance(exc, hydra_errors.HydraException):
+        return first if override == key else f"{override}: {first}"
+    errors = [line for line in str(exc).splitlines() if line.startswith("error: ")]
+    if type(exc).__name__ in ("UncompletedJobError", "FailedJobError") and errors:
+        return f"a job of the sweep failed: {errors[0].removeprefix('error: ')}"
+    return None
+
 
 def fail(message: str, status: int = 2):
     """Print ``error: message`` as one line on stderr and exit with ``status``."""
@@ -63,7 +131,7 @@ def run_stage(fn, cfg: DictConfig):
 
 def _checked_stage(fn, cfg):
     experiment.check_stage_options(plain(cfg), KNOWN_KEYS)
-    engine(cfg)
+    engine_from(plain_value(cfg, "parallel"))  # checked; the stage's engine(cfg) logs its choice
     return fn(cfg)
 
 
@@ -94,26 +162,31 @@ def _save_traceback() -> str:
 # -- callbacks ---------------------------------------------------------------------------------
 
 class CheckOutputDir(Callback):
-    """Hydra callback: before Hydra writes its logs under ``paths.data_dir``, check that the
-    directory can be created, so a read-only or full disk is one line, not a traceback."""
+    """Hydra callback: before Hydra writes anything under ``paths.data_dir``, check that the
+    directory can be written (a read-only or full disk, a file on the path: one line) and that
+    a sweep's launcher can run here; when a sweep of submitit's launchers ends, show its jobs'
+    logs, which they wrote to files."""
 
-    def _check(self, config, directory):
-        guarded(experiment.check_paths, {"paths": plain_value(config, "paths")})
-        directory = Path(str(directory))
-        probe = directory / f".tma-probe-{os.getpid()}"
+    @staticmethod
+    def _check(config, directory):
         try:  # room for Hydra's own files (resolved configs, the log): a full disk fails here
-            directory.mkdir(parents=True, exist_ok=True)
-            probe.write_bytes(bytes(PROBE_BYTES))
-            probe.unlink()
+            experiment.check_output_dir({"paths": plain_value(config, "paths")}, directory,
+                                        PROBE_BYTES)
         except OSError as exc:
-            probe.unlink(missing_ok=True)
             fail(f"cannot write the output directory: {os_error_line(exc)}")
 
     def on_run_start(self, config, **kwargs):
-        self._check(config, config.hydra.run.dir)
+        guarded(self._check, config, config.hydra.run.dir)
 
     def on_multirun_start(self, config, **kwargs):
-        self._check(config, config.hydra.sweep.dir)
+        guarded(experiment.check_launcher, str(config.hydra.launcher.get("_target_")))
+        guarded(self._check, config, config.hydra.sweep.dir)
+
+    def on_multirun_end(self, config, **kwargs):
+        if "submitit" in str(config.hydra.launcher.get("_target_")):
+            for line in experiment.job_logs(str(config.hydra.sweep.dir),
+                                            f"{config.hydra.job.name}.log"):
+                print(line)
 
 
 class SweepTable(Callback):
@@ -136,9 +209,16 @@ class SweepTable(Callback):
             guarded(write_sweep_table, config, self.sweep_id)
 
 
+def stage_hydra(cfg: DictConfig):
+    """Hydra's config of this stage: ``cfg.hydra`` when composed with it, else that of the
+    stage ``run_stage`` runs; None for a stage function called outside Hydra (a test), whatever
+    an earlier command in this process left in Hydra's singleton."""
+    return cfg.hydra if "hydra" in cfg else _stage_hydra
+
+
 def sweep_job(cfg: DictConfig):
     """The job number if this stage runs as a job of a multirun, else None."""
-    hydra_cfg = cfg.hydra if "hydra" in cfg else _stage_hydra
+    hydra_cfg = stage_hydra(cfg)
     if hydra_cfg is None or hydra_cfg.get("mode") != RunMode.MULTIRUN:
         return None
     return int(hydra_cfg.job.num)
@@ -148,26 +228,20 @@ def record_sweep_job(cfg: DictConfig, jobs) -> None:
     """Record, for ``SweepTable``, the runs this aggregate job read (a multirun job only)."""
     from tma.aggregate import sweep_record
 
-    number = sweep_job(cfg)
-    hydra_cfg = cfg.hydra if "hydra" in cfg else _stage_hydra
+    number, hydra_cfg = sweep_job(cfg), stage_hydra(cfg)
     if number is None or not hydra_cfg.runtime.get("output_dir"):
         return
     write_json_atomic(Path(hydra_cfg.runtime.output_dir) / SWEEP_RECORD, sweep_record(
         os.environ.get(SWEEP_ENV), number, cfg.paths.data_dir, cfg.paths.tables_dir, jobs))
 
 
-def write_sweep_table(config: DictConfig, sweep_id: str) -> list[Path]:
+def write_sweep_table(config: DictConfig, sweep_id: str) -> None:
     """The combined table of the aggregate jobs of sweep ``sweep_id`` (see ``SweepTable``)."""
-    import json
+    from tma.aggregate import sweep_table
 
-    from tma.aggregate import aggregate_sweep
-
-    records = [record for path in Path(str(config.hydra.sweep.dir)).rglob(SWEEP_RECORD)
-               if (record := json.loads(path.read_text())).get("sweep") == sweep_id]
-    written = aggregate_sweep(records, config.get("table"))
-    for path in written:
+    for path in sweep_table(str(config.hydra.sweep.dir), sweep_id, SWEEP_RECORD,
+                            config.get("table")):
         log.info("sweep table: wrote %s", path)
-    return written
 
 
 # -- the composed config, handed to the core ---------------------------------------------------
@@ -185,10 +259,8 @@ def plain_value(cfg: DictConfig, key: str):
 def engine(cfg: DictConfig) -> Engine:
     """Where shards run (``tma.parallel.engine_from``: in this process inside a job of a
     parallel launcher)."""
-    try:
-        launcher = str(HydraConfig.get().launcher.get("_target_", ""))
-    except ValueError:  # not running under Hydra (tests calling stage functions)
-        launcher = ""
+    hydra_cfg = stage_hydra(cfg)
+    launcher = "" if hydra_cfg is None else str(hydra_cfg.launcher.get("_target_", ""))
     return engine_from(plain_value(cfg, "parallel"), launcher)
 
 
@@ -196,10 +268,8 @@ def overrides(cfg: DictConfig) -> list[experiment.Override]:
     """The command line's overrides of the app config, as Hydra records them
     (``hydra.overrides.task``; from ``cfg.hydra`` when composed with it, else from the
     running stage's Hydra config; none for a bare ``compose``), for the grid language."""
-    if "hydra" in cfg:
-        task = list(cfg.hydra.overrides.task)
-    else:
-        task = list(_stage_hydra.overrides.task) if _stage_hydra is not None else []
+    hydra_cfg = stage_hydra(cfg)
+    task = [] if hydra_cfg is None else list(hydra_cfg.overrides.task)
     parsed = OverridesParser.create().parse_overrides(task) if task else []
     return [experiment.Override(o.key_or_group, o.input_line,
                                 o.value() if o.key_or_group == "estimator" else None,
@@ -215,7 +285,15 @@ def estimator_nodes(cfg: DictConfig, checked: bool = False) -> list[dict]:
     return make(plain_value(cfg, "estimator"), plain_value(cfg, "grid"), overrides(cfg))
 
 
+def jobs(cfg: DictConfig) -> list:
+    """The command's ``(dataset, estimator config)`` pairs (``tma.experiment.dataset_jobs``);
+    a bad estimator config fails before any I/O."""
+    estimators = estimator_nodes(cfg, checked=True)
+    return experiment.dataset_jobs(open_datasets(cfg), estimators, overrides(cfg))
+
+
 def open_datasets(cfg: DictConfig):
     scenarios = [] if cfg.dataset else scenario_nodes(cfg)
-    simulate = " ".join(HydraConfig.get().overrides.task) if HydraConfig.initialized() else ""
+    hydra_cfg = stage_hydra(cfg)
+    simulate = "" if hydra_cfg is None else " ".join(hydra_cfg.overrides.task)
     return experiment.open_datasets(cfg.paths.data_dir, cfg.dataset, scenarios, simulate)

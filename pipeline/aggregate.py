@@ -5,37 +5,24 @@ name of several runs, gets the job number: ``<table>-<N>``), and when the sweep 
 ``pipeline._common.SweepTable`` writes one table of all its jobs: ``<table>`` (default
 ``<family>-sweep``)."""
 
-import hydra
-
-from pipeline._common import (
-    CONF_DIR,
-    estimator_nodes,
-    log,
-    open_datasets,
-    record_sweep_job,
-    run_stage,
-    sweep_job,
-)
+from pipeline._common import jobs, log, record_sweep_job, run_stage, stage_main, sweep_job
 from tma.aggregate import aggregate
 
 
 def aggregate_stage(cfg):
-    estimators = estimator_nodes(cfg, checked=True)  # a bad estimator config fails before any I/O
-    jobs = [(ds, est) for ds in open_datasets(cfg) for est in estimators]
+    pairs = jobs(cfg)
     table, suffix = cfg.table, "custom"
     number = sweep_job(cfg)
     if number is not None:  # a job of a multirun: its table is one of several
         table = f"{cfg.table}-{number}" if cfg.table else None
         suffix = f"custom-{number}"
-    for path in aggregate(cfg.paths.data_dir, cfg.paths.tables_dir, jobs, table=table,
+    for path in aggregate(cfg.paths.data_dir, cfg.paths.tables_dir, pairs, table=table,
                           default_suffix=suffix):
         log.info("wrote %s", path)
-    record_sweep_job(cfg, jobs)
+    record_sweep_job(cfg, pairs)
 
 
-@hydra.main(config_path=CONF_DIR, config_name="config", version_base="1.3")
-def main(cfg):
-    run_stage(aggregate_stage, cfg)
+main = stage_main(lambda cfg: run_stage(aggregate_stage, cfg))
 
 
 if __name__ == "__main__":

@@ -1,30 +1,21 @@
 """Run estimators over stored datasets: ``python -m pipeline.estimate [overrides]``."""
 
-import hydra
-
-from pipeline._common import (
-    CONF_DIR,
-    engine,
-    estimator_nodes,
-    log,
-    open_datasets,
-    run_stage,
-)
+from pipeline._common import engine, jobs, log, run_stage, stage_main
 from tma.runs import estimate_runs
 
 
 def estimate_stage(cfg):
-    estimators = estimator_nodes(cfg, checked=True)  # a bad estimator config fails before any I/O
-    jobs = [(ds, est) for ds in open_datasets(cfg) for est in estimators]
-    roots = estimate_runs(cfg.paths.data_dir, jobs, engine=engine(cfg), progress=cfg.progress,
-                          force=cfg.force)
-    for root in roots:
-        log.info("run %s", root)
+    runs = estimate_runs(cfg.paths.data_dir, jobs(cfg), engine=engine(cfg),
+                         progress=cfg.progress, force=cfg.force)
+    for root, reused in runs:
+        if reused:
+            log.info("run %s reused (finished before and verified; force=true recomputes it)",
+                     root)
+        else:
+            log.info("run %s", root)
 
 
-@hydra.main(config_path=CONF_DIR, config_name="config", version_base="1.3")
-def main(cfg):
-    run_stage(estimate_stage, cfg)
+main = stage_main(lambda cfg: run_stage(estimate_stage, cfg))
 
 
 if __name__ == "__main__":

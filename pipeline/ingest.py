@@ -1,55 +1,39 @@
 """Turn a recorded log into a dataset: ``python -m pipeline.ingest input=log.csv``."""
 
-import sys
 from pathlib import Path
 
-import hydra
 from omegaconf import OmegaConf
 
-from pipeline._common import CONF_DIR, fail, log, run_stage
-from tma.errors import ConfigError
-from tma.ingest import ingest, option_groups, setting_names, unknown_option_of
+from pipeline._common import CONF_DIR, guarded, log, run_stage, stage_main
+from tma.experiment import check_ingest_options
+from tma.ingest import ingest, option_groups, setting_names
+
+INGEST_YAML = Path(CONF_DIR) / "ingest.yaml"
+
+
+def ingest_arguments(cfg) -> dict:
+    """``tma.ingest.ingest``'s arguments from the composed config."""
+    return dict(input_path=cfg.input, data_dir=cfg.paths.data_dir, family=cfg.family,
+                name=cfg.name, fmt=cfg.format, force=cfg.force, navigation=cfg.navigation,
+                options={group: cfg[group] for group in option_groups(cfg.family)},
+                **{key: cfg[key] for key in setting_names(cfg.family)})
 
 
 def ingest_stage(cfg):
-    root = ingest(cfg.input, data_dir=cfg.paths.data_dir, family=cfg.family, name=cfg.name,
-                  fmt=cfg.format, force=cfg.force, navigation=cfg.navigation,
-                  options={group: cfg[group] for group in option_groups(cfg.family)},
-                  **{key: cfg[key] for key in setting_names(cfg.family)})
+    root = ingest(**ingest_arguments(cfg))
     log.info("dataset %s", root)
-    print(f"dataset {root.name}: run  python -m pipeline.estimate dataset={root.name} "
-          f"estimator=lm  then  python -m pipeline.aggregate dataset={root.name} estimator=lm")
+    print(f"dataset {root.name}: estimate and aggregate it with  python -m pipeline.table "
+          f"dataset={root.name}  (estimator=lm; estimator=NAME for another)")
 
 
-@hydra.main(config_path=CONF_DIR, config_name="ingest", version_base="1.3")
-def _hydra_main(cfg):
-    run_stage(ingest_stage, cfg)
+def check_option_keys(arguments):
+    """An unknown reading option (``columns.foo=x``) is one line naming the options of its
+    group, before Hydra composes (it would name only the key)."""
+    guarded(check_ingest_options, arguments, OmegaConf.load(INGEST_YAML).family)
 
 
-def check_option_keys(overrides):
-    """An unknown reading option on the command line (``columns.foo=x``) is one line naming
-    the options of its group, before Hydra turns it into a multi-line composition error."""
-    family = OmegaConf.load(Path(CONF_DIR) / "ingest.yaml").family
-    for override in overrides:
-        if override.startswith("-") or "=" not in override:
-            continue
-        key, value = override.split("=", 1)
-        if key.lstrip("+~") == "family":
-            family = value
-    for override in overrides:
-        if override.startswith("-") or "=" not in override:
-            continue
-        try:
-            complaint = unknown_option_of(override.split("=", 1)[0].lstrip("+~"), family)
-        except ConfigError:  # an unknown family: the stage says so, in one line
-            return
-        if complaint:
-            fail(complaint)
-
-
-def main():
-    check_option_keys(sys.argv[1:])
-    _hydra_main()
+main = stage_main(lambda cfg: run_stage(ingest_stage, cfg), "ingest", bare="input",
+                  check=check_option_keys)
 
 
 if __name__ == "__main__":

@@ -1,8 +1,6 @@
 """Simulate datasets from scenario configs: ``python -m pipeline.simulate [overrides]``."""
 
-import hydra
-
-from pipeline._common import CONF_DIR, engine, estimator_nodes, log, run_stage, scenario_nodes
+from pipeline._common import engine, estimator_nodes, log, run_stage, scenario_nodes, stage_main
 from tma.errors import ConfigError
 from tma.simulate import simulate_datasets
 
@@ -10,7 +8,8 @@ from tma.simulate import simulate_datasets
 def simulate_stage(cfg):
     if cfg.dataset:
         raise ConfigError("simulate creates datasets from the scenario config; "
-                          "'dataset=' names an existing one (use it with estimate/aggregate)")
+                          "'dataset=' names an existing one (use it with estimate, aggregate or "
+                          "table)")
     estimator_nodes(cfg)  # the command line's estimator overrides fail here too, not later
     roots = simulate_datasets(scenario_nodes(cfg), cfg.paths.data_dir, engine=engine(cfg),
                               force=cfg.force, progress=cfg.progress)
@@ -18,9 +17,7 @@ def simulate_stage(cfg):
         log.info("dataset %s", root)
 
 
-@hydra.main(config_path=CONF_DIR, config_name="config", version_base="1.3")
-def main(cfg):
-    run_stage(simulate_stage, cfg)
+main = stage_main(lambda cfg: run_stage(simulate_stage, cfg))
 
 
 if __name__ == "__main__":

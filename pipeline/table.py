@@ -1,54 +1,47 @@
-"""simulate -> estimate -> aggregate in one process: ``python -m pipeline.table [overrides]``.
+"""The stages in one process: ``python -m pipeline.table [overrides]`` (what ``make table``
+runs) simulates, estimates and aggregates; ``input=FILE`` ingests a recorded log instead
+(config ``log_table``: ingest's options and an estimator), ``dataset=NAME`` starts from a
+stored dataset. The stages are the functions the verbs run and meet only through the files
+each writes: one process starts Python, composes the config and starts the worker pool once
+(about 3 s of a 20 s table on 2 cores). A stage that fails stops the command with its own
+error; what the stages before it wrote stays complete."""
 
-What ``make table`` runs. The three stages are the same functions the three verbs run, in
-order, and still meet only through the files each writes (the estimate stage reads the
-dataset from disk and verifies it, and so on): one process just starts Python, composes the
-config and starts the worker pool once, and its workers load the compiled kernels once,
-instead of three times each (about 3 s of a 20 s table on 2 cores). A stage that fails
-stops the command with its own error; what the stages before it wrote stays complete.
-"""
-
-import threading
 from time import perf_counter
 
-import hydra
+from omegaconf import open_dict
 
-from pipeline._common import CONF_DIR, log, run_stage
+from pipeline._common import log, run_stage, stage_main
 from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
+from pipeline.ingest import check_option_keys, ingest_arguments
 from pipeline.simulate import simulate_stage
-from tma.families import NAMES, family
+from tma.aggregate import prefetch_report
+from tma.experiment import log_dataset
 
 STAGES = (("simulate", simulate_stage), ("estimate", estimate_stage),
           ("aggregate", aggregate_stage))
 
 
-def _import_report(name: str):
-    try:
-        family(name).report  # noqa: B018 (imported for its side effect: the module loaded)
-    except Exception:  # left for the aggregate stage, which imports it again and says why
-        pass
-
-
-def prefetch_report(cfg) -> threading.Thread | None:
-    """Import the scenario family's report module (matplotlib, about 0.5 s) in a thread
-    while the workers estimate, when this process mostly waits for them; the aggregate
-    stage then starts with it loaded. Not earlier: during simulate the thread would hold
-    up the start of the worker pool (0.5 s). None when the config names no known family
-    (the stages say what is wrong)."""
-    name = str(cfg.get("scenario", {}).get("family"))
-    if name not in NAMES:
-        return None
-    thread = threading.Thread(target=_import_report, args=(name,), daemon=True)
-    thread.start()
-    return thread
+def ingest_stage(cfg):
+    """The log's dataset: ingested, or reused when ingesting it again gives the same one
+    (``tma.experiment.log_dataset``); the next stages read it by name."""
+    root, reused = log_dataset(**ingest_arguments(cfg))
+    log.info("dataset %s%s", root, " reused (ingesting the log again gives the same dataset)"
+             if reused else "")
+    with open_dict(cfg):
+        cfg.dataset = root.name
 
 
 def table_stage(cfg):
     prefetch = None
     for name, stage in STAGES:
-        if name == "estimate":
-            prefetch = prefetch_report(cfg)
+        if name == "simulate" and "input" in cfg:
+            name, stage = "ingest", ingest_stage
+        elif name == "simulate" and cfg.dataset:
+            continue  # a stored dataset: nothing to simulate
+        if name == "estimate":  # not during simulate: it would delay the worker pool's start
+            prefetch = prefetch_report(str(cfg.get("scenario", {}).get("family",
+                                                                       cfg.get("family"))))
         if name == "aggregate" and prefetch is not None:
             prefetch.join()  # its imports complete before the stage that uses them
         start = perf_counter()
@@ -56,9 +49,12 @@ def table_stage(cfg):
         log.info("stage %s: %.2f s", name, perf_counter() - start)
 
 
-@hydra.main(config_path=CONF_DIR, config_name="config", version_base="1.3")
-def main(cfg):
-    run_stage(table_stage, cfg)
+def _config_name(arguments) -> str:
+    return "log_table" if any(a.startswith("input=") for a in arguments) else "config"
+
+
+main = stage_main(lambda cfg: run_stage(table_stage, cfg), _config_name, bare="input",
+                  check=lambda a: _config_name(a) == "config" or check_option_keys(a))
 
 
 if __name__ == "__main__":

@@ -103,10 +103,16 @@ def test_slurm_preset_composes_and_its_local_twin_runs_a_sweep_one_layer_deep(tm
     proc = run_cli("simulate", "-m", "hydra/launcher=slurm_local", "scenario.sigma_deg=0.1,0.5",
                    *common)
     assert "Submitit 'local' sweep output dir" in proc.stdout + proc.stderr
-    assert len(list(tmp_path.glob("datasets/*/manifest.json"))) == 2
+    datasets = sorted(tmp_path.glob("datasets/*/manifest.json"))
+    assert len(datasets) == 2
     logs = list(tmp_path.glob("hydra/simulate-multirun/*/*/simulate.log"))
     assert len(logs) == 2
-    assert all("shards run serially inside each job" in p.read_text() for p in logs)
+    assert all(p.read_text().count("shards run serially inside each job") == 1 for p in logs)
+    # the jobs' results on the console (issue 22, item 9), in job order; no folder named %j
+    shown = [line for line in proc.stdout.splitlines() if "][tma][INFO] - dataset " in line]
+    assert [line.split()[0] for line in shown] == ["#0", "#1"]
+    assert sorted(line.split()[-1] for line in shown) == [str(p.parent) for p in datasets]
+    assert not [p for p in tmp_path.rglob("*") if "%" in p.name]
 
 
 def _refuse_three(task):

@@ -132,6 +132,7 @@ def logs(tmp_path_factory):
                                "longitude_deg": b.lon, "bearing_deg": b.bearing_deg,
                                "contact": b.track, "note": "ok, steady"})
     nav_export.to_csv(d / "nav_export.csv", index=False, lineterminator="\r\n")
+    nav_export.to_csv(d / "nav.csv", index=False)
     nav_export.to_csv(d / "export.tsv", index=False, sep="\t")
     pd.DataFrame({"tid": EPOCH_NS // 10**6 + np.round(b.t_s * 1000).astype(np.int64),
                   "breite": b.lat, "laenge": b.lon, "peilung": np.deg2rad(b.bearing_deg),
@@ -183,9 +184,16 @@ class Session:
             return
         given = {o.split("=", 1)[0] for o in overrides}
         extra = [p for p in self.paths if p.split("=", 1)[0] not in given]
-        extra += small_for(overrides) if verb != "ingest" else ["progress=false", "force=true"]
+        from_log = verb == "table" and any(o.startswith(("input=", "dataset=")) or "=" not in o
+                                           for o in overrides)
+        extra += (["progress=false", "force=true"] if verb == "ingest" else
+                  ["progress=false"] if from_log else small_for(overrides))
         if not any(o.startswith("parallel") for o in overrides):
             extra.append("parallel=serial")
+        stored = [o.split("=", 1)[1] for o in overrides if o.startswith("dataset=")]
+        if verb == "table" and stored and not self.ran:  # a log stored under that name
+            run_stage_here("ingest", "input=my_log.csv", f"name={stored[0]}", *self.paths,
+                           "progress=false")
         if verb in ("estimate", "aggregate") and not any(o.startswith("dataset=")
                                                          for o in overrides):
             self.needs(overrides, extra, "simulate" if verb == "estimate" else "estimate")

@@ -190,12 +190,12 @@ def test_each_stage_checks_the_sha256_of_what_it_reads(paths, tmp_path):
 def test_the_table_command_loads_the_report_while_the_workers_estimate():
     import sys
 
-    from pipeline.table import prefetch_report
+    from tma.aggregate import prefetch_report
 
-    thread = prefetch_report(compose_cfg(["scenario=ranges2d"]))
+    thread = prefetch_report("ranges2d")
     thread.join()
     assert "tma.families.ranges2d.report" in sys.modules
-    assert prefetch_report(compose_cfg(["scenario.family=nosuch"])) is None
+    assert prefetch_report("nosuch") is None
 
 
 def test_cli_sweep_and_joblib_launcher(tmp_path):

@@ -9,6 +9,7 @@ wrote. ``metrics_dataset`` reads the metrics of every run back as one Parquet da
 import functools
 import json
 import operator
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -29,6 +30,7 @@ from tma.runs import (
     MANIFEST,
     check_datasets,
     full_config,
+    missing_run_line,
     open_run,
     run_path,
     runs_dir,
@@ -59,6 +61,8 @@ def aggregate(data_dir, tables_dir, jobs, table=None, default_suffix="custom") -
     for dataset, est_cfg in jobs:
         est_cfg = full_config(dataset, est_cfg)  # no prepare: aggregate trains nothing
         runs.append((dataset, est_cfg["name"], run_path(data_dir, dataset, est_cfg)))
+        if not (runs[-1][2] / MANIFEST).exists():  # none of these settings: name those made
+            raise InputError(missing_run_line(data_dir, dataset, est_cfg))
     opened = in_threads(open_run, [root for _, _, root in runs])  # verified and read
     by_family: dict[str, list[RunEntry]] = {}
     for (dataset, estimator, root), (manifest, estimates) in zip(runs, opened, strict=True):
@@ -81,6 +85,27 @@ def aggregate(data_dir, tables_dir, jobs, table=None, default_suffix="custom") -
     return written
 
 
+def _import_report(name: str):
+    try:
+        family_of(name).report  # noqa: B018 (imported for its side effect: the module loaded)
+    except Exception:  # left for the aggregate stage, which imports it again and says why
+        pass
+
+
+def prefetch_report(name: str) -> threading.Thread | None:
+    """Import family ``name``'s report module (matplotlib, about 0.5 s) in a thread, e.g.
+    while the workers estimate and the caller mostly waits for them, so that aggregate
+    starts with it loaded; join the thread before aggregating. None when ``name`` is no
+    family (the stages say what is wrong)."""
+    from tma.families import NAMES
+
+    if name not in NAMES:
+        return None
+    thread = threading.Thread(target=_import_report, args=(name,), daemon=True)
+    thread.start()
+    return thread
+
+
 # -- every run's metrics as one dataset -------------------------------------------------------
 
 KEY_COLUMNS = ("family", "dataset", "estimator", "run")
@@ -92,6 +117,15 @@ def sweep_record(sweep: str | None, job: int, data_dir, tables_dir, jobs) -> dic
             "tables_dir": str(Path(tables_dir).resolve()),
             "runs": [{"dataset": str(Path(ds.root).resolve()), "estimator": est}
                      for ds, est in jobs]}
+
+
+def sweep_table(sweep_dir, sweep: str, record_name: str, table: str | None = None
+                ) -> list[Path]:
+    """``aggregate_sweep`` of the records (files ``record_name`` under ``sweep_dir``, written
+    by the aggregate jobs of a sweep) tagged ``sweep``."""
+    records = [record for path in Path(sweep_dir).rglob(record_name)
+               if (record := json.loads(path.read_text())).get("sweep") == sweep]
+    return aggregate_sweep(records, table)
 
 
 def aggregate_sweep(records: list[dict], table: str | None = None) -> list[Path]:

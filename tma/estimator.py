@@ -47,7 +47,10 @@ class Estimator:
       beside the run's estimates, e.g. sample points for a plot, covariances);
     - ``reference``: True for the exact estimator others are measured against;
     - ``prepare(config, dataset, data_dir, engine, progress)``: a step run once before the
-      shards (e.g. training an artefact), returning the config the run records.
+      shards (e.g. training an artefact), returning the config the run records;
+    - ``recorded_defaults``: config values that replace its defaults on a recorded log (a
+      dataset not simulated) where the command line sets none (``tma.runs.dataset_config``),
+      e.g. a start from the first bearing instead of the simulated scenario's prior.
     """
 
     family = ""
@@ -55,6 +58,7 @@ class Estimator:
     outputs: tuple[str, ...] = ()
     side_tables: tuple[str, ...] = ()
     reference = False
+    recorded_defaults: dict = {}
     data_dir = None  # where artefacts live; set by the estimate stage before ``estimate``
 
     # what the conformance suite (tests/test_conformance.py) runs it on: keys of a small

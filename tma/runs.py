@@ -142,6 +142,16 @@ def estimate_shard(task: ShardTask, log) -> dict:
                          extras=sorted(extras))
 
 
+def dataset_config(dataset: Dataset, estimator_config: dict, keep=()) -> dict:
+    """``estimator_config`` as it runs on ``dataset``: on a recorded log (a dataset that was
+    not simulated) the estimator's ``recorded_defaults`` replace its values, except for the
+    keys in ``keep`` (those the command line sets)."""
+    if dataset.manifest["source"] == "simulate":
+        return estimator_config
+    recorded = estimator_class(estimator_config["name"]).recorded_defaults
+    return {**estimator_config, **{k: v for k, v in recorded.items() if k not in keep}}
+
+
 def full_config(dataset: Dataset, estimator_config: dict) -> dict:
     """The estimator config with every default filled in (the run key hashes it, so it
     changes with them), checked against the dataset's family."""
@@ -224,9 +234,10 @@ def _is_good(root: Path) -> bool:
         return False
 
 
-def estimate_runs(data_dir, jobs, *, engine=2, progress=True, force=False):
-    """Run every (dataset, estimator config) job, all shards in one worker pool; returns the
-    run directories."""
+def estimate_runs(data_dir, jobs, *, engine=2, progress=True, force=False
+                  ) -> list[tuple[Path, bool]]:
+    """Run every (dataset, estimator config) job, all shards in one worker pool; returns each
+    job's run directory and whether it was reused (finished before and verified)."""
     check_datasets(ds for ds, _ in jobs)
     planned = []
     for dataset, est_cfg in jobs:
@@ -249,6 +260,7 @@ def check_datasets(datasets) -> None:
 def _estimate_locked(outputs, data_dir, planned, *, engine, progress, force):
     # finished runs are reused once their files verify, checked several at a time
     reuse = [False] * len(planned) if force else in_threads(_is_good, [p[0] for p in planned])
+    reused = dict(zip((p[0] for p in planned), reuse, strict=True))
     todo, tasks = [], []
     for (root, dataset, est_cfg), good in zip(planned, reuse, strict=True):
         if good or any(p[0] == root for p in todo):
@@ -284,12 +296,57 @@ def _estimate_locked(outputs, data_dir, planned, *, engine, progress, force):
             if not waiting[id(run)]:
                 finish_run(stage, dataset, est_cfg, ts, [done[u.out_path] for u in ts])
                 outputs.swap(root)
-    return [p[0] for p in planned]
+    return [(p[0], reused[p[0]]) for p in planned]
 
 
 def open_run(root) -> tuple[dict, "pa.Table"]:
     """A finished run's manifest and estimates, after ``verify_run``."""
     return verify_run(root), arrow.read_table(Path(root) / ESTIMATES)
+
+
+def missing_run_line(data_dir, dataset: Dataset, config: dict) -> str:
+    """One line for a run of ``config`` (full, as ``run_path`` hashes it) on ``dataset`` that
+    does not exist: the finished runs of ``dataset`` that do, each with the overrides that
+    select it (``estimator=NAME`` and the values that differ from NAME's on this dataset)."""
+    from tma.experiment import override_text
+
+    found, stale = [], 0
+    for path in sorted((runs_dir(data_dir) / dataset.name).glob(f"*/{MANIFEST}")):
+        try:
+            manifest = read_sealed_manifest(path, "run", RUN_FORMAT, RUN_FORMAT_VERSION, "")
+            name = manifest["config"]["name"]
+            base = full_config(dataset, dataset_config(dataset, {"name": name}))
+        except (TmaError, OSError, KeyError, TypeError):
+            continue  # not a run this tma can read: not one to offer
+        if (manifest.get("dataset", {}).get("content_hash") != dataset.content_hash
+                or manifest.get("package", {}).get("version") != __version__):
+            stale += 1  # of another content of the dataset, or another tma: not selectable
+            continue
+        selected = [f"estimator={name}"] + [
+            override_text(f"estimator.{key}", value) for key, value in
+            _differing(manifest["config"], base)]
+        found.append(f"{path.parent.name} ({' '.join(selected)})")
+    line = (f"no finished run of {config['name']} on dataset {dataset.name} with these "
+            f"settings ({run_path(data_dir, dataset, config).name}): make it with "
+            "`python -m pipeline.estimate` and the same overrides")
+    if found:
+        line += f", or aggregate a run that exists: {'; '.join(found)}"
+    if stale:
+        line += (f" ({stale} other run(s) of {dataset.name} were made from another content "
+                 "of the dataset or by another tma version)")
+    return line
+
+
+def _differing(config: dict, base: dict, prefix: str = ""):
+    """``(dotted key, value)`` of ``config`` that differ from ``base``, for keys ``base`` has
+    (a prepared config's records, e.g. an artefact's hash, are no option)."""
+    for key, value in config.items():
+        if key not in base:
+            continue
+        if isinstance(value, dict) and isinstance(base[key], dict):
+            yield from _differing(value, base[key], f"{prefix}{key}.")
+        elif value != base[key]:
+            yield f"{prefix}{key}", value
 
 
 def verify_run(root) -> dict:

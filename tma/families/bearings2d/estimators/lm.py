@@ -172,6 +172,9 @@ class LevenbergMarquardt(BearingsEstimator):
     # present when starts > 1 / when the loss is robust (the default run adds none)
     outputs = ("start_won", "cost_robust_rad2", "n_downweighted")
     conformance_config = {"starts": 2, "loss": "huber"}  # every output present
+    # a recording has no prior on the bearing of its targets (the simulated one, north): start
+    # from each track's first bearing unless the command line says otherwise
+    recorded_defaults = {"initial_bearing_deg": None}
 
     def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
         cfg = self.config
