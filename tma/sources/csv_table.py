@@ -17,7 +17,8 @@ noted for the log):
 - ``csv.delimiter`` (sniffed among ``,`` ``;`` tab), ``csv.decimal`` (``,`` found when the
   numbers are written ``12,5``); a units row under the header (``s,deg,deg`` or ``[s]``) is
   skipped; extra columns are ignored; CRLF line ends and a UTF-8 byte-order mark are fine;
-- tracks: integer ids, or text ids (``T1``) kept as labels.
+- tracks: ids as written: integers (``12``) stay the ids, any other text (``T1``, ``007``,
+  ``NA``) is a label, never re-read as a number.
 
 Everything is vectorised over the rows (pandas' C parser, numpy sorts): a million rows take
 about a second. Bad values are one ``InputError`` naming the file, the column and the line.
@@ -54,7 +55,8 @@ COMMON = {  # candidates per role, in order of preference (lower case)
 SNIFFED = (",", ";", "\t")
 SAMPLE_BYTES = 1 << 16
 SAMPLE_LINES = 50
-MAX_TRACK_ID = 2**53  # integers beyond this are not exact in a numeric CSV column
+MAX_TRACK_ID = 2**53  # an id written as a larger integer is kept as text
+INTEGER_ID = re.compile(r"-?(?:0|[1-9][0-9]{0,15})")  # an id written as a plain integer
 SAME_FIX = {"x": 1e-6, "lat": 1e-9}  # m, deg (0.1 mm): rows at one time share one own-ship
 UNIT_WORDS = {"s", "sec", "secs", "second", "seconds", "ms", "us", "ns", "utc", "iso",
               "iso8601", "iso-8601", "deg", "degree", "degrees", "rad", "radian", "radians",
@@ -265,15 +267,24 @@ class _Table:
 
     def read(self, cols: dict[str, str]) -> pd.DataFrame:
         """The chosen columns (by position, so odd header spellings cannot get in the way).
-        Every column is parsed, so that a line with more fields than the header is refused."""
+        Every column is parsed, so that a line with more fields than the header is refused.
+        The track column is text as written (``007`` is not ``7``, ``NA`` is a name)."""
         index = sorted({self.header.index(name) for name in cols.values()})
+        track = self.header.index(cols["track"]) if "track" in cols else None
         try:
             with warnings.catch_warnings():  # a row longer than the header: refused
                 warnings.simplefilter("error", pd.errors.ParserWarning)
                 df = pd.read_csv(self.path, sep=self.delimiter, decimal=self.decimal,
                                  skiprows=[1] if self.units is not None else None,
                                  index_col=False, skipinitialspace=True,
-                                 encoding="utf-8-sig", low_memory=False)
+                                 encoding="utf-8-sig", low_memory=False,
+                                 dtype=None if track is None else {track: str})
+                if track is not None and df.iloc[:, track].isna().any():
+                    # pandas read a name such as NA or null as missing: the ids as written
+                    df.iloc[:, track] = pd.read_csv(
+                        self.path, sep=self.delimiter, usecols=[track], dtype=str,
+                        keep_default_na=False, skipinitialspace=True, encoding="utf-8-sig",
+                        skiprows=[1] if self.units is not None else None).iloc[:, 0]
         except (pd.errors.ParserError, pd.errors.ParserWarning, pd.errors.EmptyDataError,
                 UnicodeDecodeError, ValueError) as exc:
             raise InputError(f"{self.path}: not a readable CSV "
@@ -456,37 +467,21 @@ def _values(df, col, options, table, path, line, notes):
 
 
 def _tracks(df, col, path, line) -> np.ndarray:
-    """int64 track ids, or text labels (object array) when the ids are not all numbers."""
+    """Track ids as written: int64 when every id is written as a plain integer (``12``,
+    ``-3``: the ids themselves), else the texts (object array), kept as labels: ``007`` and
+    ``7``, ``1e3`` and ``1000`` are different contacts, ``NA`` is a name."""
     if col is None:
         return np.zeros(len(df), dtype=np.int64)
-    series = df[col]
-    if pd.api.types.is_bool_dtype(series):
-        raise InputError(f"{path}: column {col} holds true/false, not track ids")
-    if pd.api.types.is_integer_dtype(series):
-        ids = series.to_numpy(dtype=np.int64)
-        big = np.abs(ids) > MAX_TRACK_ID
-        if big.any():
-            k = int(np.argmax(big))
-            raise InputError(f"{path}: {col} {ids[k]} on line {line[k]} is not an integer "
-                             "within +-2^53")
-        return ids
-    missing = series.isna().to_numpy()
+    text = df[col].astype(str).str.strip()
+    missing = (text == "").to_numpy()
     if missing.any():
         raise InputError(f"{path}: column {col} has missing track ids (line "
                          f"{_bad(~missing, line)})")
-    if not pd.api.types.is_numeric_dtype(series):
-        text = series.astype("str").str.strip()
-        numeric = pd.to_numeric(text, errors="coerce")
-        if numeric.isna().any():  # text ids: kept as labels
-            return text.to_numpy(dtype=object)
-        series = numeric
-    ids = series.to_numpy(dtype=float)
-    bad = (ids != np.round(ids)) | ~(np.abs(ids) <= MAX_TRACK_ID)
-    if bad.any():
-        k = int(np.argmax(bad))
-        raise InputError(f"{path}: {col} {ids[k]:g} on line {line[k]} is not an integer within "
-                         "+-2^53")
-    return ids.astype(np.int64)
+    if text.str.fullmatch(INTEGER_ID.pattern).all():
+        ids = text.astype(np.int64).to_numpy()
+        if np.all(np.abs(ids) <= MAX_TRACK_ID):
+            return ids
+    return text.to_numpy(dtype=object)
 
 
 def _codes(track: np.ndarray) -> np.ndarray:

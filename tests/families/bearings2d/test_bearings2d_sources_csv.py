@@ -269,3 +269,32 @@ def test_a_table_of_radians_with_unstated_units_is_refused_with_the_option(tmp_p
         ingest(path, data_dir=tmp_path / "data")
     root = ingest(path, data_dir=tmp_path / "data", options={"bearing": {"units": "rad"}})
     check_against_truth(estimate(root), t_offset_s=0.5, labels={"0": "T1"})
+
+
+# -- contact ids as written ------------------------------------------------------------------
+
+@pytest.mark.parametrize("ids", [("007", "7"), ("1e3", "1000"), ("NA", "T2")])
+def test_contact_ids_are_kept_as_written(tmp_path, ids):
+    """``007`` and ``7`` (``1e3`` and ``1000``) are two contacts, never one number; ``NA`` is
+    a name, not a missing id."""
+    rec = recorded(("T1", "T2"))
+    df = _iso_latlon(rec)
+    df["contact"] = rec.bearings.track.map({"T1": ids[0], "T2": ids[1]})
+    path = _write(df, tmp_path / "ids.csv")
+    (one,) = _read(path)
+    assert sorted(set(one.contacts.track)) == sorted(ids)
+    root = ingest(path, data_dir=tmp_path / "data")
+    m = json.loads((root / "manifest.json").read_text())
+    assert sorted(m["track_labels"].values()) == sorted(ids)
+    est = estimate(root)
+    assert sorted(est.label) == sorted(ids)
+    check_against_truth(est, t_offset_s=0.5, labels={ids[0]: "T1", ids[1]: "T2"})
+
+
+def test_canonical_integer_ids_stay_numbers(tmp_path):
+    """Ids written as plain integers are the ids themselves (no labels), as before."""
+    df = pd.DataFrame({"time_s": [0.0, 0.0, 1.0, 1.0], "own_x_m": [0.0, 0.0, 1.0, 1.0],
+                       "own_y_m": 0.0, "bearing_deg": 10.0, "track_id": [12, -3, 12, -3]})
+    (one,) = _read(_write(df, tmp_path / "n.csv"))
+    assert one.contacts.track.dtype == np.int64
+    np.testing.assert_array_equal(one.contacts.track, [12, -3, 12, -3])
