@@ -8,10 +8,13 @@ raw fixes and values, read as the family's observation asks (its ``ingest`` modu
 the family makes its logs (``logs``), which its scenario module writes. Times are shifted so
 the dataset starts at t = 0 at its first value; the UTC time of t = 0, the plane's origin
 (lat, lon), text track labels, the dropped values, the navigation gaps and every automatic
-choice go into the manifest. Bad input raises ``InputError`` naming the file, line or time,
-and the option that would fix it; nothing is written then. The dataset name is a plain name;
-the dataset is built beside its final place and swapped in only when complete, so a failed
-ingest (even with ``force=true``) leaves an existing dataset byte-identical.
+choice go into the manifest. Bad rows (``bad_rows=drop``: a missing or unreadable value, time
+or fix, an outlier fix) are left out, counted per reason in a log line and the manifest
+(``bad_rows``), and a contact left with too few values is skipped (the family says how
+many); under ``bad_rows=fail``, and for any other bad input, ``InputError`` names the file,
+line or time, and the option that would fix it; nothing is written then. The dataset name
+is a plain name; the dataset is built beside its final place and swapped in only when
+complete, so a failed ingest (even with ``force=true``) leaves an existing dataset byte-identical.
 """
 
 import logging
@@ -75,6 +78,7 @@ def read_recordings(path: Path, fmt, navigation: Path | None, options):
         raise InputError(f"{navigation}: no own-ship fixes found in the navigation file")
     rec = found[0]
     notes = [*rec.notes, *nav[0].notes]
+    rec.dropped.merge(nav[0].dropped)
     if rec.navigation is not None:
         notes.append(f"own-ship from navigation={navigation}; the input's own-ship "
                      f"({rec.navigation.source}) is not used")
@@ -137,6 +141,11 @@ def ingest(input_path, *, data_dir, family: str, name=None, fmt="auto", force=Fa
                     "across them", gaps["count"], gaps["max_gap_s"], gaps["longest_s"],
                     gaps["gaps"][0]["from_s"])
     logs, config, extra = reader.logs(aligned, settings, str(path))
+    bad = aligned.dropped
+    if bad.count:
+        log.warning("%s: left out %d bad row(s) (bad_rows=%s): %s", path, bad.count,
+                    bad.policy, bad.text())
+    summary["bad_rows"] = bad.record()
 
     sources = {"input": {"path": str(path), "sha256": sha256_file(path), "kind": kind}}
     if nav_path is not None:

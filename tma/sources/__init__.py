@@ -70,7 +70,7 @@ def read_source(path, kind: str, options, *, navigation: bool,
                              f"navigation=FILE and the {options.observation.plural} as input=")
         from tma.sources.nmea import read_nmea
 
-        return [read_nmea(path)]
+        return [read_nmea(path, options)]
     from tma.sources.mcap import read_mcap
 
     need = (("navigation",) if navigation else ()) + (("contacts",) if contacts else ())

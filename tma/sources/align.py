@@ -14,6 +14,12 @@
   are reported (values inside are interpolated across them).
 - Text track labels become ids 0..n-1 in sorted label order (``Aligned.labels``, and the
   summary).
+- Own-ship fixes that cannot be right are outliers, left out and counted with the rows the
+  readers left out (``bad_rows``; under ``fail`` the first refuses the file): a fix at exactly
+  latitude 0, longitude 0 (what receivers report before their first fix), and a fix far off
+  the track (``far_off``: farther from the median of the fixes around it, ``OUTLIER_NEIGHBOURS``
+  on each side, than own-ship could have gone at ``nav.max_speed_m_s``, plus
+  ``OUTLIER_TOLERANCE_M`` for the fixes' own noise).
 
 What comes out is one ``Platform`` per own-ship: flat arrays, one row per value; the family
 makes its logs from them (``bearings2d``: one epoch grid per own-ship, shared by its tracks).
@@ -25,10 +31,12 @@ import numpy as np
 
 from tma.errors import InputError
 from tma.geo import geodetic_to_local
-from tma.sources.base import Navigation, Recording
-from tma.utc import format_utc
+from tma.sources.base import Dropped, Navigation, Recording
+from tma.utc import format_utc, stamp_text
 
 MAX_LISTED_GAPS = 20
+OUTLIER_NEIGHBOURS = 10  # fixes on each side whose median a fix is held against
+OUTLIER_TOLERANCE_M = 100.0  # the fixes' own noise (GNSS, multipath) the rule allows for
 
 
 @dataclass
@@ -55,6 +63,7 @@ class Aligned:
     origin_deg: tuple[float, float] | None
     labels: np.ndarray | None
     summary: dict
+    dropped: Dropped  # every row left out so far (readers and outliers), under the policy
 
 
 def align(recordings: list[Recording], options, where: str) -> Aligned:
@@ -66,10 +75,13 @@ def align(recordings: list[Recording], options, where: str) -> Aligned:
     for messages."""
     observation = options.observation
     plural = observation.plural
+    bad = options.dropped()
+    for r in recordings:
+        bad.merge(r.dropped)
     ref = _time_reference(recordings, options)
     navs = [_shifted(r.navigation.t_s, r.navigation.epoch_utc_ns, ref) for r in recordings]
     obs = [_shifted(r.contacts.t_s, r.contacts.epoch_utc_ns, ref) for r in recordings]
-    origin, positions, notes = _local_plane(recordings, navs, options)
+    origin, positions, navs, notes = _local_plane(recordings, navs, options, bad)
     ids, labels = _track_ids([r.contacts.track for r in recordings])
     if observation.guard is not None:
         observation.guard(recordings, options, where)
@@ -118,7 +130,7 @@ def align(recordings: list[Recording], options, where: str) -> Aligned:
                      "gaps": gaps[:MAX_LISTED_GAPS]},
         "notes": [*dict.fromkeys(n for r in recordings for n in r.notes), *notes],
     }
-    return Aligned(platforms, epoch, origin, labels, summary)
+    return Aligned(platforms, epoch, origin, labels, summary, bad)
 
 
 def _time_reference(recordings, options) -> int | None:
@@ -144,8 +156,9 @@ def _shifted(t_s, epoch, ref) -> np.ndarray:
     return t if ref is None else t + (epoch - ref) / 1e9
 
 
-def _local_plane(recordings, navs, options):
-    """(origin (lat, lon) or None, [(x, y) per recording], notes)."""
+def _local_plane(recordings, navs, options, dropped: Dropped):
+    """``(origin (lat, lon) or None, [(x, y) per recording], [times per recording], notes)``,
+    the outlier fixes left out (``dropped``)."""
     geographic = [r.navigation.geographic for r in recordings]
     given = options.origin.lat is not None
     notes = []
@@ -154,21 +167,97 @@ def _local_plane(recordings, navs, options):
             notes.append(f"own-ship x/y taken as metres east/north of origin.lat/lon = "
                          f"{options.origin.lat:g}, {options.origin.lon:g}")
         origin = (options.origin.lat, options.origin.lon) if given else None
-        return origin, [(r.navigation.x_m, r.navigation.y_m) for r in recordings], notes
+        positions, times = [], []
+        for r, t in zip(recordings, navs, strict=True):
+            nav = r.navigation
+            keep = _on_track(t, nav.x_m, nav.y_m, nav, np.arange(t.size), options, dropped)
+            positions.append((nav.x_m[keep], nav.y_m[keep]))
+            times.append(t[keep])
+        return origin, positions, times, notes
     if not all(geographic):
         raise InputError("own-ship positions come both as latitude/longitude and as local x/y "
                          "metres: give one kind")
+    kept = []  # per recording: the rows kept
+    for r in recordings:
+        nav = r.navigation
+        zero = (nav.lat_deg == 0) & (nav.lon_deg == 0)
+        keep = dropped.drop(zero, "own-ship fix at 0, 0", fix_places(nav, np.arange(zero.size)),
+                            f"{nav.source}: an own-ship fix at 0, 0 (a receiver without a fix)")
+        kept.append(np.flatnonzero(keep))
+    fixes = np.concatenate([np.c_[r.navigation.lat_deg[rows], r.navigation.lon_deg[rows]]
+                            for r, rows in zip(recordings, kept, strict=True)])
+    if not fixes.size:
+        raise InputError(f"{recordings[0].navigation.source}: no own-ship fix left: "
+                         f"{dropped.text()}")
+    middle = tuple(np.median(fixes, axis=0))  # a plane no outlier can move far
+    for k, (r, t, rows) in enumerate(zip(recordings, navs, kept, strict=True)):
+        x, y = geodetic_to_local(r.navigation.lat_deg[rows], r.navigation.lon_deg[rows], middle)
+        kept[k] = rows[_on_track(t[rows], x, y, r.navigation, rows, options, dropped)]
     if given:
         lat0, lon0 = options.origin.lat, options.origin.lon
     else:
-        first = int(np.argmin([t[0] for t in navs]))
-        lat0 = float(recordings[first].navigation.lat_deg[0])
-        lon0 = float(recordings[first].navigation.lon_deg[0])
+        first = int(np.argmin([t[rows[0]] if rows.size else np.inf
+                               for t, rows in zip(navs, kept, strict=True)]))
+        nav, row = recordings[first].navigation, kept[first][0]
+        lat0, lon0 = float(nav.lat_deg[row]), float(nav.lon_deg[row])
         notes.append(f"local plane origin at the first own-ship fix {lat0:.7f}, {lon0:.7f} "
                      "(origin.lat/origin.lon)")
-    positions = [geodetic_to_local(r.navigation.lat_deg, r.navigation.lon_deg, (lat0, lon0))
-                 for r in recordings]
-    return (lat0, lon0), positions, notes
+    positions = [geodetic_to_local(r.navigation.lat_deg[rows], r.navigation.lon_deg[rows],
+                                   (lat0, lon0)) for r, rows in zip(recordings, kept, strict=True)]
+    return (lat0, lon0), positions, [t[rows] for t, rows in zip(navs, kept, strict=True)], notes
+
+
+def fix_places(nav: Navigation, index: np.ndarray):
+    """Row indices into ``nav``'s rows ``index`` -> their places: file lines, else the topic
+    and time."""
+    def places(rows):
+        rows = index[rows]
+        if nav.lines is not None:
+            return [f"line {n}" for n in nav.lines[rows]]
+        epoch = nav.epoch_utc_ns or 0
+        return [f"{nav.topic or nav.source} at "
+                f"{stamp_text(epoch + int(round(nav.t_s[i] * 1e9)))}" for i in rows]
+    return places
+
+
+def far_off(t, x, y, max_speed_m_s: float) -> np.ndarray:
+    """Fixes (sorted by time ``t``, positions ``x``, ``y`` in m) farther from the
+    component-wise median of the ``2 OUTLIER_NEIGHBOURS + 1`` fixes around them (itself
+    included; at the ends, the first or last so many) than sqrt(2) * ``max_speed_m_s`` * (the
+    longest time to one of them) + ``OUTLIER_TOLERANCE_M``. A track that never moves faster
+    than ``max_speed_m_s`` always passes: every fix of the window lies within speed x time of
+    the fix, so each coordinate of their median does too, and the median within sqrt(2) times
+    that. A fix off the track is caught as long as fewer than half of the window is off too
+    (up to ``OUTLIER_NEIGHBOURS`` bad fixes in a row). Running medians (scipy.ndimage): a
+    million fixes take about 0.1 s."""
+    from scipy.ndimage import maximum_filter1d, median_filter, minimum_filter1d
+
+    n = t.size
+    if n < 3:
+        return np.zeros(n, dtype=bool)
+    k = min(OUTLIER_NEIGHBOURS, (n - 1) // 2)
+    size = 2 * k + 1
+    mx, my = (median_filter(v, size=size, mode="nearest") for v in (x, y))
+    reach = np.maximum(maximum_filter1d(t, size, mode="nearest") - t,
+                       t - minimum_filter1d(t, size, mode="nearest"))
+    if k:  # the first and last k fixes: the window of the first (last) size fixes
+        for end, window in ((slice(None, k), slice(None, size)),
+                            (slice(n - k, None), slice(n - size, None))):
+            mx[end], my[end] = np.median(x[window]), np.median(y[window])
+            reach[end] = np.maximum(t[window][-1] - t[end], t[end] - t[window][0])
+    return np.hypot(x - mx, y - my) > np.sqrt(2) * max_speed_m_s * reach + OUTLIER_TOLERANCE_M
+
+
+def _on_track(t, x, y, nav: Navigation, index, options, dropped: Dropped) -> np.ndarray:
+    """The fixes to keep: those ``far_off`` finds off the track are left out (``index``: the
+    rows of ``nav`` they are)."""
+    order = np.argsort(t, kind="stable")
+    off = np.zeros(t.size, dtype=bool)
+    off[order] = far_off(t[order], x[order], y[order], options.nav.max_speed_m_s)
+    return dropped.drop(off, "own-ship fix far off the track", fix_places(nav, index),
+                        f"{nav.source}: an own-ship fix far off the track (farther from its "
+                        f"neighbours than nav.max_speed_m_s = {options.nav.max_speed_m_s:g} m/s "
+                        "allows)")
 
 
 def _track_ids(tracks: list[np.ndarray]):

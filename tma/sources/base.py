@@ -7,6 +7,12 @@ MCAP) into flat arrays: own-platform fixes (``Navigation``) and/or per-contact v
 ``tma.sources.align`` then puts fixes and values on one time base and one local east-north
 plane, and the family makes its logs from them.
 
+Bad rows (``bad_rows=drop|fail``): a row whose time, value or own-ship position is missing or
+unreadable, a stamp not absolute among absolute ones, a fix flagged "no fix" or far off the
+rest is left out and counted per reason (``Dropped``: how many, and where the first few are:
+file line numbers or message times); under ``fail`` the first such row refuses the file in one
+line instead (fixes the receiver itself flags as "no fix" are left out under either policy).
+
 Conventions: times are float seconds since ``epoch_utc_ns`` (UTC nanoseconds since the Unix
 epoch) when the source has absolute times, else seconds from an arbitrary zero with
 ``epoch_utc_ns = None`` (``tma.utc``); values in the observation's first unit (readers
@@ -16,13 +22,14 @@ local (x east, y north, metres) or geographic (latitude, longitude in degrees, W
 
 import functools
 from collections.abc import Callable
+from dataclasses import MISSING as MISSING_FACTORY
 from dataclasses import dataclass, field, fields, is_dataclass, make_dataclass
 
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from tma.config import validate
-from tma.errors import ConfigError
+from tma.errors import ConfigError, InputError
 
 
 @dataclass(frozen=True)
@@ -76,10 +83,69 @@ class Observation:
         return next((u for u in self.units[1:] if name.lower().endswith(f"_{u.name}")), None)
 
 
+BAD_ROWS = ("drop", "fail")
+NAMED = 5  # places named per reason: the first few
+
+
+@dataclass
+class Dropped:
+    """Rows left out, per reason: ``{reason: {"count": n, "first": [place, ...]}}``, the
+    places (``line 12``, or a message's time) of the first ``NAMED``. ``policy``: what
+    ``drop`` does with a bad row: leave it out (``drop``) or refuse the file (``fail``)."""
+
+    policy: str = "drop"
+    reasons: dict = field(default_factory=dict)
+
+    def drop(self, bad, reason: str, places: Callable, refusal: str) -> np.ndarray:
+        """The rows to keep, ``~bad``; the bad ones counted under ``reason``. ``places``:
+        row indices -> their places (texts); ``refusal``: the one line under
+        ``bad_rows=fail`` (the places and the option are appended)."""
+        bad = np.asarray(bad, dtype=bool)
+        if not bad.any():
+            return ~bad
+        rows = np.flatnonzero(bad)
+        named = [str(p) for p in places(rows[:NAMED])]
+        if self.policy == "fail":
+            raise InputError(f"{refusal} ({', '.join(named)}); bad_rows=drop leaves such rows "
+                             "out")
+        self.add(reason, rows.size, named)
+        return ~bad
+
+    def add(self, reason: str, count: int, named: list[str]):
+        """Count ``count`` rows left out under ``reason`` whatever the policy."""
+        entry = self.reasons.setdefault(reason, {"count": 0, "first": []})
+        entry["count"] += int(count)
+        entry["first"] = (entry["first"] + list(named))[:NAMED]
+
+    def merge(self, other: "Dropped"):
+        for reason, entry in other.reasons.items():
+            self.add(reason, entry["count"], entry["first"])
+
+    @property
+    def count(self) -> int:
+        return sum(e["count"] for e in self.reasons.values())
+
+    def record(self) -> dict:
+        """For the manifest: the policy, the total and each reason's count and places."""
+        return {"policy": self.policy, "count": self.count, "reasons": self.reasons}
+
+    def text(self) -> str:
+        """``3 with bearing missing or not a number (line 12, line 40, ...); 1 with ...``."""
+        return "; ".join(f"{e['count']} with {reason} ({', '.join(e['first'])}"
+                         f"{', ...' if e['count'] > len(e['first']) else ''})"
+                         for reason, e in self.reasons.items())
+
+
+def line_places(lines: np.ndarray) -> Callable:
+    """Row indices -> ``line N`` (file line numbers of the rows)."""
+    return lambda rows: [f"line {n}" for n in lines[rows]]
+
+
 @dataclass
 class Navigation:
     """Own-platform fixes, sorted by time. Exactly one of (x_m, y_m) or (lat_deg, lon_deg) is
-    set."""
+    set. ``lines``: each fix's line in its file, when it has lines (a table, NMEA), else
+    ``topic`` (MCAP), to name a fix in messages."""
 
     t_s: np.ndarray
     epoch_utc_ns: int | None
@@ -88,6 +154,8 @@ class Navigation:
     y_m: np.ndarray | None = None
     lat_deg: np.ndarray | None = None
     lon_deg: np.ndarray | None = None
+    lines: np.ndarray | None = None
+    topic: str | None = None  # the MCAP topic, for messages
 
     @property
     def geographic(self) -> bool:
@@ -110,13 +178,14 @@ class Contacts:
 
 @dataclass
 class Recording:
-    """What one file gave: own-platform fixes and/or contacts, and the file's metadata
-    records (MCAP; what it says of its sensor, for the family)."""
+    """What one file gave: own-platform fixes and/or contacts, the file's metadata records
+    (MCAP; what it says of its sensor, for the family) and the rows it left out."""
 
     navigation: Navigation | None
     contacts: Contacts | None
     metadata: dict = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)  # what was found automatically, for the log
+    dropped: Dropped = field(default_factory=Dropped)
 
 
 # -- the reading options (conf/ingest.yaml) ----------------------------------------------------
@@ -186,8 +255,12 @@ class TimeFormat:
 class NavLimits:
     max_extrapolation_s: float = 1.0  # a contact value further outside the nav span is dropped
     max_gap_s: float = 10.0  # a longer gap between fixes is reported
+    max_speed_m_s: float = 50.0  # own-ship never moves faster: a fix off by more is an outlier
 
     def __post_init__(self):
+        if not 0 < self.max_speed_m_s < 1e5:
+            raise ConfigError(f"nav.max_speed_m_s must be a speed in (0, 1e5) m/s, "
+                              f"got {self.max_speed_m_s}")
         if not 0 <= self.max_extrapolation_s < 1e9:
             raise ConfigError(f"nav.max_extrapolation_s must be a number of seconds in "
                               f"[0, 1e9), got {self.max_extrapolation_s}")
@@ -226,6 +299,11 @@ class ReadingOptions:
     def __post_init__(self):
         role, units = self.observation.role, self.observation.units
         one_of(f"{role}.units", self.contact.units, (None, *(u.name for u in units)))
+        one_of("bad_rows", self.bad_rows, BAD_ROWS)
+
+    def dropped(self) -> Dropped:
+        """A new count of the rows left out, under this policy."""
+        return Dropped(self.bad_rows)
 
 
 @functools.cache
@@ -243,7 +321,8 @@ def options_schema(observation: Observation) -> type:
               ("csv", CsvFormat, field(default_factory=CsvFormat)),
               ("time", TimeFormat, field(default_factory=TimeFormat)),
               ("nav", NavLimits, field(default_factory=NavLimits)),
-              ("origin", Origin, field(default_factory=Origin))]
+              ("origin", Origin, field(default_factory=Origin)),
+              ("bad_rows", str, field(default="drop"))]  # a top-level option, not a group
     return make_dataclass("SourceOptions", groups, bases=(ReadingOptions,),
                           namespace={"observation": observation})
 
@@ -255,8 +334,15 @@ def one_of(key: str, value, allowed):
 
 
 def groups(observation: Observation) -> tuple[str, ...]:
-    """The option groups of the ingest config (``columns``, ``bearing``, ``ownship``...)."""
+    """The reading options' top-level keys of the ingest config: the groups (``columns``,
+    ``bearing``, ``ownship``...) and the options of their own (``bad_rows``)."""
     return tuple(f.name for f in fields(options_schema(observation)))
+
+
+def _scalar(observation: Observation, key: str) -> bool:
+    """True for a top-level option that is a value, not a group (``bad_rows``)."""
+    f = next(f for f in fields(options_schema(observation)) if f.name == key)
+    return f.default_factory is MISSING_FACTORY
 
 
 def option_keys(schema, prefix="") -> list[str]:
@@ -278,6 +364,8 @@ def unknown_option(key: str, observation: Observation) -> str | None:
     group = key.split(".")[0]
     if group not in groups(observation) or key in keys or key == group:
         return None
+    if _scalar(observation, group):
+        return f"unknown option {key}: {group} is one value ({group}=...)"
     known = [k for k in keys if k.startswith(group + ".")]
     return f"unknown option {key} (the {group} options: {', '.join(known)})"
 
@@ -296,6 +384,8 @@ def source_options(node, observation: Observation):
     for group, values in node.items():
         if group not in known:
             raise ConfigError(f"unknown option {group} (known: {', '.join(known)})")
+        if _scalar(observation, group):
+            continue
         if not isinstance(values, dict):
             raise ConfigError(f"{group} holds options ({group}.<name>=...), not a value: "
                               f"got {group}='{values}'")

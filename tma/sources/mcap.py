@@ -26,10 +26,13 @@ Times: ``header.stamp`` (ROS 2) or ``timestamp`` (Foxglove) when the messages ha
 is set), else the message's ``log_time``; ``t_s`` for tma's own schemas. Stamps from 2000 on
 are UTC (``tma.utc.UTC_FROM_NS``): the recording's ``epoch_utc_ns`` is its first time and every
 ``t_s`` counts from it; earlier ones are a relative clock (simulation time, tma's older logs:
-``epoch_utc_ns`` None). Messages are sorted by time (log order is not time order across
-channels); two values of one contact at one time are an error naming the time (repeated
-own-ship fixes are ``align``'s to judge). NaN values (and NavSatFix fixes with status NO_FIX)
-are dropped and counted in ``Recording.notes``, as is every automatic choice. Nothing is
+``epoch_utc_ns`` None); a stamp before 2000 in a topic whose stamps are UTC is a clock that
+was not set (0), a bad row, never a relative clock. Messages are sorted by time (log order is
+not time order across channels); two values of one contact at one time are an error naming the
+time (repeated own-ship fixes are ``align``'s to judge). Bad rows (NaN values and positions,
+stamps not set) are left out and counted with their topic and time (``bad_rows=drop``; under
+``fail`` the first refuses the file); NavSatFix fixes with status NO_FIX are left out and
+counted under either policy. Every automatic choice is noted in ``Recording.notes``. Nothing is
 interpolated here: ``align`` puts navigation and contacts on one time base and plane.
 
 Every failure is one ``InputError`` (``ConfigError`` for an option) naming the file; a mapping
@@ -52,7 +55,7 @@ from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
 from tma.errors import ConfigError, InputError
 from tma.io.mcap_log import McapFile, TmaDecoderFactory, float_array, int_array, schema_errors
 from tma.sources import foxglove, ros2, tma_log
-from tma.sources.base import Contacts, Navigation, Recording
+from tma.sources.base import NAMED, Contacts, Dropped, Navigation, Recording
 from tma.utc import UTC_FROM_NS, stamp_text
 
 # own-ship readers by schema name, in order of preference when a log holds several
@@ -83,9 +86,26 @@ class RecordedLog(McapFile):
     """An MCAP file as a source: its topics decoded by any of ``FACTORIES``; ``notes``
     collects what was found automatically (for the log)."""
 
-    def __init__(self, path):
+    def __init__(self, path, dropped: Dropped | None = None):
         super().__init__(path)
         self.notes = []
+        self.dropped = Dropped() if dropped is None else dropped
+
+    def places(self, topic: str, t_ns: np.ndarray, clock: str = ""):
+        """Row indices -> ``<topic> at <time>`` (``clock``: ``log time`` to name the message's
+        log time rather than its stamp)."""
+        return lambda rows: [f"{topic} at {clock + ' ' if clock else ''}"
+                             f"{stamp_text(int(t_ns[i]))}" for i in rows]
+
+    def not_absolute(self, msgs: "Messages", t_ns: np.ndarray, message: np.ndarray):
+        """The rows to keep: a stamp before 2000 among UTC stamps (a clock not set: 0) is left
+        out (named by its message's log time; ``message``: each row's message)."""
+        absolute = t_ns.size and np.median(t_ns) >= UTC_FROM_NS
+        return self.dropped.drop(
+            (t_ns < UTC_FROM_NS) if absolute else np.zeros(t_ns.size, dtype=bool),
+            "time not absolute among absolute times",
+            self.places(msgs.topic, msgs.log_time_ns[message], "log time"),
+            f"{self.where}: {msgs.topic}: a time stamp before 2000 among UTC stamps")
 
     def source(self, name: str) -> str:
         """A topic as a source, for messages: ``file.mcap: /gps/fix (sensor_msgs/msg/...)``."""
@@ -246,6 +266,7 @@ def _field_values(msgs: Messages, file: RecordedLog, options):
     field = _value_field(msgs, source.field, file, observation)
     get = _getter(msgs.decoded[0], field)
     t_ns, sizes = file.message_times(msgs), None
+    message = np.arange(t_ns.size)
     with schema_errors(file.where, f"a message on {msgs.topic}"):
         values = [get(m) for m in msgs.decoded]
         first = values[0]
@@ -266,7 +287,7 @@ def _field_values(msgs: Messages, file: RecordedLog, options):
         elif _is_array(first):
             arrays = [float_array(list(v)) for v in values]
             sizes = np.array([a.size for a in arrays])
-            t_ns = np.repeat(t_ns, sizes)
+            t_ns, message = np.repeat(t_ns, sizes), np.repeat(message, sizes)
             converted, stated = _to_first_unit(np.concatenate(arrays), source.units, field,
                                                msgs.topic, file.notes, observation)
         else:
@@ -275,7 +296,7 @@ def _field_values(msgs: Messages, file: RecordedLog, options):
             raise InputError(f"{file.where}: '{field}' of {msgs.topic} holds "
                              f"{type(first).__name__} values, not numbers, arrays of numbers"
                              f"{vectors}; set {role}.field=<dotted path>")
-    return t_ns, _tracks(msgs, field, sizes, file), converted, stated
+    return t_ns, _tracks(msgs, field, sizes, file), converted, stated, message
 
 
 def _own_values(msgs: Messages, file: RecordedLog, options):
@@ -285,12 +306,12 @@ def _own_values(msgs: Messages, file: RecordedLog, options):
         raise ConfigError(f"{observation.role}.field={source.field}: {msgs.topic} has tma's "
                           f"schema {msgs.schema}, whose {observation.plural} are "
                           f"'{observation.column}'; leave {observation.role}.field unset")
-    t_ns, track, values = tma_log.contacts(msgs, file, observation.column)
+    t_ns, track, values, message = tma_log.contacts(msgs, file, observation.column)
     if source.units is not None:
         values = observation.unit(source.units).to_first(values)
     # the column names the first unit, yet values in another written there are what the
     # family's guard catches
-    return t_ns, track, values, source.units is not None
+    return t_ns, track, values, source.units is not None, message
 
 
 # -- selection, checks, time base -----------------------------------------------------------
@@ -346,9 +367,23 @@ def _drop_nonfinite(keep, values_desc: str, topic: str, notes: list):
 
 
 def _navigation_part(file: RecordedLog, msgs: Messages):
-    t_ns, columns = NAVIGATION[msgs.schema](msgs, file)
+    """Own-ship fixes of a topic, sorted by time; fixes the receiver flags (NavSatFix
+    NO_FIX), with a stamp not absolute among absolute ones or with NaN coordinates left out
+    and counted."""
+    t_ns, columns, no_fix = NAVIGATION[msgs.schema](msgs, file)
+    keep = file.not_absolute(msgs, t_ns, np.arange(t_ns.size))
+    if no_fix is not None and (no_fix & keep).any():  # the receiver's own verdict
+        rows = np.flatnonzero(no_fix & keep)
+        file.dropped.add("own-ship fix flagged no fix", rows.size,
+                         file.places(msgs.topic, t_ns)(rows[:NAMED]))
+        keep &= ~no_fix
     a, b = columns.values()
-    keep = _drop_nonfinite(np.isfinite(a) & np.isfinite(b), "fix(es)", msgs.topic, file.notes)
+    finite = _drop_nonfinite(np.isfinite(a) & np.isfinite(b) | ~keep, "fix(es)", msgs.topic,
+                             file.notes)
+    keep &= file.dropped.drop(~finite, "own-ship position missing or not a number",
+                              file.places(msgs.topic, t_ns),
+                              f"{file.where}: {msgs.topic}: an own-ship fix with NaN or "
+                              "infinite coordinates")
     if not keep.any():
         raise InputError(f"{file.where}: no usable own-ship fix on {msgs.topic}: all "
                          f"{len(msgs.decoded)} dropped (status NO_FIX or NaN coordinates)")
@@ -360,8 +395,13 @@ def _contacts_part(file: RecordedLog, msgs: Messages, options):
     observation = options.observation
     role = observation.role
     own = observation.schema is not None and msgs.schema == observation.schema
-    t_ns, track, values, stated = (_own_values if own else _field_values)(msgs, file, options)
-    keep = _drop_nonfinite(np.isfinite(values), f"{role}(s)", msgs.topic, file.notes)
+    t_ns, track, values, stated, message = (_own_values if own else _field_values)(
+        msgs, file, options)
+    keep = file.not_absolute(msgs, t_ns, message)
+    finite = _drop_nonfinite(np.isfinite(values) | ~keep, f"{role}(s)", msgs.topic, file.notes)
+    keep &= file.dropped.drop(~finite, f"{role} missing or not a number",
+                              file.places(msgs.topic, t_ns),
+                              f"{file.where}: {msgs.topic}: a {role} missing or not a number")
     if not keep.any():
         raise InputError(f"{file.where}: no usable {role} on {msgs.topic} (none, or all NaN)")
     t_ns, track, values = t_ns[keep], track[keep], values[keep]
@@ -398,7 +438,7 @@ def read_mcap(path, options, need: tuple[str, ...] = ()) -> Recording:
     raises an InputError listing the file's topics and the option that selects one. A part
     not needed and not found is None (noted); a file with neither always raises.
     """
-    file = RecordedLog(path)
+    file = RecordedLog(path, options.dropped())
     role = options.observation.role
     nav_topic = _select_navigation(file, options)
     contact_topic = _select_contacts(file, options)
@@ -436,9 +476,10 @@ def read_mcap(path, options, need: tuple[str, ...] = ()) -> Recording:
     navigation = contacts = None
     if nav_topic is not None:
         t_ns, columns = parts[nav_topic]
-        navigation = Navigation(seconds(t_ns), epoch, file.source(nav_topic), **columns)
+        navigation = Navigation(seconds(t_ns), epoch, file.source(nav_topic), **columns,
+                                topic=nav_topic)
     if contact_topic is not None:
         t_ns, track, values, stated = parts[contact_topic]
         contacts = Contacts(seconds(t_ns), epoch, track, values, file.source(contact_topic),
                             units_stated=stated)
-    return Recording(navigation, contacts, file.metadata, file.notes)
+    return Recording(navigation, contacts, file.metadata, file.notes, file.dropped)

@@ -4,10 +4,11 @@ Navigation only: use the file as ``navigation=FILE`` while ``input=`` holds the 
 RMC carries date, time and position; GGA carries time and position, its date comes from the
 RMC before it (or, for GGA sentences ahead of the first RMC, from that first RMC), with the
 day advanced when the time of day wraps past midnight. A GGA with fix quality 0 and an RMC
-with status V (no valid fix) are dropped; a GGA and an RMC of the same fix (one time) are
-merged (the first one in the file is kept). Lines that are not NMEA, have a bad or missing
-checksum or cannot be parsed are counted and reported, and are fatal only when no fix is left.
-Times are UTC.
+with status V (no valid fix) are left out and counted; a GGA and an RMC of the same fix (one
+time) are merged (the first one in the file is kept). Lines that are not NMEA, have a bad or
+missing checksum or cannot be parsed are left out and counted with their line numbers
+(``bad_rows=drop``; under ``fail`` the first refuses the file), and are fatal only when no fix
+is left. Times are UTC.
 """
 
 import datetime as dt
@@ -17,7 +18,7 @@ import numpy as np
 import pynmea2
 
 from tma.errors import InputError
-from tma.sources.base import Navigation, Recording
+from tma.sources.base import NAMED, Navigation, Recording, line_places
 
 DAY_NS = 86_400 * 10**9
 HALF_DAY_NS = DAY_NS // 2
@@ -31,31 +32,42 @@ def is_nmea(head: bytes) -> bool:
     return False
 
 
-def read_nmea(path) -> Recording:
-    """Own-ship fixes (lat/lon, deg WGS84; seconds since the first fix's UTC) from GGA/RMC."""
+BAD_LINES = {  # kind of line left out: (reason in the manifest, refusal under bad_rows=fail)
+    "not NMEA": ("NMEA line not NMEA", "a line that is not NMEA"),
+    "bad or missing checksum": ("NMEA line with a bad or missing checksum",
+                                "an NMEA sentence with a bad or missing checksum"),
+    "unparsable": ("NMEA sentence unparsable", "a GGA or RMC sentence that cannot be read"),
+}
+
+
+def read_nmea(path, options) -> Recording:
+    """Own-ship fixes (lat/lon, deg WGS84; seconds since the first fix's UTC) from GGA/RMC.
+    Damaged lines are left out and counted (``options.bad_rows``; under ``fail`` the first
+    refuses the file); fixes the receiver flags as invalid are left out and counted under
+    either policy."""
     path = Path(path)
     try:
         text = path.read_bytes().decode("ascii", errors="replace")
     except FileNotFoundError:
         raise InputError(f"{path}: no such file") from None
     fixes = []  # (kind, line, time of day ns, date or None, lat, lon)
-    skipped = {"not NMEA": 0, "bad or missing checksum": 0, "unparsable": 0,
-               "no valid fix": 0}
+    skipped = {"not NMEA": [], "bad or missing checksum": [], "unparsable": [],
+               "no valid fix": []}  # line numbers
     other = 0
     for number, line in enumerate(text.splitlines(), start=1):
         line = line.strip()
         if not line:
             continue
         if line[0] not in "$!":
-            skipped["not NMEA"] += 1
+            skipped["not NMEA"].append(number)
             continue
         try:
             msg = pynmea2.parse(line, check=True)
         except pynmea2.ChecksumError:
-            skipped["bad or missing checksum"] += 1
+            skipped["bad or missing checksum"].append(number)
             continue
         except (pynmea2.ParseError, ValueError, TypeError, AttributeError):
-            skipped["unparsable"] += 1
+            skipped["unparsable"].append(number)
             continue
         kind = getattr(msg, "sentence_type", None)
         if kind not in ("GGA", "RMC"):
@@ -63,23 +75,32 @@ def read_nmea(path) -> Recording:
             continue
         fix = _fix(msg, kind, number)
         if fix is None:
-            skipped["no valid fix"] += 1
+            skipped["no valid fix"].append(number)
         elif fix is False:
-            skipped["unparsable"] += 1
+            skipped["unparsable"].append(number)
         else:
             fixes.append(fix)
-    counts = ", ".join(f"{n} {why}" for why, n in skipped.items() if n)
+    dropped = options.dropped()
+    for why, (reason, refusal) in BAD_LINES.items():
+        lines = np.array(skipped[why], dtype=np.int64)
+        dropped.drop(np.ones(lines.size, dtype=bool), reason, line_places(lines),
+                     f"{path}: {refusal}")
+    if skipped["no valid fix"]:  # the receiver's own verdict: left out under either policy
+        dropped.add("own-ship fix flagged no fix", len(skipped["no valid fix"]),
+                    [f"line {n}" for n in skipped["no valid fix"][:NAMED]])
+    counts = ", ".join(f"{len(n)} {why}" for why, n in skipped.items() if n)
     if not fixes:
         raise InputError(f"{path}: no own-ship fix in the NMEA file (GGA or RMC sentences with "
                          f"a valid fix and checksum){': ' + counts if counts else ''}")
     t_ns = _utc_ns(fixes, path)
     lat = np.array([f[4] for f in fixes])
     lon = np.array([f[5] for f in fixes])
+    line = np.array([f[1] for f in fixes], dtype=np.int64)
     order = np.argsort(t_ns, kind="stable")
-    t_ns, lat, lon = t_ns[order], lat[order], lon[order]
+    t_ns, lat, lon, line = t_ns[order], lat[order], lon[order], line[order]
     first = np.r_[True, t_ns[1:] != t_ns[:-1]]  # GGA + RMC of one fix: keep the first
     merged = int((~first).sum())
-    t_ns, lat, lon = t_ns[first], lat[first], lon[first]
+    t_ns, lat, lon, line = t_ns[first], lat[first], lon[first], line[first]
     epoch = int(t_ns[0])
     n_gga = sum(f[0] == "GGA" for f in fixes)
     notes = [f"{path.name}: NMEA {n_gga} GGA and {len(fixes) - n_gga} RMC fixes, {t_ns.size} "
@@ -87,8 +108,8 @@ def read_nmea(path) -> Recording:
              + (f"; skipped {counts}" if counts else "")
              + (f"; {other} other sentences ignored" if other else "")]
     nav = Navigation((t_ns - epoch) / 1e9, epoch, f"{path} (NMEA GGA/RMC)", lat_deg=lat,
-                     lon_deg=lon)
-    return Recording(nav, None, notes=notes)
+                     lon_deg=lon, lines=line)
+    return Recording(nav, None, notes=notes, dropped=dropped)
 
 
 def _fix(msg, kind, number):

@@ -112,11 +112,13 @@ BAD_CSV = {
 
 @pytest.mark.parametrize("case", sorted(BAD_CSV))
 def test_bad_csv_is_a_clear_error_and_writes_nothing(tmp_path, case):
+    """Under bad_rows=fail (bad rows are left out and counted by default:
+    ``test_bearings2d_bad_rows.py``)."""
     _, _, df = _recording()
     edit, message = BAD_CSV[case]
     edit(df).to_csv(tmp_path / "bad.csv", index=False)
     with pytest.raises(InputError, match=message):
-        ingest(tmp_path / "bad.csv", data_dir=tmp_path / "data")
+        ingest(tmp_path / "bad.csv", data_dir=tmp_path / "data", options={"bad_rows": "fail"})
     assert not (tmp_path / "data").exists()
 
 
@@ -212,7 +214,9 @@ def _one_line(proc, expected):
     ("columns.foo=bar", "unknown option columns.foo (the columns options: columns.time, "),
     ("+columns.foo=bar", "unknown option columns.foo"),
     ("nav.max_gap=3", "unknown option nav.max_gap (the nav options: nav.max_extrapolation_s, "
-                      "nav.max_gap_s)"),
+                      "nav.max_gap_s, nav.max_speed_m_s)"),
+    ("bad_rows=skip", "bad_rows must be one of drop, fail, got 'skip'"),
+    ("nav.max_speed_m_s=0", "nav.max_speed_m_s must be a speed in (0, 1e5) m/s"),
     ("bearing.units=grad", "bearing.units must be one of null, deg, rad, got 'grad'"),
     ("time.format=local", "time.format must be one of auto, s, unix_s"),
     ("nav.max_extrapolation_s=abc", "nav.max_extrapolation_s"),

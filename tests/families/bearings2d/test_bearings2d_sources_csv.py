@@ -230,16 +230,20 @@ REFUSED = {
                 "yesterday noon,59.9,10.7,11\nlater,59.9,10.7,12\n", {},
                 r"timestamp_utc '.*' on line 3 has no time zone"),
     "bad iso with zone": ("timestamp_utc,lat,lon,bearing_deg\n2025-06-01T08:00:00Z,59.9,10.7,1\n"
-                          "2025-13-45T08:00:01Z,59.9,10.7,2\n", {},
-                          r"column timestamp_utc has values that are not ISO-8601 times .*"
-                          r"\(line 3\)"),
+                          "2025-13-45T08:00:01Z,59.9,10.7,2\n", {"bad_rows": "fail"},
+                          r"column timestamp_utc has missing times or values that are not "
+                          r"ISO-8601 times .*\(line 3\); bad_rows=drop leaves such rows out"),
     "unix and relative mixed": ("time,x,y,bearing_deg\n1748764800,0,0,1\n1748764801,0,0,2\n"
-                                "5,0,0,3\n", {},
-                                r"time 5 on line 4 is not a Unix time \(s\) like the others"),
+                                "5,0,0,3\n", {"bad_rows": "fail"},
+                                r"column time has times that are not Unix times \(s\) like the "
+                                r"others: .* \(line 4\); bad_rows=drop"),
     "radians beyond 2 pi": ("time_s,x,y,bearing_rad\n0,0,0,1\n1,0,0,7\n", {},
                             r"bearing_rad 7 on line 3 is outside \[-2 pi, 2 pi\]"),
-    "missing track id": ("time_s,x,y,bearing_deg,track\n0,0,0,1,T1\n1,0,0,2,\n", {},
-                         r"column track has missing track ids \(line 3\)"),
+    "missing track id": ("time_s,x,y,bearing_deg,track\n0,0,0,1,T1\n1,0,0,2,\n",
+                         {"bad_rows": "fail"}, r"column track has missing track ids \(line 3\)"),
+    "nothing usable": ("time_s,x,y,bearing_deg\n0,0,0,\n1,0,0,x\n", {},
+                       r"no usable row: 2 with bearing missing or not a number \(line 2, line "
+                       r"3\)"),
     "duplicate label time": ("time_s,x,y,bearing_deg,track\n0,0,0,1,T1\n1,0,0,2,T1\n"
                              "1,0,0,3,T1\n", {}, r"duplicate time_s for track T1 on line 4"),
     "not utf8": (b"time_s,x,y,bearing_deg\n0,0,0,1\n\xff\xfe,0,0,1\n", {},

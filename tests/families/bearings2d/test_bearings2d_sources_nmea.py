@@ -16,6 +16,7 @@ from tests.families.bearings2d.recorded_geometry import (
     estimate,
     iso,
     recorded,
+    source_options,
 )
 from tma.errors import InputError
 from tma.families.bearings2d.ingest import ingest
@@ -76,7 +77,7 @@ def write_nmea(path, nav: pd.DataFrame, start=EPOCH_NS, garbage=True):
 def test_fixes_are_read_back_and_garbage_counted(tmp_path):
     nav = recorded().navigation.head(60)
     path = write_nmea(tmp_path / "gps.nmea", nav)
-    rec = read_nmea(path)
+    rec = read_nmea(path, source_options())
     assert rec.contacts is None and rec.navigation.geographic
     assert rec.navigation.epoch_utc_ns == EPOCH_NS
     np.testing.assert_allclose(rec.navigation.t_s, nav.t_s, atol=1e-9)
@@ -96,7 +97,7 @@ def test_any_talker_southern_western_hemispheres_and_no_fix(tmp_path):
         rmc(s[0], -33.5, -70.25, talker="II"), gga(s[1], -33.5001, -70.2501, talker="GN"),
         gga(s[2], -33.5002, -70.2502, quality=0), rmc(s[3], -33.5003, -70.2503, status="V"),
         rmc(s[3], -33.5003, -70.2503, talker="GL")]) + "\n")
-    rec = read_nmea(path)
+    rec = read_nmea(path, source_options())
     np.testing.assert_allclose(rec.navigation.t_s, [0.0, 1.0, 3.0])
     np.testing.assert_allclose(rec.navigation.lat_deg, [-33.5, -33.5001, -33.5003], atol=1e-9)
     np.testing.assert_allclose(rec.navigation.lon_deg, [-70.25, -70.2501, -70.2503], atol=1e-9)
@@ -110,7 +111,7 @@ def test_gga_dates_follow_the_rmc_across_midnight(tmp_path):
     path.write_text("\n".join([gga(stamps[0] - pd.Timedelta(seconds=1), 59.9, 10.7),
                                rmc(stamps[0], 59.9, 10.7)]
                               + [gga(s, 59.9, 10.7) for s in stamps[1:]]) + "\n")
-    rec = read_nmea(path)
+    rec = read_nmea(path, source_options())
     start = int((day - pd.Timedelta(seconds=1)).value)
     assert rec.navigation.epoch_utc_ns == start
     np.testing.assert_allclose(rec.navigation.t_s, [0.0, 1.0, 2.0, 3.0, 4.0])
@@ -121,7 +122,7 @@ def test_gga_without_any_rmc_is_refused_naming_what_is_missing(tmp_path):
     path = tmp_path / "gga.nmea"
     path.write_text("\n".join(gga(s, 59.9, 10.7) for s in _stamps([0.0, 1.0])) + "\n")
     with pytest.raises(InputError, match="GGA fixes but no RMC sentence .* log RMC sentences"):
-        read_nmea(path)
+        read_nmea(path, source_options())
 
 
 def test_nothing_usable_is_refused_with_the_counts(tmp_path):
@@ -129,7 +130,7 @@ def test_nothing_usable_is_refused_with_the_counts(tmp_path):
     path.write_text("$GPGGA,1,2,3*00\nhello\n" + _sentence("GPGSV,1,1,00") + "\n")
     with pytest.raises(InputError, match=r"no own-ship fix .*: 1 not NMEA, 1 bad or missing "
                                          r"checksum"):
-        read_nmea(path)
+        read_nmea(path, source_options())
 
 
 def test_kind_is_told_from_the_first_line(tmp_path):
