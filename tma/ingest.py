@@ -71,7 +71,8 @@ def read_recordings(path: Path, fmt, navigation: Path | None, options):
         return recordings, kind, None
     nav_kind = source_kind(navigation, "auto", option=None)
     found = read_source(path, kind, options, navigation=False, contacts=True)
-    nav = read_source(navigation, nav_kind, options, navigation=True, contacts=False)
+    nav = read_source(navigation, nav_kind, options, navigation=True, contacts=False,
+                      date_hint_ns=_first_utc_ns(found))
     if len(found) != 1 or found[0].contacts is None:
         raise InputError(f"{path}: no {options.observation.plural} found in the input")
     if len(nav) != 1 or nav[0].navigation is None:
@@ -84,6 +85,14 @@ def read_recordings(path: Path, fmt, navigation: Path | None, options):
                      f"({rec.navigation.source}) is not used")
     rec.navigation, rec.notes = nav[0].navigation, notes
     return [rec], kind, nav_kind
+
+
+def _first_utc_ns(recordings) -> int | None:
+    """UTC ns of the first contact value, when the contacts have absolute times."""
+    times = [r.contacts.epoch_utc_ns + int(round(r.contacts.t_s.min() * 1e9))
+             for r in recordings if r.contacts is not None and r.contacts.t_s.size
+             and r.contacts.epoch_utc_ns is not None]
+    return min(times, default=None)
 
 
 def _require(rec, path, kind, options):
@@ -134,6 +143,10 @@ def ingest(input_path, *, data_dir, family: str, name=None, fmt="auto", force=Fa
         log.warning("%s: dropped %d %s(s) (%d before, %d after the own-ship fixes): %s",
                     path, dropped["count"], options.observation.role,
                     dropped["before_navigation"], dropped["after_navigation"], dropped["why"])
+    if aligned.epoch_utc_ns is None and aligned.origin_deg is not None:
+        log.warning("%s: relative times: the outputs give no UTC and no map MCAP is written (it "
+                    "would be dated 1970); give time.start_utc=<ISO-8601 UTC of the log's time "
+                    "0> to date them", path)
     gaps = summary["nav_gaps"]
     if gaps["count"]:
         log.warning("own-ship navigation has %d gap(s) longer than nav.max_gap_s = %g s "

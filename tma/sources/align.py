@@ -1,7 +1,8 @@
 """Readers' fixes and contacts -> one clock, one plane, own-ship at every value (``align``).
 
 - One time base: every source has absolute UTC times, or every one relative times (mixing
-  them is refused: nothing relates the two clocks). The dataset starts at t = 0 at the first
+  them is refused: nothing relates the two clocks), unless ``time.start_utc`` gives the UTC of
+  the relative times' 0, which makes them absolute. The dataset starts at t = 0 at the first
   value kept; ``epoch_utc_ns`` is the UTC time of that t = 0 (None for relative times).
 - One plane: latitude/longitude go to east/north metres (``tma.geo.geodetic_to_local``, WGS84,
   h = 0) at the origin ``origin.lat``/``origin.lon`` or the first own-ship fix. The plane is
@@ -29,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tma.errors import InputError
+from tma.errors import ConfigError, InputError
 from tma.geo import geodetic_to_local
 from tma.sources.base import Dropped, Navigation, Recording
 from tma.utc import format_utc, stamp_text
@@ -78,9 +79,10 @@ def align(recordings: list[Recording], options, where: str) -> Aligned:
     bad = options.dropped()
     for r in recordings:
         bad.merge(r.dropped)
-    ref = _time_reference(recordings, options)
-    navs = [_shifted(r.navigation.t_s, r.navigation.epoch_utc_ns, ref) for r in recordings]
-    obs = [_shifted(r.contacts.t_s, r.contacts.epoch_utc_ns, ref) for r in recordings]
+    ref, start, notes_time = _time_reference(recordings, options)
+    navs = [_shifted(r.navigation.t_s, r.navigation.epoch_utc_ns, ref, start)
+            for r in recordings]
+    obs = [_shifted(r.contacts.t_s, r.contacts.epoch_utc_ns, ref, start) for r in recordings]
     origin, positions, navs, notes = _local_plane(recordings, navs, options, bad)
     ids, labels = _track_ids([r.contacts.track for r in recordings])
     if observation.guard is not None:
@@ -128,31 +130,45 @@ def align(recordings: list[Recording], options, where: str) -> Aligned:
         "nav_gaps": {"max_gap_s": options.nav.max_gap_s, "count": len(gaps),
                      "longest_s": max((g["length_s"] for g in gaps), default=None),
                      "gaps": gaps[:MAX_LISTED_GAPS]},
-        "notes": [*dict.fromkeys(n for r in recordings for n in r.notes), *notes],
+        "notes": [*dict.fromkeys(n for r in recordings for n in r.notes), *notes_time, *notes],
     }
     return Aligned(platforms, epoch, origin, labels, summary, bad)
 
 
-def _time_reference(recordings, options) -> int | None:
-    """The earliest epoch (UTC ns) when every source is absolute; None when every source is
-    relative; InputError when they are mixed."""
+def _time_reference(recordings, options):
+    """``(reference, start, notes)``: the earliest epoch (UTC ns) when every source is
+    absolute, or made so by ``time.start_utc`` (``start``: the UTC of the relative sources'
+    time 0, else None); None when every source is relative and no start is given. A mixture
+    without a start, or a start for a log without relative times, raises."""
     sources = [(s.epoch_utc_ns, s.source) for r in recordings
                for s in (r.navigation, r.contacts)]
-    absolute = [e is not None for e, _ in sources]
-    if all(absolute):
-        return min(e for e, _ in sources)
-    if not any(absolute):
-        return None
-    rel = next(s for e, s in sources if e is None)
+    start = options.time.start_ns
+    relative = [where for e, where in sources if e is None]
+    if start is not None:
+        if not relative:
+            raise ConfigError(f"time.start_utc={options.time.start_utc} applies to logs of "
+                              f"relative times: {sources[0][1]} has UTC times; leave "
+                              "time.start_utc unset")
+        note = (f"relative times of {', '.join(dict.fromkeys(relative))} made absolute: time 0 "
+                f"is {format_utc(start)} (time.start_utc)")
+        return min([start, *(e for e, _ in sources if e is not None)]), start, [note]
+    if not relative:
+        return min(e for e, _ in sources), None, []
+    if len(relative) == len(sources):
+        return None, None, []
+    rel = relative[0]
     abs_ = next(s for e, s in sources if e is not None)
     raise InputError(f"{rel} has relative times (seconds from an arbitrary zero) but {abs_} "
                      f"has absolute UTC times (time.format={options.time.format}): nothing "
                      "relates the two clocks; give both as absolute times (Unix or ISO-8601 "
-                     "with a zone: time.format=unix_s|unix_ms|unix_ns|iso) or both relative")
+                     "with a zone: time.format=unix_s|unix_ms|unix_ns|iso) or both relative, or "
+                     "give the UTC of the relative times' 0 with time.start_utc=")
 
 
-def _shifted(t_s, epoch, ref) -> np.ndarray:
+def _shifted(t_s, epoch, ref, start=None) -> np.ndarray:
+    """Times on the common clock (``start``: the epoch of a source of relative times)."""
     t = np.asarray(t_s, dtype=float)
+    epoch = start if epoch is None else epoch
     return t if ref is None else t + (epoch - ref) / 1e9
 
 

@@ -20,6 +20,7 @@ convert the others, and direction vectors when the observation takes them); posi
 local (x east, y north, metres) or geographic (latitude, longitude in degrees, WGS84).
 """
 
+import datetime
 import functools
 from collections.abc import Callable
 from dataclasses import MISSING as MISSING_FACTORY
@@ -30,6 +31,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from tma.config import validate
 from tma.errors import ConfigError, InputError
+from tma.utc import parse_utc
 
 
 @dataclass(frozen=True)
@@ -240,15 +242,45 @@ TIME_FORMATS = ("auto", "s", "unix_s", "unix_ms", "unix_us", "unix_ns", "iso", "
 
 @dataclass
 class TimeFormat:
-    """``auto``: numbers by magnitude (Unix seconds from 1e8, ms from 1e11, us from 1e14, ns
-    from 1e17; smaller: relative seconds), text as ISO-8601 with a zone; ``s``: relative
-    seconds; ``unix_s|ms|us|ns``: Unix time; ``iso``: ISO-8601 with a zone (``Z``,
-    ``+01:00``); ``iso_utc``: ISO-8601, a time without zone taken as UTC."""
+    """``format``: ``auto``: numbers by magnitude (Unix seconds from 1e8, ms from 1e11, us
+    from 1e14, ns from 1e17; smaller: relative seconds), text as ISO-8601 with a zone; ``s``:
+    relative seconds; ``unix_s|ms|us|ns``: Unix time; ``iso``: ISO-8601 with a zone (``Z``,
+    ``+01:00``); ``iso_utc``: ISO-8601, a time without zone taken as UTC.
+    ``start_utc``: the UTC (ISO-8601 with a zone) of time 0 of a log of relative times, which
+    makes it absolute; None: such a log stays undated."""
 
     format: str = "auto"
+    start_utc: str | None = None
 
     def __post_init__(self):
         one_of("time.format", self.format, TIME_FORMATS)
+        if self.start_utc is not None:
+            try:
+                parse_utc(str(self.start_utc))
+            except ValueError as exc:
+                raise ConfigError(f"time.start_utc: {exc}") from None
+
+    @property
+    def start_ns(self) -> int | None:
+        return None if self.start_utc is None else parse_utc(str(self.start_utc))
+
+
+@dataclass
+class NmeaOptions:
+    """``date``: the UTC date (YYYY-MM-DD) of NMEA GGA fixes where no RMC sentence dates them
+    and the bearings' times do not either; None: dated by RMC or the bearings."""
+
+    date: str | None = None
+
+    def __post_init__(self):
+        if self.date is not None:
+            try:
+                datetime.date.fromisoformat(str(self.date))
+                valid = len(str(self.date)) == 10
+            except ValueError:
+                valid = False
+            if not valid:
+                raise ConfigError(f"nmea.date must be a date YYYY-MM-DD, got '{self.date}'")
 
 
 @dataclass
@@ -284,8 +316,9 @@ class Origin:
 
 class ReadingOptions:
     """Base of a family's ``SourceOptions`` (``options_schema``): the groups ``columns``,
-    ``<role>`` (the observation's ``ContactSource``), ``ownship``, ``csv``, ``time``, ``nav``,
-    ``origin``. ``observation`` is the family's; ``contact`` its group."""
+    ``<role>`` (the observation's ``ContactSource``), ``ownship``, ``csv``, ``time``, ``nmea``,
+    ``nav``, ``origin`` and the option ``bad_rows``. ``observation`` is the family's;
+    ``contact`` its group."""
 
     observation: Observation
 
@@ -320,6 +353,7 @@ def options_schema(observation: Observation) -> type:
               ("ownship", OwnshipSource, field(default_factory=OwnshipSource)),
               ("csv", CsvFormat, field(default_factory=CsvFormat)),
               ("time", TimeFormat, field(default_factory=TimeFormat)),
+              ("nmea", NmeaOptions, field(default_factory=NmeaOptions)),
               ("nav", NavLimits, field(default_factory=NavLimits)),
               ("origin", Origin, field(default_factory=Origin)),
               ("bad_rows", str, field(default="drop"))]  # a top-level option, not a group

@@ -236,7 +236,7 @@ def test_a_track_without_a_finite_estimate_is_left_out_of_the_map(mapped, tmp_pa
     back = read_bearings_log(next((tables.parent / "data" / "datasets" / "sea").glob(
         "log/*.mcap")))
     labels = dict(zip(back.track_id.tolist(), back.track_label, strict=True))
-    report = track_report(broken, 0.0, EPOCH_NS, ORIGIN, labels)
+    report = track_report(broken, EPOCH_NS, ORIGIN, labels)
     assert np.isnan(report.lat_now_deg[1]) and np.isfinite(report.lat_now_deg[[0, 2]]).all()
     with caplog.at_level(logging.WARNING):
         write_map_mcap(tmp_path / "m.mcap", report, broken, [back], EPOCH_NS, ORIGIN, {})

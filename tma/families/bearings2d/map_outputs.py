@@ -171,8 +171,10 @@ def _track_plot(path: Path, title: str, lg: BearingsLog, row: int, theta, cov_no
 
 
 def write_track_plots(report: pd.DataFrame, estimates: pd.DataFrame, logs, tables_dir,
-                      name: str) -> list[Path]:
-    """``<name>-<label>.png`` per contact (the first ``MAX_PLOTS``); returns their paths."""
+                      name: str, epoch_utc_ns=None) -> list[Path]:
+    """``<name>-<label>.png`` per contact (the first ``MAX_PLOTS``), titled with the time of
+    its last bearing in UTC (``epoch_utc_ns``: of t = 0), or in seconds from the log's start
+    when it is not dated; returns their paths."""
     theta = estimates[["x0_m", "y0_m", "vx_m_s", "vy_m_s"]].to_numpy(float)
     cov_now = position_covariance(theta_covariance(estimates),
                                   estimates["t_last_s"].to_numpy(float))
@@ -190,8 +192,9 @@ def write_track_plots(report: pd.DataFrame, estimates: pd.DataFrame, logs, table
         path = Path(tables_dir) / f"{name}-{part}.png"
         _track_plot(path, f"{name}: contact {r.label}, status {r.status}\nrange "
                     f"{r.range_now_m / 1e3:.2f} km, course {r.course_deg:.1f} deg, speed "
-                    f"{r.speed_m_s:.2f} m/s at t = {r.t_now_s:g} s", lg, row, theta[n],
-                    cov_now[n])
+                    f"{r.speed_m_s:.2f} m/s at "
+                    + (f"t = {r.t_now_s:g} s from the start" if epoch_utc_ns is None
+                       else r.time_now_utc), lg, row, theta[n], cov_now[n])
         paths.append(path)
     return paths
 

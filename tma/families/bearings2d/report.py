@@ -166,17 +166,19 @@ def status_note(report: pd.DataFrame) -> list[str]:
     return notes
 
 
-def track_report(estimates: pd.DataFrame, time_origin_s=0.0, epoch_utc_ns=None,
-                 origin_deg=None, labels=None) -> pd.DataFrame:
+def track_report(estimates: pd.DataFrame, epoch_utc_ns=None, origin_deg=None,
+                 labels=None) -> pd.DataFrame:
     """Per-track state and kinematics at each track's last bearing ("now") with 1-sigma
     errors and the status, as the estimator computed them; a note says why a track is not ok.
 
     ``label``: the contact's name (``labels``: track id -> text; else the id);
-    ``time_now_utc``: ISO-8601 UTC of the last bearing (``epoch_utc_ns``: UTC of t = 0; else
-    blank); ``x_now_m``, ``y_now_m`` (local plane, m) with ``x_sd_m``, ``y_sd_m``;
+    ``t_now_s``: the last bearing, in seconds from the log's start (its first bearing, the
+    dataset's t = 0); ``time_now_utc``: its ISO-8601 UTC (``epoch_utc_ns``: UTC of t = 0;
+    else blank); ``x_now_m``, ``y_now_m`` (local plane, m) with ``x_sd_m``, ``y_sd_m``;
     ``lat_now_deg``, ``lon_now_deg`` (WGS84, from ``origin_deg`` = (lat, lon) of the local
     plane's origin; NaN without one); ``leg_start_s`` (and ``leg_start_utc``): from when the
-    solution holds (its first bearing, or the end of the last manoeuvre ``last_leg`` found).
+    solution holds (its first bearing, or the end of the last manoeuvre ``last_leg`` found),
+    in seconds from the log's start.
     """
     e = estimates
 
@@ -195,7 +197,7 @@ def track_report(estimates: pd.DataFrame, time_origin_s=0.0, epoch_utc_ns=None,
         "track_id": e["track_id"],
         "label": [(labels or {}).get(i, str(i)) for i in ids],
         "n_bearings": e["n_bearings"],
-        "t_now_s": t + time_origin_s,
+        "t_now_s": t,
         "time_now_utc": utc(t),
         "x_now_m": x_now, "x_sd_m": np.sqrt(cov[:, 0, 0]),
         "y_now_m": y_now, "y_sd_m": np.sqrt(cov[:, 1, 1]),
@@ -205,7 +207,6 @@ def track_report(estimates: pd.DataFrame, time_origin_s=0.0, epoch_utc_ns=None,
         "sqrt_ka_deg": np.rad2deg(np.sqrt(e["cost_rad2"] / e["n_bearings"])),
         "converged": e["converged"].astype(bool),
     })
-    report["leg_start_s"] += time_origin_s
     report["note"] = status_note(report)
     return report
 
@@ -224,7 +225,7 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str)
 
     shown = pd.DataFrame({
         "track": report["label"], "n": report["n_bearings"],
-        "t now (s)": report["t_now_s"].map("{:.1f}".format),
+        "t now (s from start)": report["t_now_s"].map("{:.1f}".format),
         **({} if report["time_now_utc"].isna().all() else {"now (UTC)": report["time_now_utc"]}),
         **position(),
         "range now (m)": pm("range_now_m", "range_sd_m", ".0f"),
@@ -238,8 +239,10 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str)
         "why": report["note"],
     })
     intro = (f"Estimates per track of `{source}` (no ground truth). 'now' is each track's last "
-             "bearing epoch; ± is one standard deviation (sigma as in column sigma_used_deg "
-             "of the CSV: nominal, or estimated from the residuals), which includes the "
+             "bearing epoch, in seconds from the log's start (its first bearing) and in UTC "
+             "when the log is dated; ± is one standard deviation (sigma as in column "
+             "sigma_used_deg of the CSV: nominal, or estimated from the residuals), which "
+             "includes the "
              "target's own motion (accel_psd_m2_s3: a nearly-constant-velocity target) for "
              "`lm`; 'holds from' is the first bearing the solution rests on. "
              "Trust only `ok` tracks; 'why' says what is wrong with the others. The CSV also "
@@ -256,18 +259,22 @@ def _report_without_truth(entry, tables_dir, name: str) -> list[Path]:
     m, dataset = entry.dataset.manifest, entry.dataset
     logs = read_logs(dataset)
     epoch, origin, labels = reference(logs, str(dataset.root))
-    report = track_report(entry.estimates, m.get("time_origin_s", 0.0), epoch, origin, labels)
+    report = track_report(entry.estimates, epoch, origin, labels)
     for row in report[report["status"] != "ok"].itertuples(index=False):
         log.warning("%s track %s: %s: %s", dataset.name, row.label, row.status, row.note)
     write_parquet_atomic(entry.run_root / "report.parquet",
                          pa.Table.from_pandas(report, preserve_index=False))
     written = write_track_report(report, tables_dir, name,
                                  m.get("input", {}).get("path", dataset.name))
-    written += write_track_plots(report, entry.estimates, logs, tables_dir, name)
+    written += write_track_plots(report, entry.estimates, logs, tables_dir, name, epoch)
     if origin is None:
         log.info("%s: no map MCAP (%s.mcap): the dataset has no geographic origin (its "
                  "own-ship is in local metres; ingest latitude/longitude navigation or give "
                  "origin.lat/origin.lon)", dataset.name, name)
+    elif epoch is None:
+        log.info("%s: no map MCAP (%s.mcap): the dataset's times are relative (no UTC), so the "
+                 "map would be dated 1970; ingest it again with time.start_utc=<ISO-8601 UTC of "
+                 "the log's time 0>", dataset.name, name)
     else:
         written.append(write_map_mcap(Path(tables_dir) / f"{name}.mcap", report,
                                       entry.estimates, logs, epoch, origin,
