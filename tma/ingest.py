@@ -29,7 +29,7 @@ from tma.io.dataset import MANIFEST, datasets_dir, file_record, shard_relpath, w
 from tma.io.owned import building, is_owned, plain_name
 from tma.sources import KINDS, read_source, source_kind
 from tma.sources.align import align
-from tma.sources.base import groups, source_options, unknown_option
+from tma.sources.base import groups, inapplicable, source_options, unknown_option
 
 log = logging.getLogger(__name__)
 
@@ -62,14 +62,21 @@ def _file(value, option) -> Path:
 
 
 def read_recordings(path: Path, fmt, navigation: Path | None, options):
-    """The input's (and the navigation file's) recordings, each with own-ship and contacts."""
+    """The input's (and the navigation file's) recordings, each with own-ship and contacts.
+    An option set that neither file's kind reads is refused (``bearing.topic`` on a CSV)."""
     kind = source_kind(path, fmt)
+    kinds = {path: kind}
+    if navigation is not None:
+        kinds[navigation] = source_kind(navigation, "auto", option=None)
+    complaint = inapplicable(options, kinds)
+    if complaint:
+        raise ConfigError(complaint)
     if navigation is None:
         recordings = read_source(path, kind, options, navigation=True, contacts=True)
         for r in recordings:
             _require(r, path, kind, options)
         return recordings, kind, None
-    nav_kind = source_kind(navigation, "auto", option=None)
+    nav_kind = kinds[navigation]
     found = read_source(path, kind, options, navigation=False, contacts=True)
     nav = read_source(navigation, nav_kind, options, navigation=True, contacts=False,
                       date_hint_ns=_first_utc_ns(found))

@@ -189,6 +189,8 @@ def _local_plane(recordings, navs, options, dropped: Dropped):
             keep = _on_track(t, nav.x_m, nav.y_m, nav, np.arange(t.size), options, dropped)
             positions.append((nav.x_m[keep], nav.y_m[keep]))
             times.append(t[keep])
+        if given:
+            _near_the_fixes(positions, options)
         return origin, positions, times, notes
     if not all(geographic):
         raise InputError("own-ship positions come both as latitude/longitude and as local x/y "
@@ -220,7 +222,21 @@ def _local_plane(recordings, navs, options, dropped: Dropped):
                      "(origin.lat/origin.lon)")
     positions = [geodetic_to_local(r.navigation.lat_deg[rows], r.navigation.lon_deg[rows],
                                    (lat0, lon0)) for r, rows in zip(recordings, kept, strict=True)]
+    if given:
+        _near_the_fixes(positions, options)
     return (lat0, lon0), positions, [t[rows] for t, rows in zip(navs, kept, strict=True)], notes
+
+
+def _near_the_fixes(positions, options):
+    """A given origin lies within ``origin.max_distance_km`` of an own-ship fix (an origin far
+    from them all is a mistake: another place, swapped or mistyped coordinates)."""
+    nearest = min(float(np.hypot(x, y).min()) for x, y in positions if x.size)
+    limit = options.origin.max_distance_km
+    if nearest > limit * 1e3:
+        o = options.origin
+        raise InputError(f"origin.lat/origin.lon = {o.lat:g}, {o.lon:g} lies "
+                         f"{nearest / 1e3:.0f} km from the nearest own-ship fix (at most "
+                         f"origin.max_distance_km = {limit:g}): is it the log's place?")
 
 
 def fix_places(nav: Navigation, index: np.ndarray):

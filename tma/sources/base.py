@@ -25,6 +25,7 @@ import functools
 from collections.abc import Callable
 from dataclasses import MISSING as MISSING_FACTORY
 from dataclasses import dataclass, field, fields, is_dataclass, make_dataclass
+from typing import Any
 
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
@@ -197,12 +198,33 @@ POSITION_ROLES = ("time", "x", "y", "lat", "lon")  # table columns besides value
 
 @dataclass
 class ContactSource:
-    """Where the values are: an MCAP topic and a dotted field path (``data``, ``vector``,
-    ``bearing_deg``), and their units (None: the first unit unless a name says another)."""
+    """Where the values are: MCAP topics, and a dotted field path (``data``, ``vector``,
+    ``bearing_deg``), and their units (None: the first unit unless a name says another).
+    ``topic``: a topic, a pattern (fnmatch: ``/sonar/contact/*``) or a list of them; None: the
+    family's own topic or schema. Each topic read is a contact, or holds contacts by a track
+    field."""
 
-    topic: str | None = None
+    topic: Any = None
     field: str | None = None
     units: str | None = None
+
+    def check(self, role: str):
+        """``topic`` as text (a number is a topic's name), or a list of them."""
+        t = self.topic
+        if t is None:
+            return
+        entries = list(t) if isinstance(t, list | tuple) else [t]
+        if not entries or not all(isinstance(e, str | int | float) and not isinstance(e, bool)
+                                  and str(e).strip() for e in entries):
+            raise ConfigError(f"{role}.topic must be a topic, a pattern or a list of them, "
+                              f"got {t!r}")
+        self.topic = [str(e) for e in entries] if isinstance(t, list | tuple) else str(t)
+
+    @property
+    def topics(self) -> list[str] | None:
+        """The topics or patterns given, as a list; None when none is."""
+        return None if self.topic is None else (
+            list(self.topic) if isinstance(self.topic, list) else [self.topic])
 
 
 @dataclass
@@ -305,8 +327,12 @@ class NavLimits:
 class Origin:
     lat: float | None = None  # deg; None: the first own-ship fix
     lon: float | None = None
+    max_distance_km: float = 100.0  # a given origin lies this close to an own-ship fix
 
     def __post_init__(self):
+        if not 0 < self.max_distance_km < 2e4:
+            raise ConfigError(f"origin.max_distance_km must be a distance in (0, 20000) km, "
+                              f"got {self.max_distance_km}")
         if (self.lat is None) != (self.lon is None):
             raise ConfigError("origin.lat and origin.lon go together: give both or neither")
         if self.lat is not None and not (-90 < self.lat < 90 and -180 <= self.lon <= 360):
@@ -332,6 +358,7 @@ class ReadingOptions:
     def __post_init__(self):
         role, units = self.observation.role, self.observation.units
         one_of(f"{role}.units", self.contact.units, (None, *(u.name for u in units)))
+        self.contact.check(role)
         one_of("bad_rows", self.bad_rows, BAD_ROWS)
 
     def dropped(self) -> Dropped:
@@ -359,6 +386,44 @@ def options_schema(observation: Observation) -> type:
               ("bad_rows", str, field(default="drop"))]  # a top-level option, not a group
     return make_dataclass("SourceOptions", groups, bases=(ReadingOptions,),
                           namespace={"observation": observation})
+
+
+KIND_NAMES = {"csv": "a CSV table", "nmea": "an NMEA file", "mcap": "an MCAP log"}
+KIND_OPTIONS = {  # options (or groups) that only some kinds of input read
+    "columns": ("csv",), "csv": ("csv",), "time.format": ("csv",), "ownship.topic": ("mcap",),
+    "nmea": ("nmea",)}
+
+
+def inapplicable(options, kinds: dict[str, str]) -> str | None:
+    """A one-line complaint if an option is set that no file of ``kinds`` (``{path: kind}``)
+    reads (``bearing.topic`` on a CSV table, ``nmea.date`` without NMEA); None otherwise."""
+    role = options.observation.role
+    only = {**KIND_OPTIONS, f"{role}.topic": ("mcap",), f"{role}.field": ("mcap",)}
+    given = _set_options(options)
+    for key, value in given.items():
+        scope = only.get(key) or only.get(key.split(".")[0])
+        if scope is None or any(kind in scope for kind in kinds.values()):
+            continue
+        path, kind = next(iter(kinds.items()))
+        shown = ", ".join(map(str, value)) if isinstance(value, list) else value
+        readers = " or ".join(k.upper() for k in scope)
+        return (f"{key}={shown} does not apply to {path} ({KIND_NAMES[kind]}): it is an "
+                f"option of {readers} input; leave it unset")
+    return None
+
+
+def _set_options(options) -> dict:
+    """The dotted options whose value is not the default."""
+    out = {}
+    for f in fields(options):
+        value = getattr(options, f.name)
+        if not is_dataclass(value):
+            continue
+        default = type(value)()
+        for g in fields(value):
+            if getattr(value, g.name) != getattr(default, g.name):
+                out[f"{f.name}.{g.name}"] = getattr(value, g.name)
+    return out
 
 
 def one_of(key: str, value, allowed):

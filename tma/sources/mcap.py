@@ -12,15 +12,18 @@ and its schema name the reader:
   ``foxglove.LocationFix`` (``foxglove``), ``nav_msgs/msg/Odometry`` and
   ``geometry_msgs/msg/PoseStamped`` (``ros2``, local x east, y north);
 - the contacts' values (the family's ``Observation``; ``bearing.*`` for ``bearings2d``):
-  ``<role>.topic`` (default the observation's ``topic``, ``/sonar/bearings``, or the one topic
-  of its ``schema``, ``tma.BearingBatch``, read by ``tma_log``); any other schema by the dotted
-  field path ``<role>.field`` (``data`` for std_msgs/Float64, ``vector`` for Vector3Stamped,
-  ``bearing_deg``; unset: the first of the observation's ``fields`` the messages have). A
+  ``<role>.topic``, a topic, an fnmatch pattern (``/sonar/contact/*``) or a list of them, each
+  matching topic read (default the observation's ``topic``, ``/sonar/bearings``, or the one
+  topic of its ``schema``, ``tma.BearingBatch``, read by ``tma_log``); any other schema by the
+  dotted field path ``<role>.field`` (``data`` for std_msgs/Float64, ``vector`` for
+  Vector3Stamped, ``bearing_deg``; unset: the first of the observation's ``fields`` the
+  messages have). A
   number (or array of numbers) is a value in ``<role>.units`` (the first unit, or another when
   set or when the field's name ends in ``_<unit>``); a direction vector (fields x east, y
   north) is converted by the observation's ``from_vector`` (bearings: ``atan2(x, y)``). The
   contact is a sibling ``TRACK_FIELDS`` field (integer or text) when the messages have one,
-  else the topic itself (its name as the label).
+  else the topic itself (its name as the label); of several topics, a contact from a track
+  field is labelled ``<topic>:<id>``.
 
 Times: ``header.stamp`` (ROS 2) or ``timestamp`` (Foxglove) when the messages have one (and it
 is set), else the message's ``log_time``; ``t_s`` for tma's own schemas. Stamps from 2000 on
@@ -42,6 +45,7 @@ one. Cost: decoding is per message, about 0.12 s per 10,000 small JSON or CDR me
 ``tma.BearingBatch`` message carries a whole epoch.
 """
 
+import fnmatch
 import functools
 import operator
 from collections.abc import Sequence
@@ -338,11 +342,29 @@ def _select_navigation(file: RecordedLog, options) -> str | None:
     return best.name
 
 
-def _select_contacts(file: RecordedLog, options) -> str | None:
+def _select_contacts(file: RecordedLog, options) -> list[str]:
+    """The topics of the contacts' values: those ``<role>.topic`` names or matches (fnmatch
+    patterns), else the family's own topic, or the one topic of its schema; [] if none."""
     observation = options.observation
     role = observation.role
-    if options.contact.topic is not None:
-        return file.topic(options.contact.topic, f"{role}.topic").name
+    given = options.contact.topics
+    if given is not None:
+        chosen = []
+        for entry in given:
+            if not any(c in entry for c in "*?["):
+                chosen.append(file.topic(entry, f"{role}.topic").name)
+                continue
+            matched = sorted(t.name for t in file.topics.values()
+                             if fnmatch.fnmatchcase(t.name, entry) and t.count != 0)
+            if not matched:
+                raise InputError(f"{file.where}: {role}.topic={entry}: no topic matches; "
+                                 f"{file.describe()}")
+            chosen += matched
+        chosen = list(dict.fromkeys(chosen))
+        if len(chosen) > 1:
+            file.notes.append(f"{observation.plural}: {len(chosen)} topics, each its contacts "
+                              f"({', '.join(chosen)}; {role}.topic)")
+        return chosen
     own = observation.topic
     if own in file.topics and file.topics[own].count != 0:
         found = [file.topics[own]]
@@ -353,11 +375,11 @@ def _select_contacts(file: RecordedLog, options) -> str | None:
     if len(found) > 1:
         raise InputError(f"{file.where}: {len(found)} {role} topics of schema "
                          f"{observation.schema}: {', '.join(t.name for t in found)}; set "
-                         f"{role}.topic=<topic>")
+                         f"{role}.topic=<topic> (or a list, or a pattern such as /sonar/*)")
     if not found:
-        return None
+        return []
     file.notes.append(f"{observation.plural}: {found[0]} ({role}.topic)")
-    return found[0].name
+    return [found[0].name]
 
 
 def _drop_nonfinite(keep, values_desc: str, topic: str, notes: list):
@@ -391,12 +413,27 @@ def _navigation_part(file: RecordedLog, msgs: Messages):
     return t_ns[keep][order], {k: v[keep][order] for k, v in columns.items()}
 
 
-def _contacts_part(file: RecordedLog, msgs: Messages, options):
+def _together(parts):
+    """The contacts of several topics as one, by time then contact: ``(t_ns, track, values,
+    stated)``."""
+    if len(parts) == 1:
+        return parts[0]
+    t_ns, track, values = (np.concatenate([p[k] for p in parts]) for k in range(3))
+    order = np.argsort(t_ns, kind="stable")
+    return t_ns[order], track[order], values[order], all(p[3] for p in parts)
+
+
+def _contacts_part(file: RecordedLog, msgs: Messages, options, several=False):
+    """``(t_ns, track, values, stated)`` of one topic, by time then contact. ``several``: one
+    of several topics, whose contacts from a track field are labelled ``<topic>:<id>`` (a
+    topic without one is its own contact, labelled by its name)."""
     observation = options.observation
     role = observation.role
     own = observation.schema is not None and msgs.schema == observation.schema
     t_ns, track, values, stated, message = (_own_values if own else _field_values)(
         msgs, file, options)
+    if several and not (track.dtype == object and np.all(track == msgs.topic)):
+        track = np.array([f"{msgs.topic}:{i}" for i in track], dtype=object)
     keep = file.not_absolute(msgs, t_ns, message)
     finite = _drop_nonfinite(np.isfinite(values) | ~keep, f"{role}(s)", msgs.topic, file.notes)
     keep &= file.dropped.drop(~finite, f"{role} missing or not a number",
@@ -441,13 +478,13 @@ def read_mcap(path, options, need: tuple[str, ...] = ()) -> Recording:
     file = RecordedLog(path, options.dropped())
     role = options.observation.role
     nav_topic = _select_navigation(file, options)
-    contact_topic = _select_contacts(file, options)
+    contact_topics = _select_contacts(file, options)
     hint = {"navigation": ("no own-ship navigation: own-ship is read from a topic of schema "
                            f"{', '.join(NAVIGATION)}; set ownship.topic=<topic> or give "
                            "navigation=FILE"),
             "contacts": (f"no {options.observation.plural} selected: set {role}.topic=<topic> "
                          f"[{role}.field=data]")}
-    absent = [p for p, t in (("navigation", nav_topic), ("contacts", contact_topic))
+    absent = [p for p, t in (("navigation", nav_topic), ("contacts", contact_topics or None))
               if t is None]
     fatal = [p for p in absent if p in need] or (absent if len(absent) == 2 else [])
     if fatal:
@@ -455,8 +492,8 @@ def read_mcap(path, options, need: tuple[str, ...] = ()) -> Recording:
                          f"{file.describe()}")
     file.notes.extend(f"{file.where}: {hint[p]}" for p in absent)
 
-    topics = [t for t in (nav_topic, contact_topic) if t is not None]
-    if len(set(topics)) < len(topics):
+    topics = ([] if nav_topic is None else [nav_topic]) + contact_topics
+    if nav_topic in contact_topics:
         raise InputError(f"{file.where}: {nav_topic} is both the own-ship and the {role} topic; "
                          f"set {role}.topic= or ownship.topic= to another topic")
     messages = file.messages(topics)
@@ -466,8 +503,9 @@ def read_mcap(path, options, need: tuple[str, ...] = ()) -> Recording:
     parts = {}
     if nav_topic is not None:
         parts[nav_topic] = _navigation_part(file, messages[nav_topic])
-    if contact_topic is not None:
-        parts[contact_topic] = _contacts_part(file, messages[contact_topic], options)
+    for topic in contact_topics:
+        parts[topic] = _contacts_part(file, messages[topic], options,
+                                      several=len(contact_topics) > 1)
     epoch = _epoch({topic: part[0] for topic, part in parts.items()}, file.where)
 
     def seconds(t_ns):
@@ -478,8 +516,9 @@ def read_mcap(path, options, need: tuple[str, ...] = ()) -> Recording:
         t_ns, columns = parts[nav_topic]
         navigation = Navigation(seconds(t_ns), epoch, file.source(nav_topic), **columns,
                                 topic=nav_topic)
-    if contact_topic is not None:
-        t_ns, track, values, stated = parts[contact_topic]
-        contacts = Contacts(seconds(t_ns), epoch, track, values, file.source(contact_topic),
+    if contact_topics:
+        t_ns, track, values, stated = _together([parts[t] for t in contact_topics])
+        contacts = Contacts(seconds(t_ns), epoch, track, values,
+                            "; ".join(file.source(t) for t in contact_topics),
                             units_stated=stated)
     return Recording(navigation, contacts, file.metadata, file.notes, file.dropped)
