@@ -30,6 +30,7 @@ from tma.io.owned import building, is_owned, plain_name
 from tma.sources import KINDS, read_source, source_kind
 from tma.sources.align import align
 from tma.sources.base import groups, inapplicable, source_options, unknown_option
+from tma.sources.labels import name_room
 
 log = logging.getLogger(__name__)
 
@@ -137,6 +138,11 @@ def ingest(input_path, *, data_dir, family: str, name=None, fmt="auto", force=Fa
         raise ConfigError(f"format must be auto, csv, nmea or mcap, got '{fmt}'")
     path = Path(str(input_path))
     name = plain_name(name if name is not None else path.stem, "name")
+    room = name_room(family_named(family).estimators)
+    if len(name.encode()) > room:
+        raise ConfigError(f"name={name[:40]}... is too long: its tables are named "
+                          "<name>-<estimator>-<contact>.png and must fit a file name; give "
+                          f"name= of at most {room} characters")
     path = _file(input_path, "input")
     nav_path = None if navigation is None else _file(navigation, "navigation")
 

@@ -14,7 +14,8 @@
   one further out is dropped and counted. Gaps between fixes longer than ``nav.max_gap_s``
   are reported (values inside are interpolated across them).
 - Text track labels become ids 0..n-1 in sorted label order (``Aligned.labels``, and the
-  summary).
+  summary); a note says how each one unsafe for file names or Markdown is shown
+  (``tma.sources.labels``).
 - Own-ship fixes that cannot be right are outliers, left out and counted with the rows the
   readers left out (``bad_rows``; under ``fail`` the first refuses the file): a fix at exactly
   latitude 0, longitude 0 (what receivers report before their first fix), and a fix far off
@@ -33,6 +34,7 @@ import numpy as np
 from tma.errors import ConfigError, InputError
 from tma.geo import geodetic_to_local
 from tma.sources.base import Dropped, Navigation, Recording
+from tma.sources.labels import shown_labels
 from tma.utc import format_utc, stamp_text
 
 MAX_LISTED_GAPS = 20
@@ -85,6 +87,11 @@ def align(recordings: list[Recording], options, where: str) -> Aligned:
     obs = [_shifted(r.contacts.t_s, r.contacts.epoch_utc_ns, ref, start) for r in recordings]
     origin, positions, navs, notes = _local_plane(recordings, navs, options, bad)
     ids, labels = _track_ids([r.contacts.track for r in recordings])
+    if labels is not None:
+        notes += [f"contact {label[:40]!r}{'...' if len(label) > 40 else ''} is shown as "
+                  f"{s!r} in tables, file names and map topics (the CSV and the manifest keep "
+                  "it as written)"
+                  for label, s in zip(labels, shown_labels(labels), strict=True) if s != label]
     if observation.guard is not None:
         observation.guard(recordings, options, where)
 

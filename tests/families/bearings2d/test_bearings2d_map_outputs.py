@@ -27,6 +27,7 @@ from tma.io.dataset import datasets_dir, file_record, shard_relpath, write_manif
 ORIGIN = (59.9, 10.7)  # deg
 EPOCH_NS = 1_767_225_600 * 10**9  # 2026-01-01T00:00:00Z, the scenario's default epoch
 LABELS = ["T1", "bravo 2", "T1/x"]  # text ids; two need sanitising for file names
+SHOWN = ["T1", "bravo 2", "T1_x"]  # as outputs name them: no path separator
 
 
 def _simulated(origin=ORIGIN, labels=LABELS, n=3):
@@ -134,7 +135,7 @@ def _decoded(path):
 def test_estimated_tracks_mcap_in_foxglove_schema(mapped):
     tables, log, _, report, estimates = mapped
     schemas, messages, records = _decoded(tables / "sea-lm.mcap")
-    topics = ["/ownship/location_fix", *(f"/tma/estimate/{label}" for label in LABELS)]
+    topics = ["/ownship/location_fix", *(f"/tma/estimate/{label}" for label in SHOWN)]
     assert sorted(schemas) == sorted(topics)
     assert {s.name for s in schemas.values()} == {"foxglove.LocationFix"}
     assert {s.encoding for s in schemas.values()} == {"protobuf"}
@@ -151,7 +152,7 @@ def test_estimated_tracks_mcap_in_foxglove_schema(mapped):
     np.testing.assert_allclose([f.latitude for _, f in own], ref_lat, rtol=0, atol=1e-7)
     np.testing.assert_allclose([f.longitude for _, f in own], ref_lon, rtol=0, atol=1e-7)
 
-    for n, label in enumerate(LABELS):
+    for n, label in enumerate(SHOWN):
         fixes = messages[f"/tma/estimate/{label}"]
         k = np.flatnonzero(np.isfinite(log.bearing_deg[n]))
         assert len(fixes) == k.size  # one fix per bearing epoch
@@ -242,4 +243,4 @@ def test_a_track_without_a_finite_estimate_is_left_out_of_the_map(mapped, tmp_pa
         write_map_mcap(tmp_path / "m.mcap", report, broken, [back], EPOCH_NS, ORIGIN, {})
     assert "for bravo 2: not in the map" in caplog.text
     schemas, _, _ = _decoded(tmp_path / "m.mcap")
-    assert sorted(schemas) == ["/ownship/location_fix", "/tma/estimate/T1", "/tma/estimate/T1/x"]
+    assert sorted(schemas) == ["/ownship/location_fix", "/tma/estimate/T1", "/tma/estimate/T1_x"]

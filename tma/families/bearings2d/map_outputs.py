@@ -10,14 +10,17 @@ is {p : (p - p(t))^T C^-1 (p - p(t)) <= chi-square(2) 95 % point}.
 - ``tables/<name>-<label>.png``: own-ship path, every k-th bearing line from own-ship, the
   estimated track over the contact's bearings and the 95 % ellipse at its last bearing, in
   km east/north, the status in the title;
-- ``tables/<name>.mcap`` (only with a geographic origin): per track ``foxglove.LocationFix``
-  on ``/tma/estimate/<label>`` at each of its bearing epochs (estimated position, position
-  covariance in ENU m^2, type KNOWN), own-ship on ``/ownship/location_fix``; log times UTC
-  when the dataset has an epoch.
+- ``tables/<name>.mcap`` (only with a geographic origin and UTC times): per track
+  ``foxglove.LocationFix`` on ``/tma/estimate/<label>`` at each of its bearing epochs
+  (estimated position, position covariance in ENU m^2, type KNOWN), own-ship on
+  ``/ownship/location_fix``; log times UTC.
+
+``<label>`` is the contact's shown label (``tma.sources.labels``: safe for file names,
+Markdown and topics, long ones shortened with a hash); the table's CSV keeps the id as
+written.
 """
 
 import logging
-import re
 from pathlib import Path
 
 import matplotlib
@@ -44,6 +47,7 @@ from tma.geo import (  # noqa: E402
 )
 from tma.io.mcap_log import Channel, LogWriter, json_record  # noqa: E402
 from tma.linalg import scaled_inverse  # noqa: E402
+from tma.sources.labels import file_part, fit_file_name, shown_labels  # noqa: E402
 from tma.tables import save_figure  # noqa: E402
 
 log = logging.getLogger(__name__)
@@ -114,12 +118,6 @@ def reference(logs: list[BearingsLog], where: str):
     return next(iter(epochs), None), next(iter(origins), None), labels
 
 
-def safe_label(label: str) -> str:
-    """``label`` as a file name part: characters other than letters, digits, ``._-``
-    become ``_``."""
-    return re.sub(r"[^A-Za-z0-9._-]", "_", label).lstrip(".") or "_"
-
-
 # -- per contact PNG -------------------------------------------------------------------------
 
 def _track_plot(path: Path, title: str, lg: BearingsLog, row: int, theta, cov_now):
@@ -179,18 +177,19 @@ def write_track_plots(report: pd.DataFrame, estimates: pd.DataFrame, logs, table
     cov_now = position_covariance(theta_covariance(estimates),
                                   estimates["t_last_s"].to_numpy(float))
     where = {int(i): (lg, row) for lg in logs for row, i in enumerate(lg.track_id)}
+    shown = shown_labels(report["label"])
     if len(report) > MAX_PLOTS:
         log.info("%s: plotting the first %d of %d contacts (MAX_PLOTS); the table and the map "
                  "MCAP hold them all", name, MAX_PLOTS, len(report))
     paths, used = [], set()
     for n, r in enumerate(report.head(MAX_PLOTS).itertuples(index=False)):
         lg, row = where[int(r.track_id)]
-        part = safe_label(r.label)
-        if part in used:  # two labels alike once sanitised: the id tells them apart
+        part = file_part(shown[n])
+        if part in used:  # two labels alike as file names: the id tells them apart
             part = f"{part}-{r.track_id}"
         used.add(part)
-        path = Path(tables_dir) / f"{name}-{part}.png"
-        _track_plot(path, f"{name}: contact {r.label}, status {r.status}\nrange "
+        path = Path(tables_dir) / fit_file_name(name, part, ".png")
+        _track_plot(path, f"{name}: contact {shown[n]}, status {r.status}\nrange "
                     f"{r.range_now_m / 1e3:.2f} km, course {r.course_deg:.1f} deg, speed "
                     f"{r.speed_m_s:.2f} m/s at "
                     + (f"t = {r.t_now_s:g} s from the start" if epoch_utc_ns is None
@@ -218,15 +217,16 @@ def write_map_mcap(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, ep
         lat, lon = local_to_geodetic(lg.own_x_m, lg.own_y_m, origin_deg)
         parts.append((lg.t_s, lat.tolist(), lon.tolist(), None, OWNSHIP_FRAME))
     skipped, used = [], set()
+    shown = shown_labels(report["label"])
     for n, r in enumerate(report.itertuples(index=False)):
         k, row = where[int(r.track_id)]
         t = logs[k].t_s[np.isfinite(logs[k].bearing_deg[row])]
         x, y = (theta[n, :2, None] + theta[n, 2:, None] * t)
         lat, lon = local_to_geodetic(x, y, origin_deg)
         if not np.isfinite(lat).all():  # no finite estimate, or one farther than a map
-            skipped.append(r.label)
+            skipped.append(shown[n])
             continue
-        topic = ESTIMATE_TOPIC.format(label=r.label)
+        topic = ESTIMATE_TOPIC.format(label=shown[n])
         if topic in used:  # labels of different shards alike: the id tells them apart
             topic = f"{topic}-{r.track_id}"
         used.add(topic)
@@ -235,7 +235,7 @@ def write_map_mcap(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, ep
         channels.append(Channel.protobuf(topic, LocationFix, {
             "track_id": str(r.track_id), "status": r.status,
             "estimate": "constant-velocity fit of all bearings; covariance (J^T J)^-1 sigma^2"}))
-        parts.append((t, lat.tolist(), lon.tolist(), cov, f"contact {r.label}"))
+        parts.append((t, lat.tolist(), lon.tolist(), cov, f"contact {shown[n]}"))
     if skipped:
         log.warning("%s: no finite estimate within %g km of the origin for %s: not in the map",
                     path, MAX_MAPPED_M / 1e3, ", ".join(skipped))

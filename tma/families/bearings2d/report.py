@@ -35,6 +35,7 @@ from tma.families.bearings2d.metrics import (  # noqa: E402
 from tma.families.bearings2d.status import STATUSES  # noqa: E402
 from tma.geo import local_to_geodetic  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
+from tma.sources.labels import shown_labels  # noqa: E402
 from tma.tables import save_figure, write_table  # noqa: E402
 from tma.utc import format_utc  # noqa: E402
 
@@ -224,7 +225,7 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str)
             for a, b in report[["lat_now_deg", "lon_now_deg"]].to_numpy()]}
 
     shown = pd.DataFrame({
-        "track": report["label"], "n": report["n_bearings"],
+        "track": shown_labels(report["label"]), "n": report["n_bearings"],
         "t now (s from start)": report["t_now_s"].map("{:.1f}".format),
         **({} if report["time_now_utc"].isna().all() else {"now (UTC)": report["time_now_utc"]}),
         **position(),
@@ -260,8 +261,10 @@ def _report_without_truth(entry, tables_dir, name: str) -> list[Path]:
     logs = read_logs(dataset)
     epoch, origin, labels = reference(logs, str(dataset.root))
     report = track_report(entry.estimates, epoch, origin, labels)
-    for row in report[report["status"] != "ok"].itertuples(index=False):
-        log.warning("%s track %s: %s: %s", dataset.name, row.label, row.status, row.note)
+    for label, row in zip(shown_labels(report["label"]), report.itertuples(index=False),
+                          strict=True):
+        if row.status != "ok":
+            log.warning("%s track %s: %s: %s", dataset.name, label, row.status, row.note)
     write_parquet_atomic(entry.run_root / "report.parquet",
                          pa.Table.from_pandas(report, preserve_index=False))
     written = write_track_report(report, tables_dir, name,
