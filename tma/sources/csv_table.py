@@ -62,6 +62,8 @@ SAMPLE_LINES = 50
 MAX_TRACK_ID = 2**53  # an id written as a larger integer is kept as text
 INTEGER_ID = re.compile(r"-?(?:0|[1-9][0-9]{0,15})")  # an id written as a plain integer
 SAME_FIX = {"x": 1e-6, "lat": 1e-9}  # m, deg (0.1 mm): rows at one time share one own-ship
+UTC_WORD = r"(?i)(?<=\d)\s*(?:UTC|GMT)$"  # a time of day ending in the word UTC: zone Z
+ZONE_NAME = re.compile(r"\d\s*([A-Za-z]{2,5})")  # ... ending in a zone's name (CET, EST)
 UNIT_WORDS = {"s", "sec", "secs", "second", "seconds", "ms", "us", "ns", "utc", "iso",
               "iso8601", "iso-8601", "deg", "degree", "degrees", "rad", "radian", "radians",
               "m", "km", "nmi", "-", "id", "1", "m/s", "kn", "knots", "unix", "text", "none"}
@@ -465,10 +467,20 @@ def _iso_times(series, col, fmt, path, line, notes) -> tuple[np.ndarray, np.ndar
     without one among zoned times are rows without a readable time."""
     text = series.astype("str").str.strip()
     missing = series.isna().to_numpy() | (text == "").to_numpy()
+    utc_word = text.str.contains(UTC_WORD, regex=True)
+    if utc_word.any():  # "... 08:00:00 UTC": the zone Z, as loggers often write it
+        text = text.str.replace(UTC_WORD, "Z", regex=True)
+        notes.append(f"{path.name}: {col}: ' UTC' read as the zone Z")
     zoned = text.str.contains(ZONED, regex=True).to_numpy(dtype=bool)
     unzoned = ~zoned & ~missing
     if fmt != "iso_utc" and unzoned.sum() * 2 >= (~missing).sum() and unzoned.any():
         k = int(np.argmax(unzoned))
+        named = re.search(rf"{ZONE_NAME.pattern}$", text.iloc[k])
+        if named:  # "CET", "EST": no offset (summer time?): the offset is the user's to say
+            raise InputError(f"{path}: {col} '{text.iloc[k]}' on line {line[k]} names its zone "
+                             f"({named.group(1)}), which is no offset: write it as one "
+                             f"({text.iloc[k][:named.start(1)].rstrip()}+01:00, say) or Z for "
+                             "UTC")
         raise InputError(f"{path}: {col} '{text.iloc[k]}' on line {line[k]} has no time zone: "
                          f"write times with one ({text.iloc[k]}Z for UTC) or set "
                          "time.format=iso_utc to read zone-less times as UTC")

@@ -212,6 +212,11 @@ REFUSED = {
                 "2025-06-01T08:00:01,59.9,10.7,11\n", {},
                 r"timestamp_utc '2025-06-01T08:00:00' on line 2 has no time zone: .* set "
                 r"time.format=iso_utc"),
+    "zone name": ("timestamp_utc,lat,lon,bearing_deg\n2025-06-01 08:00:00 CET,59.9,10.7,10\n"
+                  "2025-06-01 08:00:01 CET,59.9,10.7,11\n", {},
+                  r"timestamp_utc '2025-06-01 08:00:00 CET' on line 2 names its zone \(CET\), "
+                  r"which is no offset: write it as one \(2025-06-01 08:00:00\+01:00, say\) or "
+                  r"Z for UTC"),
     "no time": ("when,lat,lon,bearing_deg\n1,59.9,10.7,10\n", {},
                 r"no time column: columns found: when, lat, lon, bearing_deg; set "
                 r"columns.time=<name>"),
@@ -302,3 +307,16 @@ def test_canonical_integer_ids_stay_numbers(tmp_path):
     (one,) = _read(_write(df, tmp_path / "n.csv"))
     assert one.contacts.track.dtype == np.int64
     np.testing.assert_array_equal(one.contacts.track, [12, -3, 12, -3])
+
+
+def test_times_ending_in_utc_are_utc(tmp_path):
+    """``2025-06-01 08:00:00.5 UTC`` (as many loggers write it) is a UTC time, not a time
+    without zone (whose suggestion was ``...UTCZ``)."""
+    path = tmp_path / "utc.csv"
+    path.write_text("timestamp_utc,lat,lon,bearing_deg\n2025-06-01 08:00:00.5 UTC,59.9,10.7,10\n"
+                    "2025-06-01 08:00:01.5 UTC,59.9,10.7,11\n2025-06-01 08:00:02.5 utc,59.9,10.7,"
+                    "12\n")
+    (one,) = _read(path)
+    assert one.contacts.epoch_utc_ns == EPOCH_NS + 500_000_000
+    np.testing.assert_allclose(one.contacts.t_s, [0.0, 1.0, 2.0])
+    assert any("' UTC' read as the zone Z" in n for n in one.notes)

@@ -135,12 +135,30 @@ def _poor_fit_note(row) -> str:
             f"(chi-square p = {row.fit_p_value:.1e}): {why}")
 
 
-def status_note(report: pd.DataFrame) -> list[str]:
-    """Why a track is not ok, in words (empty for ok tracks), naming the test that decided."""
+NOT_CONVERGED = {  # by stop_reason (estimates.parquet; lm_kernel's STOP_MAX_ITER and
+    # STOP_LAMBDA_MAX, not imported: it loads the compiler, which aggregate never needs)
+    1: "the estimator stopped at max_iter before converging",
+    2: "the estimator stopped at lambda_max (its damping) before converging",
+}
+SINGULAR = ("no finite estimate: the solve was singular (too little change of bearing: no "
+            "own-ship manoeuvre? a target far away?)")
+
+
+def status_note(report: pd.DataFrame, stop_reason=None, sigma_known=True) -> list[str]:
+    """Why a track is not ok, in words (empty for ok tracks), naming the test that decided;
+    ``stop_reason`` (per track) says why an estimator did not converge: LM's ``max_iter`` or
+    ``lambda_max``, or a direct solver's (``iv``, ``nbearings``) singular system.
+    ``sigma_known``: the log declares its noise (the chi-square test decides ``poor_fit``);
+    else a robust fit's runs test on the residuals' signs does."""
     notes = []
-    for row in report.itertuples(index=False):
+    stops = [None] * len(report) if stop_reason is None else list(stop_reason)
+    for row, stop in zip(report.itertuples(index=False), stops, strict=True):
         status = row.status
-        if status == "poor_fit":
+        if status == "poor_fit" and not sigma_known:
+            note = (f"the residuals are not white noise (runs test on their signs, p = "
+                    f"{row.fit_p_value:.1e}): a systematic error (a bias, a drift, outliers in "
+                    "runs?); give sigma_deg= to test them against your sensor's noise")
+        elif status == "poor_fit":
             note = (_poor_fit_note(row) if np.isfinite(row.fit_p_value) and
                     row.sigma_used_deg > 0 else
                     f"the residuals are not noise (p = {row.fit_p_value:.1e})")
@@ -149,7 +167,8 @@ def status_note(report: pd.DataFrame) -> list[str]:
                     "target did not move as assumed (a manoeuvre?); `estimator=last_leg` "
                     "solves its last leg")
         elif status == "not_converged":
-            note = "the estimator stopped before converging (max_iter or lambda_max)"
+            note = (NOT_CONVERGED.get(stop, SINGULAR) if stop is not None else
+                    "the estimator stopped before converging")
         elif status == "unobservable":
             note = (f"range sd {row.range_sd_m / row.range_now_m:.0%} of the range: not "
                     "determined from this geometry (no own-ship manoeuvre? target too far? "
@@ -168,7 +187,7 @@ def status_note(report: pd.DataFrame) -> list[str]:
 
 
 def track_report(estimates: pd.DataFrame, epoch_utc_ns=None, origin_deg=None,
-                 labels=None) -> pd.DataFrame:
+                 labels=None, sigma_known=True) -> pd.DataFrame:
     """Per-track state and kinematics at each track's last bearing ("now") with 1-sigma
     errors and the status, as the estimator computed them; a note says why a track is not ok.
 
@@ -179,7 +198,8 @@ def track_report(estimates: pd.DataFrame, epoch_utc_ns=None, origin_deg=None,
     ``lat_now_deg``, ``lon_now_deg`` (WGS84, from ``origin_deg`` = (lat, lon) of the local
     plane's origin; NaN without one); ``leg_start_s`` (and ``leg_start_utc``): from when the
     solution holds (its first bearing, or the end of the last manoeuvre ``last_leg`` found),
-    in seconds from the log's start.
+    in seconds from the log's start. ``sigma_known``: the log declares its bearing noise
+    (which test a ``poor_fit`` note names).
     """
     e = estimates
 
@@ -208,7 +228,7 @@ def track_report(estimates: pd.DataFrame, epoch_utc_ns=None, origin_deg=None,
         "sqrt_ka_deg": np.rad2deg(np.sqrt(e["cost_rad2"] / e["n_bearings"])),
         "converged": e["converged"].astype(bool),
     })
-    report["note"] = status_note(report)
+    report["note"] = status_note(report, e["stop_reason"].to_numpy(), sigma_known)
     return report
 
 
@@ -260,7 +280,8 @@ def _report_without_truth(entry, tables_dir, name: str) -> list[Path]:
     m, dataset = entry.dataset.manifest, entry.dataset
     logs = read_logs(dataset)
     epoch, origin, labels = reference(logs, str(dataset.root))
-    report = track_report(entry.estimates, epoch, origin, labels)
+    report = track_report(entry.estimates, epoch, origin, labels,
+                          sigma_known=any(lg.sigma_deg is not None for lg in logs))
     for label, row in zip(shown_labels(report["label"]), report.itertuples(index=False),
                           strict=True):
         if row.status != "ok":
