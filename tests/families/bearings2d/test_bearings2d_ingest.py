@@ -58,9 +58,9 @@ def test_csv_ingest_estimate_report(tmp_path, monkeypatch):
     root = ingest(tmp_path / "rec.csv", data_dir=tmp_path / "data", name="rec")
     assert (root / "manifest.json").exists() and not (root / "truth.parquet").exists()
     titles = []
-    draw = map_outputs._track_plot
-    monkeypatch.setattr(map_outputs, "_track_plot",
-                        lambda path, title, *a: titles.append(title) or draw(path, title, *a))
+    draw = map_outputs._TrackPlots.draw
+    monkeypatch.setattr(map_outputs._TrackPlots, "draw", lambda self, path, title, *a: (
+        titles.append(title) or draw(self, path, title, *a)))
     report = _estimate_and_report(tmp_path, "rec")
     assert list(report.track_id) == [0, 1, 2]
     # times from the log's start and in UTC, never Unix seconds

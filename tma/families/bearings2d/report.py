@@ -274,7 +274,34 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str)
                        shown)
 
 
-def _report_without_truth(entry, tables_dir, name: str) -> list[Path]:
+STATUS_WHY = {  # a verdict in a few words, for the one warning line of its tracks
+    "not_converged": "the estimator did not converge",
+    "manoeuvring": ("the residuals drift: the target did not move as assumed; "
+                    "estimator=last_leg solves the last leg"),
+    "poor_fit": "the residuals are not the declared noise",
+    "unobservable": "the range is not determined from this geometry",
+    "approximate": "the estimator's one-sigma errors are not honest here",
+}
+LISTED = 10  # contacts named in a warning line
+
+
+def warn_not_ok(report: pd.DataFrame, where: str):
+    """One warning per verdict other than ``ok``: a track's note, or for several tracks their
+    count, the verdict in words and the first ``LISTED`` contacts (the table's ``why`` column
+    holds each one's note)."""
+    shown = np.array(shown_labels(report["label"]), dtype=object)
+    for status in [s for s in STATUSES if s != "ok"]:
+        rows = np.flatnonzero((report["status"] == status).to_numpy())
+        if rows.size == 1:
+            log.warning("%s track %s: %s: %s", where, shown[rows[0]], status,
+                        report["note"].iloc[rows[0]])
+        elif rows.size:
+            names = ", ".join(shown[rows[:LISTED]]) + (", ..." if rows.size > LISTED else "")
+            log.warning("%s: %d tracks %s (%s): %s; the table's 'why' column says more for "
+                        "each", where, rows.size, status, STATUS_WHY[status], names)
+
+
+def _report_without_truth(entry, tables_dir, name: str, progress=None) -> list[Path]:
     """The per-track report of a dataset without truth: ``<name>.{csv,md}``, a PNG per
     contact and, with a geographic origin, the map MCAP ``<name>.mcap``."""
     m, dataset = entry.dataset.manifest, entry.dataset
@@ -282,15 +309,13 @@ def _report_without_truth(entry, tables_dir, name: str) -> list[Path]:
     epoch, origin, labels = reference(logs, str(dataset.root))
     report = track_report(entry.estimates, epoch, origin, labels,
                           sigma_known=any(lg.sigma_deg is not None for lg in logs))
-    for label, row in zip(shown_labels(report["label"]), report.itertuples(index=False),
-                          strict=True):
-        if row.status != "ok":
-            log.warning("%s track %s: %s: %s", dataset.name, label, row.status, row.note)
+    warn_not_ok(report, dataset.name)
     write_parquet_atomic(entry.run_root / "report.parquet",
                          pa.Table.from_pandas(report, preserve_index=False))
     written = write_track_report(report, tables_dir, name,
                                  m.get("input", {}).get("path", dataset.name))
-    written += write_track_plots(report, entry.estimates, logs, tables_dir, name, epoch)
+    written += write_track_plots(report, entry.estimates, logs, tables_dir, name, epoch,
+                                 progress)
     if origin is None:
         log.info("%s: no map MCAP (%s.mcap): the dataset has no geographic origin (its "
                  "own-ship is in local metres; ingest latitude/longitude navigation or give "
@@ -306,9 +331,10 @@ def _report_without_truth(entry, tables_dir, name: str) -> list[Path]:
     return written
 
 
-def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
+def aggregate_runs(entries, tables_dir, table_name, progress=None) -> list[Path]:
     """Metrics per track into each run dir; the comparison table for simulated datasets, with
-    its section against the paper, and a per-track report for each dataset without truth."""
+    its section against the paper, and a per-track report for each dataset without truth
+    (``progress``: a progress bar over its per-contact plots; None: on a terminal only)."""
     rows, written, runs, truths = [], [], [], {}
     for entry in entries:
         if id(entry.dataset) not in truths:  # read (and checked) once per dataset
@@ -316,7 +342,7 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
         truth = truths[id(entry.dataset)]
         if truth is None:
             name = table_name if len(entries) == 1 else f"{entry.dataset.name}-{entry.estimator}"
-            written += _report_without_truth(entry, tables_dir, name)
+            written += _report_without_truth(entry, tables_dir, name, progress)
             continue
         metrics = track_metrics(entry.estimates, truth)
         write_parquet_atomic(entry.run_root / "metrics.parquet",
