@@ -40,7 +40,7 @@ def workspace(tmp_path_factory):
     _csv(root / "good.csv")
     _csv(root / "t1e12.csv", edit=_set("time_s", 5, 1e12))
     _csv(root / "t1e300.csv", edit=_set("time_s", 7, 1e300))
-    _csv(root / "id1e20.csv", edit=_set("track_id", 3, 1e20))
+    _csv(root / "b1e20.csv", edit=_set("bearing_deg", 3, 1e20))  # (ids are kept as text)
     return root
 
 
@@ -63,8 +63,8 @@ CASES = {
     "force not a boolean": ("simulate", ["force=maybe"], "force must be true or false"),
     "time of 1e12 s": ("ingest", ["input={root}/t1e12.csv"], "line 7 makes the log span"),
     "time of 1e300 s": ("ingest", ["input={root}/t1e300.csv"], "line 9 makes the log span"),
-    "track_id of 1e20": ("ingest", ["input={root}/id1e20.csv"],
-                         "track_id 1e+20 on line 5 is not an integer"),
+    "bearing of 1e20": ("ingest", ["input={root}/b1e20.csv"],
+                        "bearing_deg 1e+20 on line 5 is outside [-360, 360]"),
     "initial distance zero": ("estimate", ["estimator.initial_distance_m=0"],
                               "initial_distance_m must be in (0, 1e9), got 0"),
     "initial distance negative": ("estimate", ["estimator.initial_distance_m=-5"],

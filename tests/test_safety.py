@@ -73,7 +73,8 @@ def test_force_over_a_good_dataset_keeps_it_when_the_new_input_is_bad(tmp_path):
     bad = tmp_path / "bad.csv"
     bad.write_text((tmp_path / "good.csv").read_text() + "1e3,0,0,not-a-number,0\n")
     with pytest.raises(InputError):
-        ingest(bad, data_dir=tmp_path / "data", name="trial7", force=True)
+        ingest(bad, data_dir=tmp_path / "data", name="trial7", force=True,
+               options={"bad_rows": "fail"})
     assert _tree(root) == before
     assert sorted(p.name for p in root.parent.iterdir()) == [".trial7.lock", "trial7"]
     # and a good replacement does replace it, completely

@@ -1,9 +1,10 @@
 """The aggregate stage: finished runs -> per-track metrics (Parquet) -> tables and plots.
 
 Each family's report module (``tma.families.<name>.report``) provides
-``aggregate_runs(entries, tables_dir, table_name)`` where ``entries`` are ``RunEntry``
-items; it writes per-track metrics into each run directory and returns the table files it
-wrote. ``metrics_dataset`` reads the metrics of every run back as one Parquet dataset.
+``aggregate_runs(entries, tables_dir, table_name, progress)`` where ``entries`` are
+``RunEntry`` items (``progress``: progress bars, None: on a terminal); it writes per-track
+metrics into each run directory and returns the table files it wrote. ``metrics_dataset``
+reads the metrics of every run back as one Parquet dataset.
 """
 
 import functools
@@ -52,10 +53,13 @@ class RunEntry:
     seconds_per_track: float = float("nan")
 
 
-def aggregate(data_dir, tables_dir, jobs, table=None, default_suffix="custom") -> list[Path]:
+def aggregate(data_dir, tables_dir, jobs, table=None, default_suffix="custom",
+              progress=None) -> list[Path]:
     """Aggregate the runs of ``jobs`` (``(Dataset, estimator config)`` pairs) into one table
     per family: ``table`` (``<table>-<family>`` when several families), else
-    ``<dataset>-<estimator>`` for a single run, else ``<family>-<default_suffix>``."""
+    ``<dataset>-<estimator>`` for a single run, else ``<family>-<default_suffix>``.
+    ``progress``: progress bars where a report draws per-contact outputs (None: on a
+    terminal only; the stage passes its ``progress`` option)."""
     check_datasets(ds for ds, _ in jobs)
     runs = []
     for dataset, est_cfg in jobs:
@@ -79,7 +83,7 @@ def aggregate(data_dir, tables_dir, jobs, table=None, default_suffix="custom") -
             name = f"{entries[0].dataset.name}-{entries[0].estimator}"
         else:
             name = f"{family}-{default_suffix}"
-        written += module.aggregate_runs(entries, Path(tables_dir), name)
+        written += module.aggregate_runs(entries, Path(tables_dir), name, progress=progress)
     for path in written:  # what a killed aggregate left of these files, and nothing else
         remove_stale_temporaries(path.parent, only_dead=True, names=[path.name])
     return written

@@ -8,10 +8,13 @@ raw fixes and values, read as the family's observation asks (its ``ingest`` modu
 the family makes its logs (``logs``), which its scenario module writes. Times are shifted so
 the dataset starts at t = 0 at its first value; the UTC time of t = 0, the plane's origin
 (lat, lon), text track labels, the dropped values, the navigation gaps and every automatic
-choice go into the manifest. Bad input raises ``InputError`` naming the file, line or time,
-and the option that would fix it; nothing is written then. The dataset name is a plain name;
-the dataset is built beside its final place and swapped in only when complete, so a failed
-ingest (even with ``force=true``) leaves an existing dataset byte-identical.
+choice go into the manifest. Bad rows (``bad_rows=drop``: a missing or unreadable value, time
+or fix, an outlier fix) are left out, counted per reason in a log line and the manifest
+(``bad_rows``), and a contact left with too few values is skipped (the family says how
+many); under ``bad_rows=fail``, and for any other bad input, ``InputError`` names the file,
+line or time, and the option that would fix it; nothing is written then. The dataset name
+is a plain name; the dataset is built beside its final place and swapped in only when
+complete, so a failed ingest (even with ``force=true``) leaves an existing dataset byte-identical.
 """
 
 import logging
@@ -26,7 +29,8 @@ from tma.io.dataset import MANIFEST, datasets_dir, file_record, shard_relpath, w
 from tma.io.owned import building, is_owned, plain_name
 from tma.sources import KINDS, read_source, source_kind
 from tma.sources.align import align
-from tma.sources.base import groups, source_options, unknown_option
+from tma.sources.base import groups, inapplicable, source_options, unknown_option
+from tma.sources.labels import name_room
 
 log = logging.getLogger(__name__)
 
@@ -59,27 +63,44 @@ def _file(value, option) -> Path:
 
 
 def read_recordings(path: Path, fmt, navigation: Path | None, options):
-    """The input's (and the navigation file's) recordings, each with own-ship and contacts."""
+    """The input's (and the navigation file's) recordings, each with own-ship and contacts.
+    An option set that neither file's kind reads is refused (``bearing.topic`` on a CSV)."""
     kind = source_kind(path, fmt)
+    kinds = {path: kind}
+    if navigation is not None:
+        kinds[navigation] = source_kind(navigation, "auto", option=None)
+    complaint = inapplicable(options, kinds)
+    if complaint:
+        raise ConfigError(complaint)
     if navigation is None:
         recordings = read_source(path, kind, options, navigation=True, contacts=True)
         for r in recordings:
             _require(r, path, kind, options)
         return recordings, kind, None
-    nav_kind = source_kind(navigation, "auto", option=None)
+    nav_kind = kinds[navigation]
     found = read_source(path, kind, options, navigation=False, contacts=True)
-    nav = read_source(navigation, nav_kind, options, navigation=True, contacts=False)
+    nav = read_source(navigation, nav_kind, options, navigation=True, contacts=False,
+                      date_hint_ns=_first_utc_ns(found))
     if len(found) != 1 or found[0].contacts is None:
         raise InputError(f"{path}: no {options.observation.plural} found in the input")
     if len(nav) != 1 or nav[0].navigation is None:
         raise InputError(f"{navigation}: no own-ship fixes found in the navigation file")
     rec = found[0]
     notes = [*rec.notes, *nav[0].notes]
+    rec.dropped.merge(nav[0].dropped)
     if rec.navigation is not None:
         notes.append(f"own-ship from navigation={navigation}; the input's own-ship "
                      f"({rec.navigation.source}) is not used")
     rec.navigation, rec.notes = nav[0].navigation, notes
     return [rec], kind, nav_kind
+
+
+def _first_utc_ns(recordings) -> int | None:
+    """UTC ns of the first contact value, when the contacts have absolute times."""
+    times = [r.contacts.epoch_utc_ns + int(round(r.contacts.t_s.min() * 1e9))
+             for r in recordings if r.contacts is not None and r.contacts.t_s.size
+             and r.contacts.epoch_utc_ns is not None]
+    return min(times, default=None)
 
 
 def _require(rec, path, kind, options):
@@ -117,6 +138,11 @@ def ingest(input_path, *, data_dir, family: str, name=None, fmt="auto", force=Fa
         raise ConfigError(f"format must be auto, csv, nmea or mcap, got '{fmt}'")
     path = Path(str(input_path))
     name = plain_name(name if name is not None else path.stem, "name")
+    room = name_room(family_named(family).estimators)
+    if len(name.encode()) > room:
+        raise ConfigError(f"name={name[:40]}... is too long: its tables are named "
+                          "<name>-<estimator>-<contact>.png and must fit a file name; give "
+                          f"name= of at most {room} characters")
     path = _file(input_path, "input")
     nav_path = None if navigation is None else _file(navigation, "navigation")
 
@@ -130,6 +156,10 @@ def ingest(input_path, *, data_dir, family: str, name=None, fmt="auto", force=Fa
         log.warning("%s: dropped %d %s(s) (%d before, %d after the own-ship fixes): %s",
                     path, dropped["count"], options.observation.role,
                     dropped["before_navigation"], dropped["after_navigation"], dropped["why"])
+    if aligned.epoch_utc_ns is None and aligned.origin_deg is not None:
+        log.warning("%s: relative times: the outputs give no UTC and no map MCAP is written (it "
+                    "would be dated 1970); give time.start_utc=<ISO-8601 UTC of the log's time "
+                    "0> to date them", path)
     gaps = summary["nav_gaps"]
     if gaps["count"]:
         log.warning("own-ship navigation has %d gap(s) longer than nav.max_gap_s = %g s "
@@ -137,6 +167,11 @@ def ingest(input_path, *, data_dir, family: str, name=None, fmt="auto", force=Fa
                     "across them", gaps["count"], gaps["max_gap_s"], gaps["longest_s"],
                     gaps["gaps"][0]["from_s"])
     logs, config, extra = reader.logs(aligned, settings, str(path))
+    bad = aligned.dropped
+    if bad.count:
+        log.warning("%s: left out %d bad row(s) (bad_rows=%s): %s", path, bad.count,
+                    bad.policy, bad.text())
+    summary["bad_rows"] = bad.record()
 
     sources = {"input": {"path": str(path), "sha256": sha256_file(path), "kind": kind}}
     if nav_path is not None:

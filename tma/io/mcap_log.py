@@ -355,6 +355,21 @@ class LogWriter:
         self._mcap.add_messages(ids, np.repeat(times, len(columns)), buffers, starts, lengths)
         self.n_messages += ids.size
 
+    def write_encoded(self, topics: list[str], which, t_s, payloads: Encoded):
+        """Encoded messages of several topics, in this order: message k on
+        ``topics[which[k]]`` at relative time ``t_s[k]`` (s); the same bytes as ``write`` of
+        each in turn."""
+        times = self.log_times(t_s)
+        if len(payloads) != times.size:
+            raise ValueError("write_encoded needs one time per message")
+        if not times.size:
+            return
+        self._flush_loose()
+        ids = np.array([self._ids[topic] for topic in topics], np.uint16)[np.asarray(which)]
+        self._mcap.add_messages(ids, times, [payloads.data], payloads.offsets[:-1],
+                                np.diff(payloads.offsets))
+        self.n_messages += ids.size
+
     def write_many(self, topic: str, t_s, messages):
         """One message on ``topic`` at each time ``t_s[i]`` (s): ``write_epochs`` of one
         topic."""

@@ -54,12 +54,13 @@ def source_kind(path, fmt="auto", option: str | None = "format") -> str:
     return kind
 
 
-def read_source(path, kind: str, options, *, navigation: bool,
-                contacts: bool) -> list[Recording]:
+def read_source(path, kind: str, options, *, navigation: bool, contacts: bool,
+                date_hint_ns: int | None = None) -> list[Recording]:
     """Read one file of ``kind`` with the reading ``options`` of a family (``base.
     options_schema``); ``navigation`` / ``contacts``: what is wanted from it (the CSV reader
-    then looks only for those columns). One Recording per own-ship (several only when a
-    table's tracks report different own-ship positions)."""
+    then looks only for those columns); ``date_hint_ns``: UTC ns of the first contact value,
+    which dates navigation that carries no date (NMEA GGA). One Recording per own-ship
+    (several only when a table's tracks report different own-ship positions)."""
     if kind == "csv":
         from tma.sources.csv_table import read_csv_table
 
@@ -70,7 +71,7 @@ def read_source(path, kind: str, options, *, navigation: bool,
                              f"navigation=FILE and the {options.observation.plural} as input=")
         from tma.sources.nmea import read_nmea
 
-        return [read_nmea(path)]
+        return [read_nmea(path, options, date_hint_ns)]
     from tma.sources.mcap import read_mcap
 
     need = (("navigation",) if navigation else ()) + (("contacts",) if contacts else ())

@@ -1,7 +1,8 @@
 """Readers' fixes and contacts -> one clock, one plane, own-ship at every value (``align``).
 
 - One time base: every source has absolute UTC times, or every one relative times (mixing
-  them is refused: nothing relates the two clocks). The dataset starts at t = 0 at the first
+  them is refused: nothing relates the two clocks), unless ``time.start_utc`` gives the UTC of
+  the relative times' 0, which makes them absolute. The dataset starts at t = 0 at the first
   value kept; ``epoch_utc_ns`` is the UTC time of that t = 0 (None for relative times).
 - One plane: latitude/longitude go to east/north metres (``tma.geo.geodetic_to_local``, WGS84,
   h = 0) at the origin ``origin.lat``/``origin.lon`` or the first own-ship fix. The plane is
@@ -13,7 +14,14 @@
   one further out is dropped and counted. Gaps between fixes longer than ``nav.max_gap_s``
   are reported (values inside are interpolated across them).
 - Text track labels become ids 0..n-1 in sorted label order (``Aligned.labels``, and the
-  summary).
+  summary); a note says how each one unsafe for file names or Markdown is shown
+  (``tma.sources.labels``).
+- Own-ship fixes that cannot be right are outliers, left out and counted with the rows the
+  readers left out (``bad_rows``; under ``fail`` the first refuses the file): a fix at exactly
+  latitude 0, longitude 0 (what receivers report before their first fix), and a fix far off
+  the track (``far_off``: farther from the median of the fixes around it, ``OUTLIER_NEIGHBOURS``
+  on each side, than own-ship could have gone at ``nav.max_speed_m_s``, plus
+  ``OUTLIER_TOLERANCE_M`` for the fixes' own noise).
 
 What comes out is one ``Platform`` per own-ship: flat arrays, one row per value; the family
 makes its logs from them (``bearings2d``: one epoch grid per own-ship, shared by its tracks).
@@ -23,12 +31,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tma.errors import InputError
+from tma.errors import ConfigError, InputError
 from tma.geo import geodetic_to_local
-from tma.sources.base import Navigation, Recording
-from tma.utc import format_utc
+from tma.sources.base import Dropped, Navigation, Recording
+from tma.sources.labels import shown_labels
+from tma.utc import format_utc, stamp_text
 
 MAX_LISTED_GAPS = 20
+OUTLIER_NEIGHBOURS = 10  # fixes on each side whose median a fix is held against
+OUTLIER_TOLERANCE_M = 100.0  # the fixes' own noise (GNSS, multipath) the rule allows for
 
 
 @dataclass
@@ -55,6 +66,7 @@ class Aligned:
     origin_deg: tuple[float, float] | None
     labels: np.ndarray | None
     summary: dict
+    dropped: Dropped  # every row left out so far (readers and outliers), under the policy
 
 
 def align(recordings: list[Recording], options, where: str) -> Aligned:
@@ -66,11 +78,20 @@ def align(recordings: list[Recording], options, where: str) -> Aligned:
     for messages."""
     observation = options.observation
     plural = observation.plural
-    ref = _time_reference(recordings, options)
-    navs = [_shifted(r.navigation.t_s, r.navigation.epoch_utc_ns, ref) for r in recordings]
-    obs = [_shifted(r.contacts.t_s, r.contacts.epoch_utc_ns, ref) for r in recordings]
-    origin, positions, notes = _local_plane(recordings, navs, options)
+    bad = options.dropped()
+    for r in recordings:
+        bad.merge(r.dropped)
+    ref, start, notes_time = _time_reference(recordings, options)
+    navs = [_shifted(r.navigation.t_s, r.navigation.epoch_utc_ns, ref, start)
+            for r in recordings]
+    obs = [_shifted(r.contacts.t_s, r.contacts.epoch_utc_ns, ref, start) for r in recordings]
+    origin, positions, navs, notes = _local_plane(recordings, navs, options, bad)
     ids, labels = _track_ids([r.contacts.track for r in recordings])
+    if labels is not None:
+        notes += [f"contact {label[:40]!r}{'...' if len(label) > 40 else ''} is shown as "
+                  f"{s!r} in tables, file names and map topics (the CSV and the manifest keep "
+                  "it as written)"
+                  for label, s in zip(labels, shown_labels(labels), strict=True) if s != label]
     if observation.guard is not None:
         observation.guard(recordings, options, where)
 
@@ -116,36 +137,51 @@ def align(recordings: list[Recording], options, where: str) -> Aligned:
         "nav_gaps": {"max_gap_s": options.nav.max_gap_s, "count": len(gaps),
                      "longest_s": max((g["length_s"] for g in gaps), default=None),
                      "gaps": gaps[:MAX_LISTED_GAPS]},
-        "notes": [*dict.fromkeys(n for r in recordings for n in r.notes), *notes],
+        "notes": [*dict.fromkeys(n for r in recordings for n in r.notes), *notes_time, *notes],
     }
-    return Aligned(platforms, epoch, origin, labels, summary)
+    return Aligned(platforms, epoch, origin, labels, summary, bad)
 
 
-def _time_reference(recordings, options) -> int | None:
-    """The earliest epoch (UTC ns) when every source is absolute; None when every source is
-    relative; InputError when they are mixed."""
+def _time_reference(recordings, options):
+    """``(reference, start, notes)``: the earliest epoch (UTC ns) when every source is
+    absolute, or made so by ``time.start_utc`` (``start``: the UTC of the relative sources'
+    time 0, else None); None when every source is relative and no start is given. A mixture
+    without a start, or a start for a log without relative times, raises."""
     sources = [(s.epoch_utc_ns, s.source) for r in recordings
                for s in (r.navigation, r.contacts)]
-    absolute = [e is not None for e, _ in sources]
-    if all(absolute):
-        return min(e for e, _ in sources)
-    if not any(absolute):
-        return None
-    rel = next(s for e, s in sources if e is None)
+    start = options.time.start_ns
+    relative = [where for e, where in sources if e is None]
+    if start is not None:
+        if not relative:
+            raise ConfigError(f"time.start_utc={options.time.start_utc} applies to logs of "
+                              f"relative times: {sources[0][1]} has UTC times; leave "
+                              "time.start_utc unset")
+        note = (f"relative times of {', '.join(dict.fromkeys(relative))} made absolute: time 0 "
+                f"is {format_utc(start)} (time.start_utc)")
+        return min([start, *(e for e, _ in sources if e is not None)]), start, [note]
+    if not relative:
+        return min(e for e, _ in sources), None, []
+    if len(relative) == len(sources):
+        return None, None, []
+    rel = relative[0]
     abs_ = next(s for e, s in sources if e is not None)
     raise InputError(f"{rel} has relative times (seconds from an arbitrary zero) but {abs_} "
                      f"has absolute UTC times (time.format={options.time.format}): nothing "
                      "relates the two clocks; give both as absolute times (Unix or ISO-8601 "
-                     "with a zone: time.format=unix_s|unix_ms|unix_ns|iso) or both relative")
+                     "with a zone: time.format=unix_s|unix_ms|unix_ns|iso) or both relative, or "
+                     "give the UTC of the relative times' 0 with time.start_utc=")
 
 
-def _shifted(t_s, epoch, ref) -> np.ndarray:
+def _shifted(t_s, epoch, ref, start=None) -> np.ndarray:
+    """Times on the common clock (``start``: the epoch of a source of relative times)."""
     t = np.asarray(t_s, dtype=float)
+    epoch = start if epoch is None else epoch
     return t if ref is None else t + (epoch - ref) / 1e9
 
 
-def _local_plane(recordings, navs, options):
-    """(origin (lat, lon) or None, [(x, y) per recording], notes)."""
+def _local_plane(recordings, navs, options, dropped: Dropped):
+    """``(origin (lat, lon) or None, [(x, y) per recording], [times per recording], notes)``,
+    the outlier fixes left out (``dropped``)."""
     geographic = [r.navigation.geographic for r in recordings]
     given = options.origin.lat is not None
     notes = []
@@ -154,21 +190,113 @@ def _local_plane(recordings, navs, options):
             notes.append(f"own-ship x/y taken as metres east/north of origin.lat/lon = "
                          f"{options.origin.lat:g}, {options.origin.lon:g}")
         origin = (options.origin.lat, options.origin.lon) if given else None
-        return origin, [(r.navigation.x_m, r.navigation.y_m) for r in recordings], notes
+        positions, times = [], []
+        for r, t in zip(recordings, navs, strict=True):
+            nav = r.navigation
+            keep = _on_track(t, nav.x_m, nav.y_m, nav, np.arange(t.size), options, dropped)
+            positions.append((nav.x_m[keep], nav.y_m[keep]))
+            times.append(t[keep])
+        if given:
+            _near_the_fixes(positions, options)
+        return origin, positions, times, notes
     if not all(geographic):
         raise InputError("own-ship positions come both as latitude/longitude and as local x/y "
                          "metres: give one kind")
+    kept = []  # per recording: the rows kept
+    for r in recordings:
+        nav = r.navigation
+        zero = (nav.lat_deg == 0) & (nav.lon_deg == 0)
+        keep = dropped.drop(zero, "own-ship fix at 0, 0", fix_places(nav, np.arange(zero.size)),
+                            f"{nav.source}: an own-ship fix at 0, 0 (a receiver without a fix)")
+        kept.append(np.flatnonzero(keep))
+    fixes = np.concatenate([np.c_[r.navigation.lat_deg[rows], r.navigation.lon_deg[rows]]
+                            for r, rows in zip(recordings, kept, strict=True)])
+    if not fixes.size:
+        raise InputError(f"{recordings[0].navigation.source}: no own-ship fix left: "
+                         f"{dropped.text()}")
+    middle = tuple(np.median(fixes, axis=0))  # a plane no outlier can move far
+    for k, (r, t, rows) in enumerate(zip(recordings, navs, kept, strict=True)):
+        x, y = geodetic_to_local(r.navigation.lat_deg[rows], r.navigation.lon_deg[rows], middle)
+        kept[k] = rows[_on_track(t[rows], x, y, r.navigation, rows, options, dropped)]
     if given:
         lat0, lon0 = options.origin.lat, options.origin.lon
     else:
-        first = int(np.argmin([t[0] for t in navs]))
-        lat0 = float(recordings[first].navigation.lat_deg[0])
-        lon0 = float(recordings[first].navigation.lon_deg[0])
+        first = int(np.argmin([t[rows[0]] if rows.size else np.inf
+                               for t, rows in zip(navs, kept, strict=True)]))
+        nav, row = recordings[first].navigation, kept[first][0]
+        lat0, lon0 = float(nav.lat_deg[row]), float(nav.lon_deg[row])
         notes.append(f"local plane origin at the first own-ship fix {lat0:.7f}, {lon0:.7f} "
                      "(origin.lat/origin.lon)")
-    positions = [geodetic_to_local(r.navigation.lat_deg, r.navigation.lon_deg, (lat0, lon0))
-                 for r in recordings]
-    return (lat0, lon0), positions, notes
+    positions = [geodetic_to_local(r.navigation.lat_deg[rows], r.navigation.lon_deg[rows],
+                                   (lat0, lon0)) for r, rows in zip(recordings, kept, strict=True)]
+    if given:
+        _near_the_fixes(positions, options)
+    return (lat0, lon0), positions, [t[rows] for t, rows in zip(navs, kept, strict=True)], notes
+
+
+def _near_the_fixes(positions, options):
+    """A given origin lies within ``origin.max_distance_km`` of an own-ship fix (an origin far
+    from them all is a mistake: another place, swapped or mistyped coordinates)."""
+    nearest = min(float(np.hypot(x, y).min()) for x, y in positions if x.size)
+    limit = options.origin.max_distance_km
+    if nearest > limit * 1e3:
+        o = options.origin
+        raise InputError(f"origin.lat/origin.lon = {o.lat:g}, {o.lon:g} lies "
+                         f"{nearest / 1e3:.0f} km from the nearest own-ship fix (at most "
+                         f"origin.max_distance_km = {limit:g}): is it the log's place?")
+
+
+def fix_places(nav: Navigation, index: np.ndarray):
+    """Row indices into ``nav``'s rows ``index`` -> their places: file lines, else the topic
+    and time."""
+    def places(rows):
+        rows = index[rows]
+        if nav.lines is not None:
+            return [f"line {n}" for n in nav.lines[rows]]
+        epoch = nav.epoch_utc_ns or 0
+        return [f"{nav.topic or nav.source} at "
+                f"{stamp_text(epoch + int(round(nav.t_s[i] * 1e9)))}" for i in rows]
+    return places
+
+
+def far_off(t, x, y, max_speed_m_s: float) -> np.ndarray:
+    """Fixes (sorted by time ``t``, positions ``x``, ``y`` in m) farther from the
+    component-wise median of the ``2 OUTLIER_NEIGHBOURS + 1`` fixes around them (itself
+    included; at the ends, the first or last so many) than sqrt(2) * ``max_speed_m_s`` * (the
+    longest time to one of them) + ``OUTLIER_TOLERANCE_M``. A track that never moves faster
+    than ``max_speed_m_s`` always passes: every fix of the window lies within speed x time of
+    the fix, so each coordinate of their median does too, and the median within sqrt(2) times
+    that. A fix off the track is caught as long as fewer than half of the window is off too
+    (up to ``OUTLIER_NEIGHBOURS`` bad fixes in a row). Running medians (scipy.ndimage): a
+    million fixes take about 0.1 s."""
+    from scipy.ndimage import maximum_filter1d, median_filter, minimum_filter1d
+
+    n = t.size
+    if n < 3:
+        return np.zeros(n, dtype=bool)
+    k = min(OUTLIER_NEIGHBOURS, (n - 1) // 2)
+    size = 2 * k + 1
+    mx, my = (median_filter(v, size=size, mode="nearest") for v in (x, y))
+    reach = np.maximum(maximum_filter1d(t, size, mode="nearest") - t,
+                       t - minimum_filter1d(t, size, mode="nearest"))
+    if k:  # the first and last k fixes: the window of the first (last) size fixes
+        for end, window in ((slice(None, k), slice(None, size)),
+                            (slice(n - k, None), slice(n - size, None))):
+            mx[end], my[end] = np.median(x[window]), np.median(y[window])
+            reach[end] = np.maximum(t[window][-1] - t[end], t[end] - t[window][0])
+    return np.hypot(x - mx, y - my) > np.sqrt(2) * max_speed_m_s * reach + OUTLIER_TOLERANCE_M
+
+
+def _on_track(t, x, y, nav: Navigation, index, options, dropped: Dropped) -> np.ndarray:
+    """The fixes to keep: those ``far_off`` finds off the track are left out (``index``: the
+    rows of ``nav`` they are)."""
+    order = np.argsort(t, kind="stable")
+    off = np.zeros(t.size, dtype=bool)
+    off[order] = far_off(t[order], x[order], y[order], options.nav.max_speed_m_s)
+    return dropped.drop(off, "own-ship fix far off the track", fix_places(nav, index),
+                        f"{nav.source}: an own-ship fix far off the track (farther from its "
+                        f"neighbours than nav.max_speed_m_s = {options.nav.max_speed_m_s:g} m/s "
+                        "allows)")
 
 
 def _track_ids(tracks: list[np.ndarray]):

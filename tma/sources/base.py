@@ -7,6 +7,12 @@ MCAP) into flat arrays: own-platform fixes (``Navigation``) and/or per-contact v
 ``tma.sources.align`` then puts fixes and values on one time base and one local east-north
 plane, and the family makes its logs from them.
 
+Bad rows (``bad_rows=drop|fail``): a row whose time, value or own-ship position is missing or
+unreadable, a stamp not absolute among absolute ones, a fix flagged "no fix" or far off the
+rest is left out and counted per reason (``Dropped``: how many, and where the first few are:
+file line numbers or message times); under ``fail`` the first such row refuses the file in one
+line instead (fixes the receiver itself flags as "no fix" are left out under either policy).
+
 Conventions: times are float seconds since ``epoch_utc_ns`` (UTC nanoseconds since the Unix
 epoch) when the source has absolute times, else seconds from an arbitrary zero with
 ``epoch_utc_ns = None`` (``tma.utc``); values in the observation's first unit (readers
@@ -14,15 +20,19 @@ convert the others, and direction vectors when the observation takes them); posi
 local (x east, y north, metres) or geographic (latitude, longitude in degrees, WGS84).
 """
 
+import datetime
 import functools
 from collections.abc import Callable
+from dataclasses import MISSING as MISSING_FACTORY
 from dataclasses import dataclass, field, fields, is_dataclass, make_dataclass
+from typing import Any
 
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from tma.config import validate
-from tma.errors import ConfigError
+from tma.errors import ConfigError, InputError
+from tma.utc import parse_utc
 
 
 @dataclass(frozen=True)
@@ -76,10 +86,69 @@ class Observation:
         return next((u for u in self.units[1:] if name.lower().endswith(f"_{u.name}")), None)
 
 
+BAD_ROWS = ("drop", "fail")
+NAMED = 5  # places named per reason: the first few
+
+
+@dataclass
+class Dropped:
+    """Rows left out, per reason: ``{reason: {"count": n, "first": [place, ...]}}``, the
+    places (``line 12``, or a message's time) of the first ``NAMED``. ``policy``: what
+    ``drop`` does with a bad row: leave it out (``drop``) or refuse the file (``fail``)."""
+
+    policy: str = "drop"
+    reasons: dict = field(default_factory=dict)
+
+    def drop(self, bad, reason: str, places: Callable, refusal: str) -> np.ndarray:
+        """The rows to keep, ``~bad``; the bad ones counted under ``reason``. ``places``:
+        row indices -> their places (texts); ``refusal``: the one line under
+        ``bad_rows=fail`` (the places and the option are appended)."""
+        bad = np.asarray(bad, dtype=bool)
+        if not bad.any():
+            return ~bad
+        rows = np.flatnonzero(bad)
+        named = [str(p) for p in places(rows[:NAMED])]
+        if self.policy == "fail":
+            raise InputError(f"{refusal} ({', '.join(named)}); bad_rows=drop leaves such rows "
+                             "out")
+        self.add(reason, rows.size, named)
+        return ~bad
+
+    def add(self, reason: str, count: int, named: list[str]):
+        """Count ``count`` rows left out under ``reason`` whatever the policy."""
+        entry = self.reasons.setdefault(reason, {"count": 0, "first": []})
+        entry["count"] += int(count)
+        entry["first"] = (entry["first"] + list(named))[:NAMED]
+
+    def merge(self, other: "Dropped"):
+        for reason, entry in other.reasons.items():
+            self.add(reason, entry["count"], entry["first"])
+
+    @property
+    def count(self) -> int:
+        return sum(e["count"] for e in self.reasons.values())
+
+    def record(self) -> dict:
+        """For the manifest: the policy, the total and each reason's count and places."""
+        return {"policy": self.policy, "count": self.count, "reasons": self.reasons}
+
+    def text(self) -> str:
+        """``3 with bearing missing or not a number (line 12, line 40, ...); 1 with ...``."""
+        return "; ".join(f"{e['count']} with {reason} ({', '.join(e['first'])}"
+                         f"{', ...' if e['count'] > len(e['first']) else ''})"
+                         for reason, e in self.reasons.items())
+
+
+def line_places(lines: np.ndarray) -> Callable:
+    """Row indices -> ``line N`` (file line numbers of the rows)."""
+    return lambda rows: [f"line {n}" for n in lines[rows]]
+
+
 @dataclass
 class Navigation:
     """Own-platform fixes, sorted by time. Exactly one of (x_m, y_m) or (lat_deg, lon_deg) is
-    set."""
+    set. ``lines``: each fix's line in its file, when it has lines (a table, NMEA), else
+    ``topic`` (MCAP), to name a fix in messages."""
 
     t_s: np.ndarray
     epoch_utc_ns: int | None
@@ -88,6 +157,8 @@ class Navigation:
     y_m: np.ndarray | None = None
     lat_deg: np.ndarray | None = None
     lon_deg: np.ndarray | None = None
+    lines: np.ndarray | None = None
+    topic: str | None = None  # the MCAP topic, for messages
 
     @property
     def geographic(self) -> bool:
@@ -110,13 +181,14 @@ class Contacts:
 
 @dataclass
 class Recording:
-    """What one file gave: own-platform fixes and/or contacts, and the file's metadata
-    records (MCAP; what it says of its sensor, for the family)."""
+    """What one file gave: own-platform fixes and/or contacts, the file's metadata records
+    (MCAP; what it says of its sensor, for the family) and the rows it left out."""
 
     navigation: Navigation | None
     contacts: Contacts | None
     metadata: dict = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)  # what was found automatically, for the log
+    dropped: Dropped = field(default_factory=Dropped)
 
 
 # -- the reading options (conf/ingest.yaml) ----------------------------------------------------
@@ -126,12 +198,33 @@ POSITION_ROLES = ("time", "x", "y", "lat", "lon")  # table columns besides value
 
 @dataclass
 class ContactSource:
-    """Where the values are: an MCAP topic and a dotted field path (``data``, ``vector``,
-    ``bearing_deg``), and their units (None: the first unit unless a name says another)."""
+    """Where the values are: MCAP topics, and a dotted field path (``data``, ``vector``,
+    ``bearing_deg``), and their units (None: the first unit unless a name says another).
+    ``topic``: a topic, a pattern (fnmatch: ``/sonar/contact/*``) or a list of them; None: the
+    family's own topic or schema. Each topic read is a contact, or holds contacts by a track
+    field."""
 
-    topic: str | None = None
+    topic: Any = None
     field: str | None = None
     units: str | None = None
+
+    def check(self, role: str):
+        """``topic`` as text (a number is a topic's name), or a list of them."""
+        t = self.topic
+        if t is None:
+            return
+        entries = list(t) if isinstance(t, list | tuple) else [t]
+        if not entries or not all(isinstance(e, str | int | float) and not isinstance(e, bool)
+                                  and str(e).strip() for e in entries):
+            raise ConfigError(f"{role}.topic must be a topic, a pattern or a list of them, "
+                              f"got {t!r}")
+        self.topic = [str(e) for e in entries] if isinstance(t, list | tuple) else str(t)
+
+    @property
+    def topics(self) -> list[str] | None:
+        """The topics or patterns given, as a list; None when none is."""
+        return None if self.topic is None else (
+            list(self.topic) if isinstance(self.topic, list) else [self.topic])
 
 
 @dataclass
@@ -171,23 +264,57 @@ TIME_FORMATS = ("auto", "s", "unix_s", "unix_ms", "unix_us", "unix_ns", "iso", "
 
 @dataclass
 class TimeFormat:
-    """``auto``: numbers by magnitude (Unix seconds from 1e8, ms from 1e11, us from 1e14, ns
-    from 1e17; smaller: relative seconds), text as ISO-8601 with a zone; ``s``: relative
-    seconds; ``unix_s|ms|us|ns``: Unix time; ``iso``: ISO-8601 with a zone (``Z``,
-    ``+01:00``); ``iso_utc``: ISO-8601, a time without zone taken as UTC."""
+    """``format``: ``auto``: numbers by magnitude (Unix seconds from 1e8, ms from 1e11, us
+    from 1e14, ns from 1e17; smaller: relative seconds), text as ISO-8601 with a zone; ``s``:
+    relative seconds; ``unix_s|ms|us|ns``: Unix time; ``iso``: ISO-8601 with a zone (``Z``,
+    ``+01:00``); ``iso_utc``: ISO-8601, a time without zone taken as UTC.
+    ``start_utc``: the UTC (ISO-8601 with a zone) of time 0 of a log of relative times, which
+    makes it absolute; None: such a log stays undated."""
 
     format: str = "auto"
+    start_utc: str | None = None
 
     def __post_init__(self):
         one_of("time.format", self.format, TIME_FORMATS)
+        if self.start_utc is not None:
+            try:
+                parse_utc(str(self.start_utc))
+            except ValueError as exc:
+                raise ConfigError(f"time.start_utc: {exc}") from None
+
+    @property
+    def start_ns(self) -> int | None:
+        return None if self.start_utc is None else parse_utc(str(self.start_utc))
+
+
+@dataclass
+class NmeaOptions:
+    """``date``: the UTC date (YYYY-MM-DD) of NMEA GGA fixes where no RMC sentence dates them
+    and the bearings' times do not either; None: dated by RMC or the bearings."""
+
+    date: str | None = None
+
+    def __post_init__(self):
+        if self.date is not None:
+            try:
+                datetime.date.fromisoformat(str(self.date))
+                valid = len(str(self.date)) == 10
+            except ValueError:
+                valid = False
+            if not valid:
+                raise ConfigError(f"nmea.date must be a date YYYY-MM-DD, got '{self.date}'")
 
 
 @dataclass
 class NavLimits:
     max_extrapolation_s: float = 1.0  # a contact value further outside the nav span is dropped
     max_gap_s: float = 10.0  # a longer gap between fixes is reported
+    max_speed_m_s: float = 50.0  # own-ship never moves faster: a fix off by more is an outlier
 
     def __post_init__(self):
+        if not 0 < self.max_speed_m_s < 1e5:
+            raise ConfigError(f"nav.max_speed_m_s must be a speed in (0, 1e5) m/s, "
+                              f"got {self.max_speed_m_s}")
         if not 0 <= self.max_extrapolation_s < 1e9:
             raise ConfigError(f"nav.max_extrapolation_s must be a number of seconds in "
                               f"[0, 1e9), got {self.max_extrapolation_s}")
@@ -200,8 +327,12 @@ class NavLimits:
 class Origin:
     lat: float | None = None  # deg; None: the first own-ship fix
     lon: float | None = None
+    max_distance_km: float = 100.0  # a given origin lies this close to an own-ship fix
 
     def __post_init__(self):
+        if not 0 < self.max_distance_km < 2e4:
+            raise ConfigError(f"origin.max_distance_km must be a distance in (0, 20000) km, "
+                              f"got {self.max_distance_km}")
         if (self.lat is None) != (self.lon is None):
             raise ConfigError("origin.lat and origin.lon go together: give both or neither")
         if self.lat is not None and not (-90 < self.lat < 90 and -180 <= self.lon <= 360):
@@ -211,8 +342,9 @@ class Origin:
 
 class ReadingOptions:
     """Base of a family's ``SourceOptions`` (``options_schema``): the groups ``columns``,
-    ``<role>`` (the observation's ``ContactSource``), ``ownship``, ``csv``, ``time``, ``nav``,
-    ``origin``. ``observation`` is the family's; ``contact`` its group."""
+    ``<role>`` (the observation's ``ContactSource``), ``ownship``, ``csv``, ``time``, ``nmea``,
+    ``nav``, ``origin`` and the option ``bad_rows``. ``observation`` is the family's;
+    ``contact`` its group."""
 
     observation: Observation
 
@@ -226,6 +358,12 @@ class ReadingOptions:
     def __post_init__(self):
         role, units = self.observation.role, self.observation.units
         one_of(f"{role}.units", self.contact.units, (None, *(u.name for u in units)))
+        self.contact.check(role)
+        one_of("bad_rows", self.bad_rows, BAD_ROWS)
+
+    def dropped(self) -> Dropped:
+        """A new count of the rows left out, under this policy."""
+        return Dropped(self.bad_rows)
 
 
 @functools.cache
@@ -242,10 +380,50 @@ def options_schema(observation: Observation) -> type:
               ("ownship", OwnshipSource, field(default_factory=OwnshipSource)),
               ("csv", CsvFormat, field(default_factory=CsvFormat)),
               ("time", TimeFormat, field(default_factory=TimeFormat)),
+              ("nmea", NmeaOptions, field(default_factory=NmeaOptions)),
               ("nav", NavLimits, field(default_factory=NavLimits)),
-              ("origin", Origin, field(default_factory=Origin))]
+              ("origin", Origin, field(default_factory=Origin)),
+              ("bad_rows", str, field(default="drop"))]  # a top-level option, not a group
     return make_dataclass("SourceOptions", groups, bases=(ReadingOptions,),
                           namespace={"observation": observation})
+
+
+KIND_NAMES = {"csv": "a CSV table", "nmea": "an NMEA file", "mcap": "an MCAP log"}
+KIND_OPTIONS = {  # options (or groups) that only some kinds of input read
+    "columns": ("csv",), "csv": ("csv",), "time.format": ("csv",), "ownship.topic": ("mcap",),
+    "nmea": ("nmea",)}
+
+
+def inapplicable(options, kinds: dict[str, str]) -> str | None:
+    """A one-line complaint if an option is set that no file of ``kinds`` (``{path: kind}``)
+    reads (``bearing.topic`` on a CSV table, ``nmea.date`` without NMEA); None otherwise."""
+    role = options.observation.role
+    only = {**KIND_OPTIONS, f"{role}.topic": ("mcap",), f"{role}.field": ("mcap",)}
+    given = _set_options(options)
+    for key, value in given.items():
+        scope = only.get(key) or only.get(key.split(".")[0])
+        if scope is None or any(kind in scope for kind in kinds.values()):
+            continue
+        path, kind = next(iter(kinds.items()))
+        shown = ", ".join(map(str, value)) if isinstance(value, list) else value
+        readers = " or ".join(k.upper() for k in scope)
+        return (f"{key}={shown} does not apply to {path} ({KIND_NAMES[kind]}): it is an "
+                f"option of {readers} input; leave it unset")
+    return None
+
+
+def _set_options(options) -> dict:
+    """The dotted options whose value is not the default."""
+    out = {}
+    for f in fields(options):
+        value = getattr(options, f.name)
+        if not is_dataclass(value):
+            continue
+        default = type(value)()
+        for g in fields(value):
+            if getattr(value, g.name) != getattr(default, g.name):
+                out[f"{f.name}.{g.name}"] = getattr(value, g.name)
+    return out
 
 
 def one_of(key: str, value, allowed):
@@ -255,8 +433,15 @@ def one_of(key: str, value, allowed):
 
 
 def groups(observation: Observation) -> tuple[str, ...]:
-    """The option groups of the ingest config (``columns``, ``bearing``, ``ownship``...)."""
+    """The reading options' top-level keys of the ingest config: the groups (``columns``,
+    ``bearing``, ``ownship``...) and the options of their own (``bad_rows``)."""
     return tuple(f.name for f in fields(options_schema(observation)))
+
+
+def _scalar(observation: Observation, key: str) -> bool:
+    """True for a top-level option that is a value, not a group (``bad_rows``)."""
+    f = next(f for f in fields(options_schema(observation)) if f.name == key)
+    return f.default_factory is MISSING_FACTORY
 
 
 def option_keys(schema, prefix="") -> list[str]:
@@ -278,6 +463,8 @@ def unknown_option(key: str, observation: Observation) -> str | None:
     group = key.split(".")[0]
     if group not in groups(observation) or key in keys or key == group:
         return None
+    if _scalar(observation, group):
+        return f"unknown option {key}: {group} is one value ({group}=...)"
     known = [k for k in keys if k.startswith(group + ".")]
     return f"unknown option {key} (the {group} options: {', '.join(known)})"
 
@@ -296,6 +483,8 @@ def source_options(node, observation: Observation):
     for group, values in node.items():
         if group not in known:
             raise ConfigError(f"unknown option {group} (known: {', '.join(known)})")
+        if _scalar(observation, group):
+            continue
         if not isinstance(values, dict):
             raise ConfigError(f"{group} holds options ({group}.<name>=...), not a value: "
                               f"got {group}='{values}'")

@@ -17,10 +17,15 @@ noted for the log):
 - ``csv.delimiter`` (sniffed among ``,`` ``;`` tab), ``csv.decimal`` (``,`` found when the
   numbers are written ``12,5``); a units row under the header (``s,deg,deg`` or ``[s]``) is
   skipped; extra columns are ignored; CRLF line ends and a UTF-8 byte-order mark are fine;
-- tracks: integer ids, or text ids (``T1``) kept as labels.
+- tracks: ids as written: integers (``12``) stay the ids, any other text (``T1``, ``007``,
+  ``NA``) is a label, never re-read as a number.
 
 Everything is vectorised over the rows (pandas' C parser, numpy sorts): a million rows take
-about a second. Bad values are one ``InputError`` naming the file, the column and the line.
+about a second. A row with a missing or unreadable time, value, track id or own-ship position
+(or a time that is not absolute among absolute ones) is left out and counted with its line
+(``bad_rows=drop``), or refuses the file in one line naming the column, the line and the
+option (``bad_rows=fail``); a file-wide problem (a column not found, a unit, a time zone) is
+always one ``InputError``.
 """
 
 import csv
@@ -33,8 +38,8 @@ import numpy as np
 import pandas as pd
 
 from tma.errors import InputError
-from tma.sources.base import Contacts, Navigation, Recording
-from tma.utc import MAX_SPAN_S, UNIX_FROM_S, UNIX_MAGNITUDE, UNIX_SCALE_NS, ZONED
+from tma.sources.base import Contacts, Navigation, Recording, line_places
+from tma.utc import MAX_SPAN_S, UNIX_FROM_S, UNIX_MAGNITUDE, UNIX_SCALE_NS, UTC_FROM_NS, ZONED
 
 DOCUMENTED = {"time": "time_s", "x": "own_x_m", "y": "own_y_m", "track": "track_id"}
 COMMON = {  # candidates per role, in order of preference (lower case)
@@ -54,8 +59,11 @@ COMMON = {  # candidates per role, in order of preference (lower case)
 SNIFFED = (",", ";", "\t")
 SAMPLE_BYTES = 1 << 16
 SAMPLE_LINES = 50
-MAX_TRACK_ID = 2**53  # integers beyond this are not exact in a numeric CSV column
+MAX_TRACK_ID = 2**53  # an id written as a larger integer is kept as text
+INTEGER_ID = re.compile(r"-?(?:0|[1-9][0-9]{0,15})")  # an id written as a plain integer
 SAME_FIX = {"x": 1e-6, "lat": 1e-9}  # m, deg (0.1 mm): rows at one time share one own-ship
+UTC_WORD = r"(?i)(?<=\d)\s*(?:UTC|GMT)$"  # a time of day ending in the word UTC: zone Z
+ZONE_NAME = re.compile(r"\d\s*([A-Za-z]{2,5})")  # ... ending in a zone's name (CET, EST)
 UNIT_WORDS = {"s", "sec", "secs", "second", "seconds", "ms", "us", "ns", "utc", "iso",
               "iso8601", "iso-8601", "deg", "degree", "degrees", "rad", "radian", "radians",
               "m", "km", "nmi", "-", "id", "1", "m/s", "kn", "knots", "unix", "text", "none"}
@@ -66,7 +74,9 @@ def read_csv_table(path, options, *, navigation: bool, contacts: bool) -> list[R
     positions are needed (from this file); ``contacts``: the contacts' values are needed.
     Returns one Recording per own-ship: one, unless the rows of different tracks give
     different own-ship positions at one time (then one per track, as each track had its own
-    own-ship)."""
+    own-ship). Rows with a missing or unreadable time, value, track id or own-ship position,
+    or a time not absolute among absolute ones, are left out and counted
+    (``options.bad_rows``; under ``fail`` the first refuses the file)."""
     path = Path(path)
     table = _Table(path, options)
     role = options.observation.role
@@ -74,39 +84,77 @@ def read_csv_table(path, options, *, navigation: bool, contacts: bool) -> list[R
     df = table.read(cols)
     line = table.lines(len(df))
     notes = list(table.notes)
-    t, epoch = _times(df, cols["time"], options.time.format, path, line, notes)
+    rows, keep = options.dropped(), np.ones(len(df), dtype=bool)
+
+    def drop(bad, reason, refusal):
+        keep[:] &= rows.drop(bad & keep, reason, line_places(line), f"{path}: {refusal}")
+
+    tcol = cols["time"]
+    t_raw, fmt, t_ok, not_absolute = _time_column(df, tcol, options.time.format, path, line,
+                                                  notes)
+    drop(~t_ok, "time missing or unreadable",
+         f"column {tcol} has missing times or values that are not "
+         + ("ISO-8601 times such as 2024-05-01T10:00:00Z; set columns.time or time.format"
+            if fmt in ("iso", "iso_utc") else "numbers"))
+    unit = fmt.replace("unix_", "")
+    drop(not_absolute, "time not absolute among absolute times",
+         f"column {tcol} has times that are not Unix times ({unit}) like the others: times "
+         "must be all Unix or all relative (time.format=s, unix_s, unix_ms, unix_us, unix_ns)"
+         if fmt.startswith("unix") else
+         f"column {tcol} has times before 2000 among UTC times")
+    if role in cols:
+        b_raw = _number_column(df, cols[role], path)
+        drop(~np.isfinite(b_raw), f"{role} missing or not a number",
+             f"column {cols[role]} has missing, NaN or non-numeric values")
+        track_raw = _track_text(df, cols.get("track"))
+        if track_raw is not None:
+            drop((track_raw == "").to_numpy(), "track id missing",
+                 f"column {cols['track']} has missing track ids")
+    geo = "lat" in cols
+    if navigation:
+        p0, p1 = (_number_column(df, cols[k], path) for k in (("lat", "lon") if geo else "xy"))
+        drop(~(np.isfinite(p0) & np.isfinite(p1)), "own-ship position missing or not a number",
+             f"columns {', '.join(cols[k] for k in (('lat', 'lon') if geo else 'xy'))} have "
+             "missing, NaN or non-numeric values")
+    if not keep.any():
+        raise InputError(f"{path}: no usable row: {rows.text()}")
+    if not keep.all():
+        line, t_raw = line[keep], t_raw[keep]
+    t, epoch = _seconds(t_raw, fmt, tcol, path, line)
     track = None
     if role in cols:
-        b, stated = _values(df, cols[role], options, table, path, line, notes)
-        track = _tracks(df, cols.get("track"), path, line)
-        _check_increasing(t, track, cols["time"], path, line)
+        b, stated = _values(b_raw[keep], cols[role], options, table, path, line, notes)
+        track = _tracks(None if track_raw is None else track_raw[keep], len(t))
+        _check_increasing(t, track, tcol, path, line)
     if not navigation:
-        return [Recording(None, Contacts(t, epoch, track, b, str(path), stated), notes=notes)]
-    geo = "lat" in cols
-    pos = (_numbers(df, cols["lat"], path, line), _numbers(df, cols["lon"], path, line)) if geo \
-        else (_numbers(df, cols["x"], path, line), _numbers(df, cols["y"], path, line))
+        return [Recording(None, Contacts(t, epoch, track, b, str(path), stated), notes=notes,
+                          dropped=rows)]
+    pos = (p0[keep], p1[keep])
     if geo:
         _check_lat_lon(*pos, cols, path, line)
     nav_rows, consistent = _one_fix_per_time(t, pos, SAME_FIX["lat" if geo else "x"])
     if not consistent.all() and not contacts:
         row = nav_rows[int(np.flatnonzero(~consistent)[0])]
         raise InputError(f"{path}: two different own-ship positions at the time of line "
-                         f"{line[row]} ({cols['time']}): one fix per time")
+                         f"{line[row]} ({tcol}): one fix per time")
     if not contacts:
-        return [Recording(_navigation(t, epoch, pos, nav_rows, geo, path), None, notes=notes)]
+        return [Recording(_navigation(t, epoch, pos, nav_rows, geo, path, line), None,
+                          notes=notes, dropped=rows)]
     if consistent.all():
-        return [Recording(_navigation(t, epoch, pos, nav_rows, geo, path),
-                          Contacts(t, epoch, track, b, str(path), stated), notes=notes)]
+        return [Recording(_navigation(t, epoch, pos, nav_rows, geo, path, line),
+                          Contacts(t, epoch, track, b, str(path), stated), notes=notes,
+                          dropped=rows)]
     notes.append("tracks report different own-ship positions at one time: each track gets "
                  "its own own-ship (and dataset shard)")
     recordings = []
     code = _codes(track)
     order = np.argsort(code, kind="stable")
     starts = np.flatnonzero(np.r_[True, code[order][1:] != code[order][:-1]])
-    for rows in np.split(order, starts[1:]):  # times increase within a track (checked)
-        nav = _navigation(t, epoch, pos, rows, geo, path)
-        recordings.append(Recording(nav, Contacts(t[rows], epoch, track[rows], b[rows],
-                                                  str(path), stated), notes=notes))
+    for k, group in enumerate(np.split(order, starts[1:])):  # times increase (checked)
+        nav = _navigation(t, epoch, pos, group, geo, path, line)
+        recordings.append(Recording(nav, Contacts(t[group], epoch, track[group], b[group],
+                                                  str(path), stated), notes=notes,
+                                    dropped=rows if k == 0 else options.dropped()))
     return recordings
 
 
@@ -265,15 +313,24 @@ class _Table:
 
     def read(self, cols: dict[str, str]) -> pd.DataFrame:
         """The chosen columns (by position, so odd header spellings cannot get in the way).
-        Every column is parsed, so that a line with more fields than the header is refused."""
+        Every column is parsed, so that a line with more fields than the header is refused.
+        The track column is text as written (``007`` is not ``7``, ``NA`` is a name)."""
         index = sorted({self.header.index(name) for name in cols.values()})
+        track = self.header.index(cols["track"]) if "track" in cols else None
         try:
             with warnings.catch_warnings():  # a row longer than the header: refused
                 warnings.simplefilter("error", pd.errors.ParserWarning)
                 df = pd.read_csv(self.path, sep=self.delimiter, decimal=self.decimal,
                                  skiprows=[1] if self.units is not None else None,
                                  index_col=False, skipinitialspace=True,
-                                 encoding="utf-8-sig", low_memory=False)
+                                 encoding="utf-8-sig", low_memory=False,
+                                 dtype=None if track is None else {track: str})
+                if track is not None and df.iloc[:, track].isna().any():
+                    # pandas read a name such as NA or null as missing: the ids as written
+                    df.iloc[:, track] = pd.read_csv(
+                        self.path, sep=self.delimiter, usecols=[track], dtype=str,
+                        keep_default_na=False, skipinitialspace=True, encoding="utf-8-sig",
+                        skiprows=[1] if self.units is not None else None).iloc[:, 0]
         except (pd.errors.ParserError, pd.errors.ParserWarning, pd.errors.EmptyDataError,
                 UnicodeDecodeError, ValueError) as exc:
             raise InputError(f"{self.path}: not a readable CSV "
@@ -301,51 +358,70 @@ def _bad(values_ok: np.ndarray, line: np.ndarray) -> str:
     return ", ".join(str(v) for v in line[np.flatnonzero(~values_ok)[:5]])
 
 
-def _numbers(df, col, path, line) -> np.ndarray:
-    """A column as finite float64; InputError naming the lines of the others."""
+def _number_column(df, col, path) -> np.ndarray:
+    """A column as float64, NaN where a cell is missing or not a number (true/false columns
+    are refused: no number is meant)."""
     series = df[col]
     if pd.api.types.is_bool_dtype(series):
         raise InputError(f"{path}: column {col} holds true/false, not numbers")
     if pd.api.types.is_numeric_dtype(series):
-        values = series.to_numpy(dtype=float)
-    else:
-        try:
-            values = pd.to_numeric(series, errors="coerce").to_numpy(dtype=float)
-        except (OverflowError, ValueError, TypeError) as exc:
-            raise InputError(f"{path}: column {col} has values that are not numbers of a "
-                             f"usable size ({exc})") from None
-    ok = np.isfinite(values)
-    if not ok.all():
-        raise InputError(f"{path}: column {col} has missing, NaN or non-numeric values "
-                         f"(line {_bad(ok, line)})")
-    return values
+        return series.to_numpy(dtype=float)
+    try:
+        return pd.to_numeric(series, errors="coerce").to_numpy(dtype=float)
+    except (OverflowError, ValueError, TypeError) as exc:
+        raise InputError(f"{path}: column {col} has values that are not numbers of a "
+                         f"usable size ({exc})") from None
 
 
-def _times(df, col, fmt, path, line, notes) -> tuple[np.ndarray, int | None]:
-    """Seconds (float64) since ``epoch_utc_ns`` (absolute times) or relative (epoch None)."""
+def _time_column(df, col, fmt, path, line, notes):
+    """``(values, format, ok, not_absolute)``: the times as read (ns since 1970 for ISO text,
+    else the numbers), their format (``iso``/``iso_utc``, ``s``, ``rel_ms``..., ``unix_*``),
+    which rows hold a readable time, and which hold a time that is not absolute where the
+    others are (a 0 among Unix times, a 1970 stamp among UTC ones: a clock that was not set,
+    never a relative clock)."""
     series = df[col]
-    numeric = pd.api.types.is_numeric_dtype(series)  # true/false too: _numbers refuses them
+    numeric = pd.api.types.is_numeric_dtype(series)  # true/false too: refused as numbers
     if fmt in ("iso", "iso_utc") or (fmt == "auto" and not numeric and _mostly_text(series)):
-        return _iso_times(series, col, fmt, path, line, notes)
+        ns, ok = _iso_times(series, col, fmt, path, line, notes)
+        fmt = "iso" if fmt == "auto" else fmt
+        early = ok & (ns < UTC_FROM_NS)
+        absolute = ok.any() and np.median(ns[ok]) >= UTC_FROM_NS
+        return ns, fmt, ok, early if absolute else np.zeros_like(ok)
     if pd.api.types.is_integer_dtype(series):
         values = series.to_numpy(dtype=np.int64)
+        ok = np.ones(values.size, dtype=bool)
     else:
-        values = _numbers(df, col, path, line)
+        values = _number_column(df, col, path)
+        ok = np.isfinite(values)
+    if not ok.any():
+        return values, "s", ok, np.zeros_like(ok)
+    median = abs(float(np.median(values[ok])))
     scaled_name = re.search(r"_(ms|us|ns)$", col.lower())
-    guessed = fmt == "auto"
-    if guessed:
+    if fmt == "auto":
         if scaled_name:  # the name says the unit; the magnitude says Unix or relative
             unit = scaled_name.group(1)
             per_s = UNIX_SCALE_NS["unix_s"] / UNIX_SCALE_NS["unix_" + unit]
-            fmt = ("unix_" if abs(float(np.median(values))) / per_s >= UNIX_FROM_S
-                   else "rel_") + unit
+            fmt = ("unix_" if median / per_s >= UNIX_FROM_S else "rel_") + unit
         else:
-            magnitude = abs(float(np.median(values)))
-            fmt = next((f for bound, f in UNIX_MAGNITUDE if magnitude >= bound), "s")
+            fmt = next((f for bound, f in UNIX_MAGNITUDE if median >= bound), "s")
         if fmt != "s":
             notes.append(f"{path.name}: {col} read as "
                          f"{fmt.replace('unix_', 'Unix time in ').replace('rel_', 'relative ')}"
                          f" (time.format={fmt if fmt.startswith('unix') else 's'})")
+    not_absolute = np.zeros_like(ok)
+    if fmt.startswith("unix"):
+        bound = UNIX_FROM_S * (1e9 / UNIX_SCALE_NS[fmt])
+        if median >= bound:  # Unix times: all must be (a 0 is a clock not set)
+            not_absolute = ok & (values < bound)
+    return values, fmt, ok, not_absolute
+
+
+def _seconds(values, fmt, col, path, line) -> tuple[np.ndarray, int | None]:
+    """Seconds (float64) since ``epoch_utc_ns`` (absolute times) or relative (epoch None), of
+    times as ``_time_column`` read them (every one usable)."""
+    if fmt in ("iso", "iso_utc"):
+        first = int(values.min())
+        return _checked_span((values - first) / 1e9, values, col, path, line), first
     if fmt in ("s", "rel_ms", "rel_us", "rel_ns"):
         seconds = values.astype(float) / {"s": 1, "rel_ms": 1e3, "rel_us": 1e6,
                                            "rel_ns": 1e9}[fmt]
@@ -357,13 +433,6 @@ def _times(df, col, fmt, path, line, notes) -> tuple[np.ndarray, int | None]:
                              "seconds (or set time.format)")
         return seconds, None
     scale = UNIX_SCALE_NS[fmt]
-    too_early = values < UNIX_FROM_S * (1e9 / scale)
-    if guessed and too_early.any():  # the magnitude chose Unix time: all must be Unix times
-        k = int(np.argmax(too_early))
-        raise InputError(f"{path}: {col} {values[k]:g} on line {line[k]} is not a Unix time "
-                         f"({fmt.replace('unix_', '')}) like the others: times must be all "
-                         "Unix or all relative (time.format=s, unix_s, unix_ms, unix_us, "
-                         "unix_ns)")
     if values.dtype.kind == "i":
         first = int(values.min())
         seconds = (values - first).astype(float) * (scale / 1e9)
@@ -392,43 +461,48 @@ def _mostly_text(series) -> bool:
     return numeric < 0.5
 
 
-def _iso_times(series, col, fmt, path, line, notes):
+def _iso_times(series, col, fmt, path, line, notes) -> tuple[np.ndarray, np.ndarray]:
+    """ISO-8601 texts as UTC ns (int64) and which rows hold one. A column whose times mostly
+    have no zone is refused (unless ``iso_utc``): the times would be guessed; a few rows
+    without one among zoned times are rows without a readable time."""
     text = series.astype("str").str.strip()
-    missing = series.isna().to_numpy()
-    if missing.any():
-        raise InputError(f"{path}: column {col} has missing times (line "
-                         f"{_bad(~missing, line)})")
+    missing = series.isna().to_numpy() | (text == "").to_numpy()
+    utc_word = text.str.contains(UTC_WORD, regex=True)
+    if utc_word.any():  # "... 08:00:00 UTC": the zone Z, as loggers often write it
+        text = text.str.replace(UTC_WORD, "Z", regex=True)
+        notes.append(f"{path.name}: {col}: ' UTC' read as the zone Z")
     zoned = text.str.contains(ZONED, regex=True).to_numpy(dtype=bool)
-    if fmt != "iso_utc" and not zoned.all():
-        k = int(np.argmax(~zoned))
+    unzoned = ~zoned & ~missing
+    if fmt != "iso_utc" and unzoned.sum() * 2 >= (~missing).sum() and unzoned.any():
+        k = int(np.argmax(unzoned))
+        named = re.search(rf"{ZONE_NAME.pattern}$", text.iloc[k])
+        if named:  # "CET", "EST": no offset (summer time?): the offset is the user's to say
+            raise InputError(f"{path}: {col} '{text.iloc[k]}' on line {line[k]} names its zone "
+                             f"({named.group(1)}), which is no offset: write it as one "
+                             f"({text.iloc[k][:named.start(1)].rstrip()}+01:00, say) or Z for "
+                             "UTC")
         raise InputError(f"{path}: {col} '{text.iloc[k]}' on line {line[k]} has no time zone: "
                          f"write times with one ({text.iloc[k]}Z for UTC) or set "
                          "time.format=iso_utc to read zone-less times as UTC")
-    if fmt == "iso_utc" and not zoned.all():
+    if fmt == "iso_utc" and unzoned.any():
         notes.append(f"{path.name}: {col} without time zone read as UTC (time.format=iso_utc)")
     try:
-        parsed = pd.to_datetime(text, format="ISO8601", utc=True, errors="coerce")
+        parsed = pd.to_datetime(text.where(~missing & (zoned | (fmt == "iso_utc"))),
+                                format="ISO8601", utc=True, errors="coerce")
     except (ValueError, OverflowError) as exc:
         raise InputError(f"{path}: column {col}: not ISO-8601 times ({exc})") from None
     ok = parsed.notna().to_numpy()
-    if not ok.all():
-        raise InputError(f"{path}: column {col} has values that are not ISO-8601 times such as "
-                         f"2024-05-01T10:00:00Z (line {_bad(ok, line)}); set columns.time or "
-                         "time.format")
-    ns = parsed.dt.as_unit("ns").array.asi8
-    first = int(ns.min())
-    seconds = (ns - first) / 1e9
-    if fmt == "auto":
+    if fmt == "auto" and ok.any():
         notes.append(f"{path.name}: {col} read as ISO-8601 times (time.format=iso)")
-    return _checked_span(seconds, ns, col, path, line), first
+    return np.where(ok, parsed.dt.as_unit("ns").array.asi8, 0), ok
 
 
-def _values(df, col, options, table, path, line, notes):
-    """The observation's values in its first unit, and whether a unit was stated: by
-    ``<role>.units``, or another unit than the first by the units row or the column's name. A
-    name or units row saying the first unit is what a column in another unit mislabelled would
-    say too, so the family's guard still checks it."""
-    observation, values = options.observation, _numbers(df, col, path, line)
+def _values(values, col, options, table, path, line, notes):
+    """The observation's ``values`` (of column ``col``) in its first unit, and whether a unit
+    was stated: by ``<role>.units``, or another unit than the first by the units row or the
+    column's name. A name or units row saying the first unit is what a column in another unit
+    mislabelled would say too, so the family's guard still checks it."""
+    observation = options.observation
     role, plural = observation.role, observation.plural
     units, stated = options.contact.units, options.contact.units is not None
     if units is None:
@@ -455,38 +529,24 @@ def _values(df, col, options, table, path, line, notes):
     return unit.to_first(values), stated
 
 
-def _tracks(df, col, path, line) -> np.ndarray:
-    """int64 track ids, or text labels (object array) when the ids are not all numbers."""
-    if col is None:
-        return np.zeros(len(df), dtype=np.int64)
-    series = df[col]
-    if pd.api.types.is_bool_dtype(series):
-        raise InputError(f"{path}: column {col} holds true/false, not track ids")
-    if pd.api.types.is_integer_dtype(series):
-        ids = series.to_numpy(dtype=np.int64)
-        big = np.abs(ids) > MAX_TRACK_ID
-        if big.any():
-            k = int(np.argmax(big))
-            raise InputError(f"{path}: {col} {ids[k]} on line {line[k]} is not an integer "
-                             "within +-2^53")
-        return ids
-    missing = series.isna().to_numpy()
-    if missing.any():
-        raise InputError(f"{path}: column {col} has missing track ids (line "
-                         f"{_bad(~missing, line)})")
-    if not pd.api.types.is_numeric_dtype(series):
-        text = series.astype("str").str.strip()
-        numeric = pd.to_numeric(text, errors="coerce")
-        if numeric.isna().any():  # text ids: kept as labels
-            return text.to_numpy(dtype=object)
-        series = numeric
-    ids = series.to_numpy(dtype=float)
-    bad = (ids != np.round(ids)) | ~(np.abs(ids) <= MAX_TRACK_ID)
-    if bad.any():
-        k = int(np.argmax(bad))
-        raise InputError(f"{path}: {col} {ids[k]:g} on line {line[k]} is not an integer within "
-                         "+-2^53")
-    return ids.astype(np.int64)
+def _track_text(df, col):
+    """The track ids as written (stripped text; empty where missing), or None without a
+    track column."""
+    return None if col is None else df[col].fillna("").astype(str).str.strip()
+
+
+def _tracks(text, n: int) -> np.ndarray:
+    """Track ids as written: int64 when every id is written as a plain integer (``12``,
+    ``-3``: the ids themselves), else the texts (object array), kept as labels: ``007`` and
+    ``7``, ``1e3`` and ``1000`` are different contacts, ``NA`` is a name. No track column:
+    one contact, 0."""
+    if text is None:
+        return np.zeros(n, dtype=np.int64)
+    if text.str.fullmatch(INTEGER_ID.pattern).all():
+        ids = text.astype(np.int64).to_numpy()
+        if np.all(np.abs(ids) <= MAX_TRACK_ID):
+            return ids
+    return text.to_numpy(dtype=object)
 
 
 def _codes(track: np.ndarray) -> np.ndarray:
@@ -531,10 +591,10 @@ def _one_fix_per_time(t, pos, tolerance):
     return order[starts], same
 
 
-def _navigation(t, epoch, pos, rows, geo, path) -> Navigation:
+def _navigation(t, epoch, pos, rows, geo, path, line) -> Navigation:
     """Own-ship fixes of ``rows`` (their times distinct), sorted by time."""
     rows = rows[np.argsort(t[rows], kind="stable")]
     a, b = pos[0][rows], pos[1][rows]
     if geo:
-        return Navigation(t[rows], epoch, str(path), lat_deg=a, lon_deg=b)
-    return Navigation(t[rows], epoch, str(path), x_m=a, y_m=b)
+        return Navigation(t[rows], epoch, str(path), lat_deg=a, lon_deg=b, lines=line[rows])
+    return Navigation(t[rows], epoch, str(path), x_m=a, y_m=b, lines=line[rows])

@@ -46,4 +46,4 @@ def location_fix(msgs, file):
     with schema_errors(file.where, f"a message on {msgs.topic}"):
         lat = float_array([m["latitude"] if json else m.latitude for m in msgs.decoded])
         lon = float_array([m["longitude"] if json else m.longitude for m in msgs.decoded])
-    return file.message_times(msgs), {"lat_deg": lat, "lon_deg": lon}
+    return file.message_times(msgs), {"lat_deg": lat, "lon_deg": lon}, None

@@ -12,24 +12,30 @@ and its schema name the reader:
   ``foxglove.LocationFix`` (``foxglove``), ``nav_msgs/msg/Odometry`` and
   ``geometry_msgs/msg/PoseStamped`` (``ros2``, local x east, y north);
 - the contacts' values (the family's ``Observation``; ``bearing.*`` for ``bearings2d``):
-  ``<role>.topic`` (default the observation's ``topic``, ``/sonar/bearings``, or the one topic
-  of its ``schema``, ``tma.BearingBatch``, read by ``tma_log``); any other schema by the dotted
-  field path ``<role>.field`` (``data`` for std_msgs/Float64, ``vector`` for Vector3Stamped,
-  ``bearing_deg``; unset: the first of the observation's ``fields`` the messages have). A
+  ``<role>.topic``, a topic, an fnmatch pattern (``/sonar/contact/*``) or a list of them, each
+  matching topic read (default the observation's ``topic``, ``/sonar/bearings``, or the one
+  topic of its ``schema``, ``tma.BearingBatch``, read by ``tma_log``); any other schema by the
+  dotted field path ``<role>.field`` (``data`` for std_msgs/Float64, ``vector`` for
+  Vector3Stamped, ``bearing_deg``; unset: the first of the observation's ``fields`` the
+  messages have). A
   number (or array of numbers) is a value in ``<role>.units`` (the first unit, or another when
   set or when the field's name ends in ``_<unit>``); a direction vector (fields x east, y
   north) is converted by the observation's ``from_vector`` (bearings: ``atan2(x, y)``). The
   contact is a sibling ``TRACK_FIELDS`` field (integer or text) when the messages have one,
-  else the topic itself (its name as the label).
+  else the topic itself (its name as the label); of several topics, a contact from a track
+  field is labelled ``<topic>:<id>``.
 
 Times: ``header.stamp`` (ROS 2) or ``timestamp`` (Foxglove) when the messages have one (and it
 is set), else the message's ``log_time``; ``t_s`` for tma's own schemas. Stamps from 2000 on
 are UTC (``tma.utc.UTC_FROM_NS``): the recording's ``epoch_utc_ns`` is its first time and every
 ``t_s`` counts from it; earlier ones are a relative clock (simulation time, tma's older logs:
-``epoch_utc_ns`` None). Messages are sorted by time (log order is not time order across
-channels); two values of one contact at one time are an error naming the time (repeated
-own-ship fixes are ``align``'s to judge). NaN values (and NavSatFix fixes with status NO_FIX)
-are dropped and counted in ``Recording.notes``, as is every automatic choice. Nothing is
+``epoch_utc_ns`` None); a stamp before 2000 in a topic whose stamps are UTC is a clock that
+was not set (0), a bad row, never a relative clock. Messages are sorted by time (log order is
+not time order across channels); two values of one contact at one time are an error naming the
+time (repeated own-ship fixes are ``align``'s to judge). Bad rows (NaN values and positions,
+stamps not set) are left out and counted with their topic and time (``bad_rows=drop``; under
+``fail`` the first refuses the file); NavSatFix fixes with status NO_FIX are left out and
+counted under either policy. Every automatic choice is noted in ``Recording.notes``. Nothing is
 interpolated here: ``align`` puts navigation and contacts on one time base and plane.
 
 Every failure is one ``InputError`` (``ConfigError`` for an option) naming the file; a mapping
@@ -39,6 +45,7 @@ one. Cost: decoding is per message, about 0.12 s per 10,000 small JSON or CDR me
 ``tma.BearingBatch`` message carries a whole epoch.
 """
 
+import fnmatch
 import functools
 import operator
 from collections.abc import Sequence
@@ -52,7 +59,7 @@ from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
 from tma.errors import ConfigError, InputError
 from tma.io.mcap_log import McapFile, TmaDecoderFactory, float_array, int_array, schema_errors
 from tma.sources import foxglove, ros2, tma_log
-from tma.sources.base import Contacts, Navigation, Recording
+from tma.sources.base import NAMED, Contacts, Dropped, Navigation, Recording
 from tma.utc import UTC_FROM_NS, stamp_text
 
 # own-ship readers by schema name, in order of preference when a log holds several
@@ -83,9 +90,26 @@ class RecordedLog(McapFile):
     """An MCAP file as a source: its topics decoded by any of ``FACTORIES``; ``notes``
     collects what was found automatically (for the log)."""
 
-    def __init__(self, path):
+    def __init__(self, path, dropped: Dropped | None = None):
         super().__init__(path)
         self.notes = []
+        self.dropped = Dropped() if dropped is None else dropped
+
+    def places(self, topic: str, t_ns: np.ndarray, clock: str = ""):
+        """Row indices -> ``<topic> at <time>`` (``clock``: ``log time`` to name the message's
+        log time rather than its stamp)."""
+        return lambda rows: [f"{topic} at {clock + ' ' if clock else ''}"
+                             f"{stamp_text(int(t_ns[i]))}" for i in rows]
+
+    def not_absolute(self, msgs: "Messages", t_ns: np.ndarray, message: np.ndarray):
+        """The rows to keep: a stamp before 2000 among UTC stamps (a clock not set: 0) is left
+        out (named by its message's log time; ``message``: each row's message)."""
+        absolute = t_ns.size and np.median(t_ns) >= UTC_FROM_NS
+        return self.dropped.drop(
+            (t_ns < UTC_FROM_NS) if absolute else np.zeros(t_ns.size, dtype=bool),
+            "time not absolute among absolute times",
+            self.places(msgs.topic, msgs.log_time_ns[message], "log time"),
+            f"{self.where}: {msgs.topic}: a time stamp before 2000 among UTC stamps")
 
     def source(self, name: str) -> str:
         """A topic as a source, for messages: ``file.mcap: /gps/fix (sensor_msgs/msg/...)``."""
@@ -246,6 +270,7 @@ def _field_values(msgs: Messages, file: RecordedLog, options):
     field = _value_field(msgs, source.field, file, observation)
     get = _getter(msgs.decoded[0], field)
     t_ns, sizes = file.message_times(msgs), None
+    message = np.arange(t_ns.size)
     with schema_errors(file.where, f"a message on {msgs.topic}"):
         values = [get(m) for m in msgs.decoded]
         first = values[0]
@@ -266,7 +291,7 @@ def _field_values(msgs: Messages, file: RecordedLog, options):
         elif _is_array(first):
             arrays = [float_array(list(v)) for v in values]
             sizes = np.array([a.size for a in arrays])
-            t_ns = np.repeat(t_ns, sizes)
+            t_ns, message = np.repeat(t_ns, sizes), np.repeat(message, sizes)
             converted, stated = _to_first_unit(np.concatenate(arrays), source.units, field,
                                                msgs.topic, file.notes, observation)
         else:
@@ -275,7 +300,7 @@ def _field_values(msgs: Messages, file: RecordedLog, options):
             raise InputError(f"{file.where}: '{field}' of {msgs.topic} holds "
                              f"{type(first).__name__} values, not numbers, arrays of numbers"
                              f"{vectors}; set {role}.field=<dotted path>")
-    return t_ns, _tracks(msgs, field, sizes, file), converted, stated
+    return t_ns, _tracks(msgs, field, sizes, file), converted, stated, message
 
 
 def _own_values(msgs: Messages, file: RecordedLog, options):
@@ -285,12 +310,12 @@ def _own_values(msgs: Messages, file: RecordedLog, options):
         raise ConfigError(f"{observation.role}.field={source.field}: {msgs.topic} has tma's "
                           f"schema {msgs.schema}, whose {observation.plural} are "
                           f"'{observation.column}'; leave {observation.role}.field unset")
-    t_ns, track, values = tma_log.contacts(msgs, file, observation.column)
+    t_ns, track, values, message = tma_log.contacts(msgs, file, observation.column)
     if source.units is not None:
         values = observation.unit(source.units).to_first(values)
     # the column names the first unit, yet values in another written there are what the
     # family's guard catches
-    return t_ns, track, values, source.units is not None
+    return t_ns, track, values, source.units is not None, message
 
 
 # -- selection, checks, time base -----------------------------------------------------------
@@ -317,11 +342,29 @@ def _select_navigation(file: RecordedLog, options) -> str | None:
     return best.name
 
 
-def _select_contacts(file: RecordedLog, options) -> str | None:
+def _select_contacts(file: RecordedLog, options) -> list[str]:
+    """The topics of the contacts' values: those ``<role>.topic`` names or matches (fnmatch
+    patterns), else the family's own topic, or the one topic of its schema; [] if none."""
     observation = options.observation
     role = observation.role
-    if options.contact.topic is not None:
-        return file.topic(options.contact.topic, f"{role}.topic").name
+    given = options.contact.topics
+    if given is not None:
+        chosen = []
+        for entry in given:
+            if not any(c in entry for c in "*?["):
+                chosen.append(file.topic(entry, f"{role}.topic").name)
+                continue
+            matched = sorted(t.name for t in file.topics.values()
+                             if fnmatch.fnmatchcase(t.name, entry) and t.count != 0)
+            if not matched:
+                raise InputError(f"{file.where}: {role}.topic={entry}: no topic matches; "
+                                 f"{file.describe()}")
+            chosen += matched
+        chosen = list(dict.fromkeys(chosen))
+        if len(chosen) > 1:
+            file.notes.append(f"{observation.plural}: {len(chosen)} topics, each its contacts "
+                              f"({', '.join(chosen)}; {role}.topic)")
+        return chosen
     own = observation.topic
     if own in file.topics and file.topics[own].count != 0:
         found = [file.topics[own]]
@@ -332,11 +375,11 @@ def _select_contacts(file: RecordedLog, options) -> str | None:
     if len(found) > 1:
         raise InputError(f"{file.where}: {len(found)} {role} topics of schema "
                          f"{observation.schema}: {', '.join(t.name for t in found)}; set "
-                         f"{role}.topic=<topic>")
+                         f"{role}.topic=<topic> (or a list, or a pattern such as /sonar/*)")
     if not found:
-        return None
+        return []
     file.notes.append(f"{observation.plural}: {found[0]} ({role}.topic)")
-    return found[0].name
+    return [found[0].name]
 
 
 def _drop_nonfinite(keep, values_desc: str, topic: str, notes: list):
@@ -346,9 +389,23 @@ def _drop_nonfinite(keep, values_desc: str, topic: str, notes: list):
 
 
 def _navigation_part(file: RecordedLog, msgs: Messages):
-    t_ns, columns = NAVIGATION[msgs.schema](msgs, file)
+    """Own-ship fixes of a topic, sorted by time; fixes the receiver flags (NavSatFix
+    NO_FIX), with a stamp not absolute among absolute ones or with NaN coordinates left out
+    and counted."""
+    t_ns, columns, no_fix = NAVIGATION[msgs.schema](msgs, file)
+    keep = file.not_absolute(msgs, t_ns, np.arange(t_ns.size))
+    if no_fix is not None and (no_fix & keep).any():  # the receiver's own verdict
+        rows = np.flatnonzero(no_fix & keep)
+        file.dropped.add("own-ship fix flagged no fix", rows.size,
+                         file.places(msgs.topic, t_ns)(rows[:NAMED]))
+        keep &= ~no_fix
     a, b = columns.values()
-    keep = _drop_nonfinite(np.isfinite(a) & np.isfinite(b), "fix(es)", msgs.topic, file.notes)
+    finite = _drop_nonfinite(np.isfinite(a) & np.isfinite(b) | ~keep, "fix(es)", msgs.topic,
+                             file.notes)
+    keep &= file.dropped.drop(~finite, "own-ship position missing or not a number",
+                              file.places(msgs.topic, t_ns),
+                              f"{file.where}: {msgs.topic}: an own-ship fix with NaN or "
+                              "infinite coordinates")
     if not keep.any():
         raise InputError(f"{file.where}: no usable own-ship fix on {msgs.topic}: all "
                          f"{len(msgs.decoded)} dropped (status NO_FIX or NaN coordinates)")
@@ -356,12 +413,32 @@ def _navigation_part(file: RecordedLog, msgs: Messages):
     return t_ns[keep][order], {k: v[keep][order] for k, v in columns.items()}
 
 
-def _contacts_part(file: RecordedLog, msgs: Messages, options):
+def _together(parts):
+    """The contacts of several topics as one, by time then contact: ``(t_ns, track, values,
+    stated)``."""
+    if len(parts) == 1:
+        return parts[0]
+    t_ns, track, values = (np.concatenate([p[k] for p in parts]) for k in range(3))
+    order = np.argsort(t_ns, kind="stable")
+    return t_ns[order], track[order], values[order], all(p[3] for p in parts)
+
+
+def _contacts_part(file: RecordedLog, msgs: Messages, options, several=False):
+    """``(t_ns, track, values, stated)`` of one topic, by time then contact. ``several``: one
+    of several topics, whose contacts from a track field are labelled ``<topic>:<id>`` (a
+    topic without one is its own contact, labelled by its name)."""
     observation = options.observation
     role = observation.role
     own = observation.schema is not None and msgs.schema == observation.schema
-    t_ns, track, values, stated = (_own_values if own else _field_values)(msgs, file, options)
-    keep = _drop_nonfinite(np.isfinite(values), f"{role}(s)", msgs.topic, file.notes)
+    t_ns, track, values, stated, message = (_own_values if own else _field_values)(
+        msgs, file, options)
+    if several and not (track.dtype == object and np.all(track == msgs.topic)):
+        track = np.array([f"{msgs.topic}:{i}" for i in track], dtype=object)
+    keep = file.not_absolute(msgs, t_ns, message)
+    finite = _drop_nonfinite(np.isfinite(values) | ~keep, f"{role}(s)", msgs.topic, file.notes)
+    keep &= file.dropped.drop(~finite, f"{role} missing or not a number",
+                              file.places(msgs.topic, t_ns),
+                              f"{file.where}: {msgs.topic}: a {role} missing or not a number")
     if not keep.any():
         raise InputError(f"{file.where}: no usable {role} on {msgs.topic} (none, or all NaN)")
     t_ns, track, values = t_ns[keep], track[keep], values[keep]
@@ -398,16 +475,16 @@ def read_mcap(path, options, need: tuple[str, ...] = ()) -> Recording:
     raises an InputError listing the file's topics and the option that selects one. A part
     not needed and not found is None (noted); a file with neither always raises.
     """
-    file = RecordedLog(path)
+    file = RecordedLog(path, options.dropped())
     role = options.observation.role
     nav_topic = _select_navigation(file, options)
-    contact_topic = _select_contacts(file, options)
+    contact_topics = _select_contacts(file, options)
     hint = {"navigation": ("no own-ship navigation: own-ship is read from a topic of schema "
                            f"{', '.join(NAVIGATION)}; set ownship.topic=<topic> or give "
                            "navigation=FILE"),
             "contacts": (f"no {options.observation.plural} selected: set {role}.topic=<topic> "
                          f"[{role}.field=data]")}
-    absent = [p for p, t in (("navigation", nav_topic), ("contacts", contact_topic))
+    absent = [p for p, t in (("navigation", nav_topic), ("contacts", contact_topics or None))
               if t is None]
     fatal = [p for p in absent if p in need] or (absent if len(absent) == 2 else [])
     if fatal:
@@ -415,8 +492,8 @@ def read_mcap(path, options, need: tuple[str, ...] = ()) -> Recording:
                          f"{file.describe()}")
     file.notes.extend(f"{file.where}: {hint[p]}" for p in absent)
 
-    topics = [t for t in (nav_topic, contact_topic) if t is not None]
-    if len(set(topics)) < len(topics):
+    topics = ([] if nav_topic is None else [nav_topic]) + contact_topics
+    if nav_topic in contact_topics:
         raise InputError(f"{file.where}: {nav_topic} is both the own-ship and the {role} topic; "
                          f"set {role}.topic= or ownship.topic= to another topic")
     messages = file.messages(topics)
@@ -426,8 +503,9 @@ def read_mcap(path, options, need: tuple[str, ...] = ()) -> Recording:
     parts = {}
     if nav_topic is not None:
         parts[nav_topic] = _navigation_part(file, messages[nav_topic])
-    if contact_topic is not None:
-        parts[contact_topic] = _contacts_part(file, messages[contact_topic], options)
+    for topic in contact_topics:
+        parts[topic] = _contacts_part(file, messages[topic], options,
+                                      several=len(contact_topics) > 1)
     epoch = _epoch({topic: part[0] for topic, part in parts.items()}, file.where)
 
     def seconds(t_ns):
@@ -436,9 +514,11 @@ def read_mcap(path, options, need: tuple[str, ...] = ()) -> Recording:
     navigation = contacts = None
     if nav_topic is not None:
         t_ns, columns = parts[nav_topic]
-        navigation = Navigation(seconds(t_ns), epoch, file.source(nav_topic), **columns)
-    if contact_topic is not None:
-        t_ns, track, values, stated = parts[contact_topic]
-        contacts = Contacts(seconds(t_ns), epoch, track, values, file.source(contact_topic),
+        navigation = Navigation(seconds(t_ns), epoch, file.source(nav_topic), **columns,
+                                topic=nav_topic)
+    if contact_topics:
+        t_ns, track, values, stated = _together([parts[t] for t in contact_topics])
+        contacts = Contacts(seconds(t_ns), epoch, track, values,
+                            "; ".join(file.source(t) for t in contact_topics),
                             units_stated=stated)
-    return Recording(navigation, contacts, file.metadata, file.notes)
+    return Recording(navigation, contacts, file.metadata, file.notes, file.dropped)

@@ -1,11 +1,12 @@
 """ROS 2 messages (CDR, decoded by mcap-ros2-support) in a recorded log: own-ship and stamps.
 
 Own-ship readers, by schema name (``ownship.topic`` or found by schema, ``mcap.py``),
-each ``reader(msgs, file) -> (t_ns, columns)``:
+each ``reader(msgs, file) -> (t_ns, columns, no_fix)`` (``no_fix``: the fixes the receiver
+flags as invalid, or None):
 
 - ``sensor_msgs/msg/NavSatFix``: latitude, longitude (deg, WGS84); a fix with status
-  ``STATUS_NO_FIX`` (-1) is dropped and counted (``STATUS_UNKNOWN``, -2, the default of
-  drivers that do not set it, is kept);
+  ``STATUS_NO_FIX`` (-1) is flagged, left out and counted by the caller (``STATUS_UNKNOWN``,
+  -2, the default of drivers that do not set it, is kept);
 - ``nav_msgs/msg/Odometry`` (``pose.pose.position``) and ``geometry_msgs/msg/PoseStamped``
   (``pose.position``): x east, y north in metres of a local frame (REP 103's ENU, as a
   ``map`` or ``odom`` frame is).
@@ -39,18 +40,18 @@ def header_stamps_ns(decoded: list) -> np.ndarray | None:
 
 
 def navsatfix(msgs, file):
-    """Own-ship latitude/longitude (deg) from NavSatFix; no-fix fixes dropped (NaN ones are
-    dropped by the caller, as for every reader)."""
+    """Own-ship latitude/longitude (deg) from NavSatFix, and which fixes have status NO_FIX
+    (the caller leaves them out, and the NaN ones, as for every reader)."""
     with schema_errors(file.where, f"a message on {msgs.topic}"):
         status = np.fromiter((m.status.status for m in msgs.decoded), np.int64,
                              len(msgs.decoded))
         lat = float_array([m.latitude for m in msgs.decoded])
         lon = float_array([m.longitude for m in msgs.decoded])
-    fix = status != STATUS_NO_FIX
-    if not fix.all():
-        file.notes.append(f"{msgs.topic}: {int((~fix).sum())} fix(es) with status "
+    no_fix = status == STATUS_NO_FIX
+    if no_fix.any():
+        file.notes.append(f"{msgs.topic}: {int(no_fix.sum())} fix(es) with status "
                           f"STATUS_NO_FIX ({STATUS_NO_FIX}) dropped")
-    return file.message_times(msgs)[fix], {"lat_deg": lat[fix], "lon_deg": lon[fix]}
+    return file.message_times(msgs), {"lat_deg": lat, "lon_deg": lon}, no_fix
 
 
 def _local(msgs, file, position):
@@ -61,7 +62,7 @@ def _local(msgs, file, position):
         points = [position(m) for m in msgs.decoded]
         x = float_array([p.x for p in points])
         y = float_array([p.y for p in points])
-    return file.message_times(msgs), {"x_m": x, "y_m": y}
+    return file.message_times(msgs), {"x_m": x, "y_m": y}, None
 
 
 def odometry(msgs, file):

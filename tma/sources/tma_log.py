@@ -43,8 +43,8 @@ def _times_ns(t_s: np.ndarray, file, topic: str) -> np.ndarray:
 
 
 def navigation(msgs, file):
-    """Own-ship from ``tma.OwnshipNavigation``: x/y (m), or lat/lon (deg) with ``tma.geo``;
-    the time is ``t_s``, not the log time."""
+    """Own-ship from ``tma.OwnshipNavigation``: ``(t_ns, columns, None)``, x/y (m), or lat/lon
+    (deg) with ``tma.geo``; the time is ``t_s``, not the log time."""
     with schema_errors(file.where, f"a message on {msgs.topic}"):
         t_s = np.array([number(m["t_s"]) for m in msgs.decoded])
         x = float_array([m["x_m"] for m in msgs.decoded])
@@ -52,21 +52,22 @@ def navigation(msgs, file):
     t_ns = _times_ns(t_s, file, msgs.topic)
     origin = geo_origin(file.metadata, file.where)
     if origin is None:
-        return t_ns, {"x_m": x, "y_m": y}
+        return t_ns, {"x_m": x, "y_m": y}, None
     file.notes.append(f"{msgs.topic}: x/y mapped to latitude/longitude at the log's origin "
                       f"{origin[0]:.9g}, {origin[1]:.9g} deg ({GEO}; origin.lat/origin.lon "
                       "keep its plane)")
     lat, lon = local_to_geodetic(x, y, origin)
-    return t_ns, {"lat_deg": lat, "lon_deg": lon}
+    return t_ns, {"lat_deg": lat, "lon_deg": lon}, None
 
 
 def contacts(msgs, file, column: str):
-    """The values ``column`` (``bearing_deg``) of a family's schema: ``(t_ns, track, values)``
-    one row per value; tracks are the int64 ids, or their text labels from the record
-    ``tma.tracks``."""
+    """The values ``column`` (``bearing_deg``) of a family's schema: ``(t_ns, track, values,
+    message)`` one row per value (``message``: the index of its message); tracks are the
+    int64 ids, or their text labels from the record ``tma.tracks``."""
     obs = msgs.decoded
     with schema_errors(file.where, f"a message on {msgs.topic}"):
         t_msg = np.array([number(m["t_s"]) for m in obs])
+        message = np.arange(t_msg.size)
         ids = [m["track_id"] for m in obs]
         values = [m[column] for m in obs]
         arrays = (list, np.ndarray)  # JSON arrays; protobuf messages' numpy arrays
@@ -77,7 +78,7 @@ def contacts(msgs, file, column: str):
             if np.any(sizes != [v.size for v in values]):
                 raise InputError(f"{file.where}: track_id and {column} differ in length in "
                                  f"a message on {msgs.topic}")
-            t_msg = np.repeat(t_msg, sizes)
+            t_msg, message = np.repeat(t_msg, sizes), np.repeat(message, sizes)
             ids, values = np.concatenate(ids), np.concatenate(values)
         else:  # scalars, one value per message: converted at once
             ids, values = int_array(ids), float_array(values)
@@ -85,4 +86,4 @@ def contacts(msgs, file, column: str):
     labels = track_labels(file.metadata, known, file.where)
     if labels is not None:
         ids = labels[index]
-    return _times_ns(t_msg, file, msgs.topic), ids, values
+    return _times_ns(t_msg, file, msgs.topic), ids, values, message

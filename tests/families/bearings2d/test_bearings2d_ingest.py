@@ -2,6 +2,7 @@
 for datasets without truth. The readers have their own test files (``..._sources_*.py``)."""
 
 import json
+import logging
 import time
 
 import numpy as np
@@ -22,6 +23,7 @@ from tests.families.bearings2d.recorded_geometry import (
     recorded,
 )
 from tma.errors import ConfigError, InputError
+from tma.families.bearings2d import map_outputs
 from tma.families.bearings2d.ingest import ingest
 from tma.families.bearings2d.log import write_bearings_log
 from tma.families.bearings2d.scenario import Config, simulate_shard
@@ -50,14 +52,26 @@ def _estimate_and_report(tmp_path, name, sigma_flag=()):
     return pd.read_csv(tmp_path / "tables" / f"{name}-lm.csv")
 
 
-def test_csv_ingest_estimate_report(tmp_path):
+def test_csv_ingest_estimate_report(tmp_path, monkeypatch):
     log, truth, df = _recording()
     df.to_csv(tmp_path / "rec.csv", index=False)
     root = ingest(tmp_path / "rec.csv", data_dir=tmp_path / "data", name="rec")
     assert (root / "manifest.json").exists() and not (root / "truth.parquet").exists()
+    titles = []
+    draw = map_outputs._TrackPlots.draw
+    monkeypatch.setattr(map_outputs._TrackPlots, "draw", lambda self, path, title, *a: (
+        titles.append(title) or draw(self, path, title, *a)))
     report = _estimate_and_report(tmp_path, "rec")
     assert list(report.track_id) == [0, 1, 2]
-    np.testing.assert_allclose(report.t_now_s, T_OFFSET + 1200.0)
+    # times from the log's start and in UTC, never Unix seconds
+    np.testing.assert_allclose(report.t_now_s, 1200.0)
+    np.testing.assert_allclose(report.leg_start_s, 0.0)
+    now = pd.Timestamp(T_OFFSET + 1200.0, unit="s", tz="UTC").strftime("%Y-%m-%dT%H:%M:%SZ")
+    assert list(report.time_now_utc) == [now] * 3
+    md = (tmp_path / "tables" / "rec-lm.md").read_text()
+    assert "| t now (s from start) | now (UTC) |" in md and f"| 1200.0 | {now} |" in md
+    assert "1.7e+09" not in md and "1700001200" not in md
+    assert len(titles) == 3 and all(f"at {now}" in t for t in titles), titles
     # truth now, against the estimate and its reported standard deviation
     t = 1200.0
     x = truth.x0_m + truth.vx_m_s * t - log.own_x_m[-1]
@@ -112,11 +126,13 @@ BAD_CSV = {
 
 @pytest.mark.parametrize("case", sorted(BAD_CSV))
 def test_bad_csv_is_a_clear_error_and_writes_nothing(tmp_path, case):
+    """Under bad_rows=fail (bad rows are left out and counted by default:
+    ``test_bearings2d_bad_rows.py``)."""
     _, _, df = _recording()
     edit, message = BAD_CSV[case]
     edit(df).to_csv(tmp_path / "bad.csv", index=False)
     with pytest.raises(InputError, match=message):
-        ingest(tmp_path / "bad.csv", data_dir=tmp_path / "data")
+        ingest(tmp_path / "bad.csv", data_dir=tmp_path / "data", options={"bad_rows": "fail"})
     assert not (tmp_path / "data").exists()
 
 
@@ -186,15 +202,16 @@ def test_bad_ingest_options_are_refused(tmp_path, options, message):
         ingest(tmp_path / "rec.csv", data_dir=tmp_path / "data", **options)
 
 
-def test_columns_of_booleans_or_absurd_integers_are_refused(tmp_path):
+def test_booleans_are_refused_and_integers_beyond_2_53_kept_as_text(tmp_path):
     _, _, df = _recording()
     df.assign(bearing_deg=True).to_csv(tmp_path / "bool.csv", index=False)
     with pytest.raises(InputError, match="column bearing_deg holds true/false"):
         ingest(tmp_path / "bool.csv", data_dir=tmp_path / "data")
-    df.astype({"track_id": object}).assign(track_id="9" * 400).to_csv(tmp_path / "id.csv",
-                                                                       index=False)
-    with pytest.raises(InputError, match="track_id"):
-        ingest(tmp_path / "id.csv", data_dir=tmp_path / "data")
+    huge = {i: "9" * 40 + str(i) for i in range(3)}  # not exact as a number: kept as written
+    df.assign(track_id=df.track_id.map(huge)).to_csv(tmp_path / "id.csv", index=False)
+    root = ingest(tmp_path / "id.csv", data_dir=tmp_path / "data")
+    labels = json.loads((root / "manifest.json").read_text())["track_labels"]
+    assert sorted(labels.values()) == sorted(huge.values())
 
 
 # -- the ingest options on the command line --------------------------------------------------
@@ -211,7 +228,9 @@ def _one_line(proc, expected):
     ("columns.foo=bar", "unknown option columns.foo (the columns options: columns.time, "),
     ("+columns.foo=bar", "unknown option columns.foo"),
     ("nav.max_gap=3", "unknown option nav.max_gap (the nav options: nav.max_extrapolation_s, "
-                      "nav.max_gap_s)"),
+                      "nav.max_gap_s, nav.max_speed_m_s)"),
+    ("bad_rows=skip", "bad_rows must be one of drop, fail, got 'skip'"),
+    ("nav.max_speed_m_s=0", "nav.max_speed_m_s must be a speed in (0, 1e5) m/s"),
     ("bearing.units=grad", "bearing.units must be one of null, deg, rad, got 'grad'"),
     ("time.format=local", "time.format must be one of auto, s, unix_s"),
     ("nav.max_extrapolation_s=abc", "nav.max_extrapolation_s"),
@@ -299,6 +318,55 @@ def test_separate_navigation_file_recovers_the_target(tmp_path):
     m = json.loads((root / "manifest.json").read_text())
     np.testing.assert_allclose(m["origin_deg"], ORIGIN, atol=1e-12)  # the first fix, at t = 0
     check_against_truth(estimate(root), t_offset_s=(m["epoch_utc_ns"] - EPOCH_NS) / 1e9)
+
+
+def _relative_latlon(tmp_path, rec):
+    b = rec.bearings
+    pd.DataFrame({"time_s": b.t_s, "lat": b.lat, "lon": b.lon, "bearing_deg": b.bearing_deg}
+                 ).to_csv(tmp_path / "rel.csv", index=False)
+    return tmp_path / "rel.csv"
+
+
+def test_start_utc_makes_a_relative_log_absolute(tmp_path):
+    """time.start_utc is the UTC of the log's own time 0: the dataset starts at its first
+    bearing (0.5 s), and every output is dated, the map MCAP too."""
+    rec = recorded(("T1",))
+    path = _relative_latlon(tmp_path, rec)
+    root = ingest(path, data_dir=tmp_path / "data", name="rel",
+                  options={"time": {"start_utc": "2025-06-01T10:00:00+02:00"}})
+    m = json.loads((root / "manifest.json").read_text())
+    assert m["epoch_utc_ns"] == EPOCH_NS + 500_000_000
+    assert m["start_utc"] == "2025-06-01T08:00:00.5Z"
+    assert any("time.start_utc" in n for n in m["notes"])
+    report = _estimate_and_report(tmp_path, "rel")
+    t_last = report.t_now_s[0]  # seconds from the first bearing
+    assert pd.Timestamp(report.time_now_utc[0]) == pd.Timestamp(
+        EPOCH_NS + 500_000_000 + round(t_last * 1e9), tz="UTC")
+    with open(tmp_path / "tables" / "rel-lm.mcap", "rb") as f:
+        from mcap.reader import make_reader
+        first = next(make_reader(f).iter_messages())[2]
+    assert first.log_time == EPOCH_NS + 500_000_000
+    # an absolute log has its own UTC: the option is refused, in one line
+    _recording()[2].to_csv(tmp_path / "abs.csv", index=False)
+    with pytest.raises(ConfigError, match=r"time.start_utc=2025-06-01T08:00:00Z applies to logs "
+                                          r"of relative times: .*abs.csv has UTC times"):
+        ingest(tmp_path / "abs.csv", data_dir=tmp_path / "data",
+               options={"time": {"start_utc": "2025-06-01T08:00:00Z"}})
+    with pytest.raises(ConfigError, match="time.start_utc: '08:00' is not an ISO-8601 time"):
+        ingest(path, data_dir=tmp_path / "data", options={"time": {"start_utc": "08:00"}})
+
+
+def test_a_relative_log_with_lat_lon_is_not_dated_1970(tmp_path, caplog):
+    rec = recorded(("T1",))
+    path = _relative_latlon(tmp_path, rec)
+    with caplog.at_level(logging.WARNING):
+        ingest(path, data_dir=tmp_path / "data", name="rel")
+    assert "relative times: the outputs give no UTC and no map MCAP is written (it would be " \
+           "dated 1970); give time.start_utc=<ISO-8601 UTC of the log's time 0>" in caplog.text
+    with caplog.at_level(logging.INFO):
+        _estimate_and_report(tmp_path, "rel")
+    assert not (tmp_path / "tables" / "rel-lm.mcap").exists()
+    assert "no map MCAP (rel-lm.mcap): the dataset's times are relative" in caplog.text
 
 
 def test_a_bearings_table_without_own_ship_names_the_options(tmp_path):

@@ -12,21 +12,24 @@ import pymap3d
 import pytest
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
+from omegaconf import OmegaConf
 
 from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
 from tests.conftest import compose_cfg
+from tma.aggregate import aggregate
 from tma.families.bearings2d import map_outputs
 from tma.families.bearings2d.log import read_bearings_log, write_bearings_log
 from tma.families.bearings2d.map_outputs import CHI2_2_P95, ellipse_points, write_map_mcap
 from tma.families.bearings2d.report import track_report
 from tma.families.bearings2d.scenario import Config, simulate_shard
 from tma.geo import local_to_geodetic
-from tma.io.dataset import datasets_dir, file_record, shard_relpath, write_manifest
+from tma.io.dataset import Dataset, datasets_dir, file_record, shard_relpath, write_manifest
 
 ORIGIN = (59.9, 10.7)  # deg
 EPOCH_NS = 1_767_225_600 * 10**9  # 2026-01-01T00:00:00Z, the scenario's default epoch
 LABELS = ["T1", "bravo 2", "T1/x"]  # text ids; two need sanitising for file names
+SHOWN = ["T1", "bravo 2", "T1_x"]  # as outputs name them: no path separator
 
 
 def _simulated(origin=ORIGIN, labels=LABELS, n=3):
@@ -134,7 +137,7 @@ def _decoded(path):
 def test_estimated_tracks_mcap_in_foxglove_schema(mapped):
     tables, log, _, report, estimates = mapped
     schemas, messages, records = _decoded(tables / "sea-lm.mcap")
-    topics = ["/ownship/location_fix", *(f"/tma/estimate/{label}" for label in LABELS)]
+    topics = ["/ownship/location_fix", *(f"/tma/estimate/{label}" for label in SHOWN)]
     assert sorted(schemas) == sorted(topics)
     assert {s.name for s in schemas.values()} == {"foxglove.LocationFix"}
     assert {s.encoding for s in schemas.values()} == {"protobuf"}
@@ -151,7 +154,7 @@ def test_estimated_tracks_mcap_in_foxglove_schema(mapped):
     np.testing.assert_allclose([f.latitude for _, f in own], ref_lat, rtol=0, atol=1e-7)
     np.testing.assert_allclose([f.longitude for _, f in own], ref_lon, rtol=0, atol=1e-7)
 
-    for n, label in enumerate(LABELS):
+    for n, label in enumerate(SHOWN):
         fixes = messages[f"/tma/estimate/{label}"]
         k = np.flatnonzero(np.isfinite(log.bearing_deg[n]))
         assert len(fixes) == k.size  # one fix per bearing epoch
@@ -236,10 +239,44 @@ def test_a_track_without_a_finite_estimate_is_left_out_of_the_map(mapped, tmp_pa
     back = read_bearings_log(next((tables.parent / "data" / "datasets" / "sea").glob(
         "log/*.mcap")))
     labels = dict(zip(back.track_id.tolist(), back.track_label, strict=True))
-    report = track_report(broken, 0.0, EPOCH_NS, ORIGIN, labels)
+    report = track_report(broken, EPOCH_NS, ORIGIN, labels)
     assert np.isnan(report.lat_now_deg[1]) and np.isfinite(report.lat_now_deg[[0, 2]]).all()
     with caplog.at_level(logging.WARNING):
         write_map_mcap(tmp_path / "m.mcap", report, broken, [back], EPOCH_NS, ORIGIN, {})
     assert "for bravo 2: not in the map" in caplog.text
     schemas, _, _ = _decoded(tmp_path / "m.mcap")
-    assert sorted(schemas) == ["/ownship/location_fix", "/tma/estimate/T1", "/tma/estimate/T1/x"]
+    assert sorted(schemas) == ["/ownship/location_fix", "/tma/estimate/T1", "/tma/estimate/T1_x"]
+
+
+# -- many contacts: one warning line per verdict, a progress bar, time -----------------------
+
+def test_many_contacts_warn_once_per_status_and_show_progress(tmp_path, caplog, capsys):
+    """30 contacts estimated by nbearings (none `ok`: biased, so `approximate` or `poor_fit`
+    against the declared noise): one warning line per verdict with its count, not 30; the
+    per-contact plots with a progress bar unless progress=false."""
+    log, _ = _simulated(labels=[f"C{i:02d}" for i in range(30)], n=30)
+    _ingested_dataset(tmp_path / "data", "many", log)
+    cfg = compose_cfg([f"paths.data_dir={tmp_path / 'data'}",
+                       f"paths.tables_dir={tmp_path / 'tables'}", "dataset=many",
+                       "estimator=nbearings", "progress=false", "parallel=serial"])
+    estimate_stage(cfg)
+    jobs = [(Dataset.open(datasets_dir(tmp_path / "data") / "many"),
+             OmegaConf.to_container(cfg.estimator))]
+    with caplog.at_level(logging.WARNING):
+        aggregate(tmp_path / "data", tmp_path / "tables", jobs, progress=True)
+    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    table = pd.read_csv(tmp_path / "tables" / "many-nbearings.csv")
+    counts = table.status.value_counts()
+    assert "ok" not in counts and counts.min() > 1
+    assert sorted(warnings) == sorted(
+        next(w for w in warnings if w.startswith(f"many: {n} tracks {status} ("))
+        for status, n in counts.items())
+    for status, n in counts.items():
+        first = ", ".join(table.label[table.status == status][:10])
+        (line,) = [w for w in warnings if w.startswith(f"many: {n} tracks {status} (")]
+        assert f"): {first}" in line and line.endswith("the table's 'why' column says more "
+                                                       "for each")
+    assert "many-nbearings plots: 100%" in capsys.readouterr().err
+    aggregate(tmp_path / "data", tmp_path / "tables", jobs, progress=False)
+    assert "plots" not in capsys.readouterr().err
+    assert len(list((tmp_path / "tables").glob("many-nbearings-C*.png"))) == 30

@@ -212,6 +212,11 @@ REFUSED = {
                 "2025-06-01T08:00:01,59.9,10.7,11\n", {},
                 r"timestamp_utc '2025-06-01T08:00:00' on line 2 has no time zone: .* set "
                 r"time.format=iso_utc"),
+    "zone name": ("timestamp_utc,lat,lon,bearing_deg\n2025-06-01 08:00:00 CET,59.9,10.7,10\n"
+                  "2025-06-01 08:00:01 CET,59.9,10.7,11\n", {},
+                  r"timestamp_utc '2025-06-01 08:00:00 CET' on line 2 names its zone \(CET\), "
+                  r"which is no offset: write it as one \(2025-06-01 08:00:00\+01:00, say\) or "
+                  r"Z for UTC"),
     "no time": ("when,lat,lon,bearing_deg\n1,59.9,10.7,10\n", {},
                 r"no time column: columns found: when, lat, lon, bearing_deg; set "
                 r"columns.time=<name>"),
@@ -230,16 +235,20 @@ REFUSED = {
                 "yesterday noon,59.9,10.7,11\nlater,59.9,10.7,12\n", {},
                 r"timestamp_utc '.*' on line 3 has no time zone"),
     "bad iso with zone": ("timestamp_utc,lat,lon,bearing_deg\n2025-06-01T08:00:00Z,59.9,10.7,1\n"
-                          "2025-13-45T08:00:01Z,59.9,10.7,2\n", {},
-                          r"column timestamp_utc has values that are not ISO-8601 times .*"
-                          r"\(line 3\)"),
+                          "2025-13-45T08:00:01Z,59.9,10.7,2\n", {"bad_rows": "fail"},
+                          r"column timestamp_utc has missing times or values that are not "
+                          r"ISO-8601 times .*\(line 3\); bad_rows=drop leaves such rows out"),
     "unix and relative mixed": ("time,x,y,bearing_deg\n1748764800,0,0,1\n1748764801,0,0,2\n"
-                                "5,0,0,3\n", {},
-                                r"time 5 on line 4 is not a Unix time \(s\) like the others"),
+                                "5,0,0,3\n", {"bad_rows": "fail"},
+                                r"column time has times that are not Unix times \(s\) like the "
+                                r"others: .* \(line 4\); bad_rows=drop"),
     "radians beyond 2 pi": ("time_s,x,y,bearing_rad\n0,0,0,1\n1,0,0,7\n", {},
                             r"bearing_rad 7 on line 3 is outside \[-2 pi, 2 pi\]"),
-    "missing track id": ("time_s,x,y,bearing_deg,track\n0,0,0,1,T1\n1,0,0,2,\n", {},
-                         r"column track has missing track ids \(line 3\)"),
+    "missing track id": ("time_s,x,y,bearing_deg,track\n0,0,0,1,T1\n1,0,0,2,\n",
+                         {"bad_rows": "fail"}, r"column track has missing track ids \(line 3\)"),
+    "nothing usable": ("time_s,x,y,bearing_deg\n0,0,0,\n1,0,0,x\n", {},
+                       r"no usable row: 2 with bearing missing or not a number \(line 2, line "
+                       r"3\)"),
     "duplicate label time": ("time_s,x,y,bearing_deg,track\n0,0,0,1,T1\n1,0,0,2,T1\n"
                              "1,0,0,3,T1\n", {}, r"duplicate time_s for track T1 on line 4"),
     "not utf8": (b"time_s,x,y,bearing_deg\n0,0,0,1\n\xff\xfe,0,0,1\n", {},
@@ -269,3 +278,45 @@ def test_a_table_of_radians_with_unstated_units_is_refused_with_the_option(tmp_p
         ingest(path, data_dir=tmp_path / "data")
     root = ingest(path, data_dir=tmp_path / "data", options={"bearing": {"units": "rad"}})
     check_against_truth(estimate(root), t_offset_s=0.5, labels={"0": "T1"})
+
+
+# -- contact ids as written ------------------------------------------------------------------
+
+@pytest.mark.parametrize("ids", [("007", "7"), ("1e3", "1000"), ("NA", "T2")])
+def test_contact_ids_are_kept_as_written(tmp_path, ids):
+    """``007`` and ``7`` (``1e3`` and ``1000``) are two contacts, never one number; ``NA`` is
+    a name, not a missing id."""
+    rec = recorded(("T1", "T2"))
+    df = _iso_latlon(rec)
+    df["contact"] = rec.bearings.track.map({"T1": ids[0], "T2": ids[1]})
+    path = _write(df, tmp_path / "ids.csv")
+    (one,) = _read(path)
+    assert sorted(set(one.contacts.track)) == sorted(ids)
+    root = ingest(path, data_dir=tmp_path / "data")
+    m = json.loads((root / "manifest.json").read_text())
+    assert sorted(m["track_labels"].values()) == sorted(ids)
+    est = estimate(root)
+    assert sorted(est.label) == sorted(ids)
+    check_against_truth(est, t_offset_s=0.5, labels={ids[0]: "T1", ids[1]: "T2"})
+
+
+def test_canonical_integer_ids_stay_numbers(tmp_path):
+    """Ids written as plain integers are the ids themselves (no labels), as before."""
+    df = pd.DataFrame({"time_s": [0.0, 0.0, 1.0, 1.0], "own_x_m": [0.0, 0.0, 1.0, 1.0],
+                       "own_y_m": 0.0, "bearing_deg": 10.0, "track_id": [12, -3, 12, -3]})
+    (one,) = _read(_write(df, tmp_path / "n.csv"))
+    assert one.contacts.track.dtype == np.int64
+    np.testing.assert_array_equal(one.contacts.track, [12, -3, 12, -3])
+
+
+def test_times_ending_in_utc_are_utc(tmp_path):
+    """``2025-06-01 08:00:00.5 UTC`` (as many loggers write it) is a UTC time, not a time
+    without zone (whose suggestion was ``...UTCZ``)."""
+    path = tmp_path / "utc.csv"
+    path.write_text("timestamp_utc,lat,lon,bearing_deg\n2025-06-01 08:00:00.5 UTC,59.9,10.7,10\n"
+                    "2025-06-01 08:00:01.5 UTC,59.9,10.7,11\n2025-06-01 08:00:02.5 utc,59.9,10.7,"
+                    "12\n")
+    (one,) = _read(path)
+    assert one.contacts.epoch_utc_ns == EPOCH_NS + 500_000_000
+    np.testing.assert_allclose(one.contacts.t_s, [0.0, 1.0, 2.0])
+    assert any("' UTC' read as the zone Z" in n for n in one.notes)

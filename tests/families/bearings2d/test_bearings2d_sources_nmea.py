@@ -16,8 +16,9 @@ from tests.families.bearings2d.recorded_geometry import (
     estimate,
     iso,
     recorded,
+    source_options,
 )
-from tma.errors import InputError
+from tma.errors import ConfigError, InputError
 from tma.families.bearings2d.ingest import ingest
 from tma.io.atomic import sha256_file
 from tma.sources import source_kind
@@ -76,7 +77,7 @@ def write_nmea(path, nav: pd.DataFrame, start=EPOCH_NS, garbage=True):
 def test_fixes_are_read_back_and_garbage_counted(tmp_path):
     nav = recorded().navigation.head(60)
     path = write_nmea(tmp_path / "gps.nmea", nav)
-    rec = read_nmea(path)
+    rec = read_nmea(path, source_options())
     assert rec.contacts is None and rec.navigation.geographic
     assert rec.navigation.epoch_utc_ns == EPOCH_NS
     np.testing.assert_allclose(rec.navigation.t_s, nav.t_s, atol=1e-9)
@@ -96,7 +97,7 @@ def test_any_talker_southern_western_hemispheres_and_no_fix(tmp_path):
         rmc(s[0], -33.5, -70.25, talker="II"), gga(s[1], -33.5001, -70.2501, talker="GN"),
         gga(s[2], -33.5002, -70.2502, quality=0), rmc(s[3], -33.5003, -70.2503, status="V"),
         rmc(s[3], -33.5003, -70.2503, talker="GL")]) + "\n")
-    rec = read_nmea(path)
+    rec = read_nmea(path, source_options())
     np.testing.assert_allclose(rec.navigation.t_s, [0.0, 1.0, 3.0])
     np.testing.assert_allclose(rec.navigation.lat_deg, [-33.5, -33.5001, -33.5003], atol=1e-9)
     np.testing.assert_allclose(rec.navigation.lon_deg, [-70.25, -70.2501, -70.2503], atol=1e-9)
@@ -110,18 +111,54 @@ def test_gga_dates_follow_the_rmc_across_midnight(tmp_path):
     path.write_text("\n".join([gga(stamps[0] - pd.Timedelta(seconds=1), 59.9, 10.7),
                                rmc(stamps[0], 59.9, 10.7)]
                               + [gga(s, 59.9, 10.7) for s in stamps[1:]]) + "\n")
-    rec = read_nmea(path)
+    rec = read_nmea(path, source_options())
     start = int((day - pd.Timedelta(seconds=1)).value)
     assert rec.navigation.epoch_utc_ns == start
     np.testing.assert_allclose(rec.navigation.t_s, [0.0, 1.0, 2.0, 3.0, 4.0])
     assert dt.datetime.fromtimestamp((start + 4 * 10**9) / 1e9, dt.UTC).day == 2
 
 
-def test_gga_without_any_rmc_is_refused_naming_what_is_missing(tmp_path):
-    path = tmp_path / "gga.nmea"
-    path.write_text("\n".join(gga(s, 59.9, 10.7) for s in _stamps([0.0, 1.0])) + "\n")
-    with pytest.raises(InputError, match="GGA fixes but no RMC sentence .* log RMC sentences"):
-        read_nmea(path)
+def _gga_only(path, nav, start=EPOCH_NS):
+    path.write_text("\n".join(gga(s, lat, lon) for s, lat, lon in zip(
+        _stamps(nav.t_s, start), nav.lat, nav.lon, strict=True)) + "\n")
+    return path
+
+
+def test_gga_without_any_rmc_is_refused_naming_nmea_date(tmp_path):
+    path = _gga_only(tmp_path / "gga.nmea", recorded().navigation.head(2))
+    with pytest.raises(InputError, match=r"GGA sentences carry no date and nothing else dates "
+                                         r"them: set nmea.date=YYYY-MM-DD \(or log RMC"):
+        read_nmea(path, source_options())
+
+
+@pytest.mark.parametrize("start", ["2025-06-01T08:00:00Z", "2025-06-01T23:55:00Z"])
+def test_gga_only_is_dated_by_the_bearings(tmp_path, start):
+    """GGA-only navigation (no RMC) with a bearings table of UTC times: the date is the
+    bearings', across midnight too (a 40 min log from 23:55)."""
+    epoch = int(pd.Timestamp(start).value)
+    rec = recorded(("T1",))
+    b = rec.bearings
+    nav_path = _gga_only(tmp_path / "gga.nmea", rec.navigation, start=epoch)
+    stamps = pd.to_datetime(epoch + np.round(b.t_s * 1e9).astype(np.int64), utc=True)
+    pd.DataFrame({"timestamp_utc": [s.strftime("%Y-%m-%dT%H:%M:%S.%fZ") for s in stamps],
+                  "bearing_deg": b.bearing_deg}).to_csv(tmp_path / "brg.csv", index=False)
+    root = ingest(tmp_path / "brg.csv", navigation=nav_path, data_dir=tmp_path / "data")
+    m = json.loads((root / "manifest.json").read_text())
+    assert m["epoch_utc_ns"] == epoch + 500_000_000
+    assert any("GGA dated 2025-06-01 from the bearings' times (nmea.date=" in n
+               for n in m["notes"])
+    check_against_truth(estimate(root), t_offset_s=0.5, labels={"0": "T1"})
+
+
+def test_nmea_date_dates_gga_only_navigation(tmp_path):
+    nav = recorded().navigation.head(5)
+    path = _gga_only(tmp_path / "gga.nmea", nav)
+    rec = read_nmea(path, source_options({"nmea": {"date": "2025-06-01"}}))
+    assert rec.navigation.epoch_utc_ns == EPOCH_NS
+    np.testing.assert_allclose(rec.navigation.t_s, nav.t_s)
+    assert "GGA dated 2025-06-01 by nmea.date" in rec.notes[-1]
+    with pytest.raises(ConfigError, match="nmea.date must be a date YYYY-MM-DD, got '1.6.2025'"):
+        source_options({"nmea": {"date": "1.6.2025"}})
 
 
 def test_nothing_usable_is_refused_with_the_counts(tmp_path):
@@ -129,7 +166,7 @@ def test_nothing_usable_is_refused_with_the_counts(tmp_path):
     path.write_text("$GPGGA,1,2,3*00\nhello\n" + _sentence("GPGSV,1,1,00") + "\n")
     with pytest.raises(InputError, match=r"no own-ship fix .*: 1 not NMEA, 1 bad or missing "
                                          r"checksum"):
-        read_nmea(path)
+        read_nmea(path, source_options())
 
 
 def test_kind_is_told_from_the_first_line(tmp_path):

@@ -8,8 +8,9 @@ import pytest
 from scipy.stats import chi2
 
 from tma.families import build_estimator
+from tma.families.bearings2d.log import BearingsLog
 from tma.families.bearings2d.metrics import NEES_95, summary_row, track_metrics
-from tma.families.bearings2d.report import track_report
+from tma.families.bearings2d.report import status_note, track_report
 from tma.families.bearings2d.scenario import Config, LegConfig, ObserverConfig, PopulationConfig
 from tma.families.bearings2d.scenario import simulate_shard as simulate
 from tma.families.bearings2d.status import STATUSES, kinematics_now, runs_test_p
@@ -179,4 +180,37 @@ def test_not_converged_is_any_stop_but_the_f_tolerance():
     est, _ = _run(Config(n_tracks=50, shard_size=50, seed=2), max_iter=2)
     assert (est.status[est.stop_reason != 0] == "not_converged").all()
     assert (est.stop_reason != 0).mean() > 0.9
+    notes = track_report(est).note[est.stop_reason == 1]
+    assert notes.str.startswith("the estimator stopped at max_iter before converging").all()
+
+
+@pytest.mark.parametrize("estimator", ["nbearings", "iv"])
+def test_a_singular_direct_solve_says_so(estimator):
+    """Constant bearings from an own-ship at rest: the direct solvers' systems are singular.
+    Their note says so, not "max_iter or lambda_max" (they have neither)."""
+    t = np.arange(0.0, 600.0, 2.0)
+    log = BearingsLog(t_s=t, own_x_m=np.zeros_like(t), own_y_m=np.zeros_like(t),
+                      track_id=np.array([0, 1]),
+                      bearing_deg=np.vstack([np.full(t.size, 45.0), np.full(t.size, 100.0)]))
+    with np.errstate(divide="ignore", invalid="ignore"):  # the singular solve's own NaN
+        columns = build_estimator({"name": estimator}).estimate(log)
+    est = pd.DataFrame({"track_id": log.track_id,
+                        **{k: v for k, v in columns.items() if np.ndim(v) == 1}})
+    assert (est.status == "not_converged").all() and (est.stop_reason == -1).all()
+    for note in track_report(est).note:
+        assert note.startswith("no finite estimate: the solve was singular") and \
+            "max_iter" not in note and "lambda_max" not in note
     assert NEES_95 == pytest.approx(9.4877, abs=1e-4)
+
+
+def test_poor_fit_notes_name_the_test_that_decided():
+    """With sigma declared the chi-square test decides (and a sigma too small is named); with
+    sigma unknown a robust fit's runs test does, and the note says so, not chi-square."""
+    row = {"status": "poor_fit", "fit_p_value": 2e-6, "sigma_used_deg": 0.2,
+           "sqrt_ka_deg": 0.9, "motion_p_value": 0.3, "range_sd_m": 100.0,
+           "range_now_m": 1e4}
+    report = pd.DataFrame([row])
+    (known,) = status_note(report, sigma_known=True)
+    assert "chi-square p = 2.0e-06" in known and "sigma_deg understated" in known
+    (unknown,) = status_note(report, sigma_known=False)
+    assert "runs test" in unknown and "p = 2.0e-06" in unknown and "chi-square" not in unknown

@@ -10,6 +10,7 @@ track has no bearing at an epoch, with the nominal noise an MCAP log declares (`
 or ``sigma_deg``.
 """
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,9 +18,11 @@ import numpy as np
 from tma.config import Params, param
 from tma.errors import ConfigError, InputError
 from tma.families.bearings2d.log import BEARINGS_TOPIC, SCHEMAS, BearingsLog, nominal_sigma
+from tma.geo import MAX_MAPPED_M
 from tma.sources.base import Observation, Unit
 from tma.utc import MAX_SPAN_S
 
+log = logging.getLogger(__name__)
 MAX_CELLS = 1 << 26  # bearings grid cells (tracks x epochs) per log: 512 MiB of float64
 RADIANS_MIN_COUNT = 10
 
@@ -78,10 +81,41 @@ class Settings(Params):
         super().__post_init__()
 
 
+def _enough_bearings(aligned, settings: Settings, where: str) -> dict:
+    """Leave out the contacts with fewer than ``min_bearings`` bearings kept (``bad_rows=
+    drop``; under ``fail`` refuse the file, as a contact with too few bearings always was);
+    what the manifest records of them (``skipped_contacts``)."""
+    ids = np.concatenate([p.track_id for p in aligned.platforms])
+    known, counts = np.unique(ids, return_counts=True)
+    few = counts < settings.min_bearings
+    if not few.any():
+        return {"min_bearings": settings.min_bearings, "count": 0, "contacts": {}}
+    names = known.astype(str) if aligned.labels is None else aligned.labels[known]
+    shown = {str(n): int(c) for n, c in zip(names[few], counts[few], strict=True)}
+    listed = ", ".join(f"{n} ({c})" for n, c in list(shown.items())[:10])
+    if aligned.dropped.policy == "fail":
+        raise InputError(f"{where}: track(s) {', '.join(list(shown)[:10])} have "
+                         f"{counts[few].min()} bearing(s); estimating 4 parameters (x0, y0, vx, "
+                         f"vy) needs at least {settings.min_bearings} (min_bearings); "
+                         "bad_rows=drop skips such contacts")
+    if few.all():
+        raise InputError(f"{where}: no contact has min_bearings = {settings.min_bearings} "
+                         f"bearings: {listed}")
+    for p in aligned.platforms:
+        keep = ~np.isin(p.track_id, known[few])
+        p.t_s, p.own_x_m, p.own_y_m, p.track_id, p.values = (
+            p.t_s[keep], p.own_x_m[keep], p.own_y_m[keep], p.track_id[keep], p.values[keep])
+    aligned.platforms = [p for p in aligned.platforms if p.t_s.size]
+    log.warning("%s: skipped %d contact(s) with fewer than min_bearings = %d bearings: %s",
+                where, int(few.sum()), settings.min_bearings, listed)
+    return {"min_bearings": settings.min_bearings, "count": int(few.sum()), "contacts": shown}
+
+
 def logs(aligned, settings: Settings, where: str):
     """``(logs, config, extra)``: one ``BearingsLog`` per own-ship of ``aligned``
     (``tma.sources.align``), checked; what the dataset's config and manifest record of the
-    settings."""
+    settings and of the contacts skipped for too few bearings."""
+    skipped = _enough_bearings(aligned, settings, where)
     out = []
     for p in aligned.platforms:
         sigma = nominal_sigma(p.recording.metadata, where)  # the input's record tma.sensor
@@ -101,15 +135,27 @@ def logs(aligned, settings: Settings, where: str):
             raise InputError(f"{where}: the log spans {lg.t_s[-1]:.3g} s (at most "
                              f"{MAX_SPAN_S:.3g} s): times must be seconds")
         lg.validate(where)
-        counts = np.isfinite(lg.bearing_deg).sum(axis=1)
-        few = counts < settings.min_bearings
-        if np.any(few):
-            shown = lg.track_id[few] if lg.track_label is None else lg.track_label[few]
-            raise InputError(
-                f"{where}: track(s) {', '.join(map(str, shown[:10]))} have "
-                f"{counts[few].min()} bearing(s); estimating 4 parameters (x0, y0, vx, vy) "
-                f"needs at least {settings.min_bearings}")
-    return out, {"min_bearings": settings.min_bearings}, {"sigma_deg": out[0].sigma_deg}
+        _within_the_map(lg, where)
+    labels = aligned.summary["track_labels"]
+    if labels is not None and skipped["count"]:  # the skipped contacts are not in the dataset
+        kept = {str(i) for lg in out for i in lg.track_id}
+        labels = {i: s for i, s in labels.items() if i in kept}
+    return out, {"min_bearings": settings.min_bearings}, {
+        "sigma_deg": out[0].sigma_deg, "skipped_contacts": skipped, "track_labels": labels}
+
+
+def _within_the_map(lg: BearingsLog, where: str):
+    """Own-ship within ``MAX_MAPPED_M`` of the origin, where the tangent plane maps it (checked
+    here, naming the input and the time, before anything is written)."""
+    if lg.origin_deg is None:
+        return
+    far = np.hypot(lg.own_x_m, lg.own_y_m) > MAX_MAPPED_M
+    if far.any():
+        k = int(np.argmax(far))
+        raise InputError(f"{where}: own-ship goes farther than {MAX_MAPPED_M / 1e3:g} km from "
+                         f"the origin ({np.hypot(lg.own_x_m[k], lg.own_y_m[k]) / 1e3:.0f} km at "
+                         f"t = {lg.t_s[k]:.9g} s after the log's start): its tangent plane "
+                         "cannot map it; split the log")
 
 
 def _logs(t, x, y, track, bearing, sigma, where) -> list[BearingsLog]:

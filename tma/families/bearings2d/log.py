@@ -179,9 +179,11 @@ def write_bearings_log(path, log: BearingsLog, metadata=None, encoding="protobuf
                                      "epoch_utc_ns": log.epoch_utc_ns})
         chosen = [*chosen, OWNSHIP_FIX_CHANNEL]
         own_lat, own_lon = local_to_geodetic(log.own_x_m, log.own_y_m, (lat0, lon0))
-        if not np.isfinite(own_lat).all():
-            raise InputError(f"{path}: own-ship goes farther than {MAX_MAPPED_M / 1e3:g} km "
-                             "from the origin: its tangent plane cannot map it; split the log")
+        if not np.isfinite(own_lat).all():  # (no path: it may be a staging file's)
+            k = int(np.argmax(~np.isfinite(own_lat)))
+            raise InputError(f"own-ship goes farther than {MAX_MAPPED_M / 1e3:g} km from the "
+                             f"origin (at t = {log.t_s[k]:.9g} s): its tangent plane cannot map "
+                             "it; split the log")
     with LogWriter(path, chosen, metadata, epoch_utc_ns=log.epoch_utc_ns,
                    compression=COMPRESSION[encoding]) as w:
         step = max(1, BLOCK_BEARINGS // max(1, log.n_tracks))

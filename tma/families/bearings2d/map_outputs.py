@@ -10,14 +10,17 @@ is {p : (p - p(t))^T C^-1 (p - p(t)) <= chi-square(2) 95 % point}.
 - ``tables/<name>-<label>.png``: own-ship path, every k-th bearing line from own-ship, the
   estimated track over the contact's bearings and the 95 % ellipse at its last bearing, in
   km east/north, the status in the title;
-- ``tables/<name>.mcap`` (only with a geographic origin): per track ``foxglove.LocationFix``
-  on ``/tma/estimate/<label>`` at each of its bearing epochs (estimated position, position
-  covariance in ENU m^2, type KNOWN), own-ship on ``/ownship/location_fix``; log times UTC
-  when the dataset has an epoch.
+- ``tables/<name>.mcap`` (only with a geographic origin and UTC times): per track
+  ``foxglove.LocationFix`` on ``/tma/estimate/<label>`` at each of its bearing epochs
+  (estimated position, position covariance in ENU m^2, type KNOWN), own-ship on
+  ``/ownship/location_fix``; log times UTC.
+
+``<label>`` is the contact's shown label (``tma.sources.labels``: safe for file names,
+Markdown and topics, long ones shortened with a hash); the table's CSV keeps the id as
+written.
 """
 
 import logging
-import re
 from pathlib import Path
 
 import matplotlib
@@ -43,7 +46,9 @@ from tma.geo import (  # noqa: E402
     location_fix,
 )
 from tma.io.mcap_log import Channel, LogWriter, json_record  # noqa: E402
+from tma.io.mcap_writer import Encoded  # noqa: E402
 from tma.linalg import scaled_inverse  # noqa: E402
+from tma.sources.labels import file_part, fit_file_name, shown_labels  # noqa: E402
 from tma.tables import save_figure  # noqa: E402
 
 log = logging.getLogger(__name__)
@@ -114,85 +119,113 @@ def reference(logs: list[BearingsLog], where: str):
     return next(iter(epochs), None), next(iter(origins), None), labels
 
 
-def safe_label(label: str) -> str:
-    """``label`` as a file name part: characters other than letters, digits, ``._-``
-    become ``_``."""
-    return re.sub(r"[^A-Za-z0-9._-]", "_", label).lstrip(".") or "_"
-
-
 # -- per contact PNG -------------------------------------------------------------------------
 
-def _track_plot(path: Path, title: str, lg: BearingsLog, row: int, theta, cov_now):
-    """One contact: own-ship, bearing lines, estimated track, 95 % ellipse (km)."""
-    valid = np.flatnonzero(np.isfinite(lg.bearing_deg[row]))
-    t = lg.t_s[valid]
-    own = np.column_stack([lg.own_x_m, lg.own_y_m])
-    track = theta[:2] + np.outer(t, theta[2:])  # estimated positions over the contact's span
-    finite = np.isfinite(track).all()
-    reach = (np.hypot(*(track - own[valid]).T).max() * 1.3 if finite
-             else 20_000.0)  # no estimate: lines of a nominal 20 km
-    step = max(1, int(np.ceil(valid.size / BEARING_LINES)))
-    b = np.deg2rad(lg.bearing_deg[row, valid[::step]])
-    start = own[valid[::step]]
-    end = start + reach * np.column_stack([np.sin(b), np.cos(b)])
-    lines = np.stack([start, end, np.full_like(start, np.nan)], axis=1).reshape(-1, 2) / 1e3
+class _TrackPlots:
+    """One figure, drawn again for each contact: its artists are made once and given each
+    contact's data (a new figure and a tight layout per contact cost twice as much: the
+    layout's text measuring, not the drawing, was most of it); the layout is fixed, with room
+    for the axis labels and a two-line title."""
 
-    fig, ax = plt.subplots(figsize=(7, 7))
-    shown = [own]
-    ax.plot(lines[:, 0], lines[:, 1], color="0.6", lw=0.5,  # one line, NaN between segments
-            label="bearings" + (f" (every {step}th)" if step > 1 else ""))
-    ax.plot(own[:, 0] / 1e3, own[:, 1] / 1e3, color="tab:blue", label="own-ship")
-    ax.plot(*own[valid[-1]] / 1e3, "o", color="tab:blue", ms=4)
-    if finite:
-        shown.append(track)
-        ax.plot(track[:, 0] / 1e3, track[:, 1] / 1e3, color="tab:red", label="estimated track")
-        ax.plot(*track[-1] / 1e3, "o", color="tab:red", ms=4)
-        if np.isfinite(cov_now).all():
-            ring = ellipse_points(track[-1], cov_now)
-            shown.append(ring)
-            ax.plot(ring[:, 0] / 1e3, ring[:, 1] / 1e3, color="tab:red", lw=1, ls="--",
-                    label="95 % position (last bearing)")
-    else:
-        shown.append(end)
-    box = np.concatenate(shown) / 1e3  # a square view of everything but the bearing lines
-    lo, hi = box.min(axis=0), box.max(axis=0)
-    mid, half = (lo + hi) / 2, 0.54 * (hi - lo).max() + 0.1
-    ax.set_xlim(mid[0] - half, mid[0] + half)
-    ax.set_ylim(mid[1] - half, mid[1] + half)
-    ax.set_aspect("equal", adjustable="box")
-    ax.set_xlabel("east (km)")
-    ax.set_ylabel("north (km)")
-    ax.grid(True, alpha=0.3)
-    ax.legend(loc="best", fontsize=8)
-    ax.set_title(title, fontsize=10)
-    fig.tight_layout()
-    save_figure(fig, path)
-    plt.close(fig)
+    def __init__(self):
+        self.fig, ax = plt.subplots(figsize=(7, 7))
+        self.ax = ax
+        self.lines, = ax.plot([], [], color="0.6", lw=0.5)  # one line, NaN between segments
+        self.own, = ax.plot([], [], color="tab:blue", label="own-ship")
+        self.own_now, = ax.plot([], [], "o", color="tab:blue", ms=4)
+        self.track, = ax.plot([], [], color="tab:red", label="estimated track")
+        self.track_now, = ax.plot([], [], "o", color="tab:red", ms=4)
+        self.ring, = ax.plot([], [], color="tab:red", lw=1, ls="--",
+                             label="95 % position (last bearing)")
+        ax.set_aspect("equal", adjustable="box")
+        ax.set_xlabel("east (km)")
+        ax.set_ylabel("north (km)")
+        ax.grid(True, alpha=0.3)
+        self.fig.subplots_adjust(left=0.1, right=0.97, bottom=0.07, top=0.91)
+
+    def draw(self, path: Path, title: str, lg: BearingsLog, row: int, theta, cov_now):
+        """One contact: own-ship, bearing lines, estimated track, 95 % ellipse (km)."""
+        valid = np.flatnonzero(np.isfinite(lg.bearing_deg[row]))
+        t = lg.t_s[valid]
+        own = np.column_stack([lg.own_x_m, lg.own_y_m])
+        track = theta[:2] + np.outer(t, theta[2:])  # estimated positions over its span
+        finite = np.isfinite(track).all()
+        reach = (np.hypot(*(track - own[valid]).T).max() * 1.3 if finite
+                 else 20_000.0)  # no estimate: lines of a nominal 20 km
+        step = max(1, int(np.ceil(valid.size / BEARING_LINES)))
+        b = np.deg2rad(lg.bearing_deg[row, valid[::step]])
+        start = own[valid[::step]]
+        end = start + reach * np.column_stack([np.sin(b), np.cos(b)])
+        lines = np.stack([start, end, np.full_like(start, np.nan)], axis=1).reshape(-1, 2) / 1e3
+
+        self.lines.set_data(lines.T)
+        self.lines.set_label("bearings" + (f" (every {step}th)" if step > 1 else ""))
+        self.own.set_data(own.T / 1e3)
+        self.own_now.set_data(own[valid[-1], :, None] / 1e3)
+        shown = [own]
+        ring = np.empty((0, 2))
+        if finite:
+            shown.append(track)
+            if np.isfinite(cov_now).all():
+                ring = ellipse_points(track[-1], cov_now)
+                shown.append(ring)
+        else:
+            shown.append(end)
+        self.track.set_data(track.T / 1e3 if finite else ([], []))
+        self.track_now.set_data(track[-1, :, None] / 1e3 if finite else ([], []))
+        self.ring.set_data(ring.T / 1e3)
+        box = np.concatenate(shown) / 1e3  # a square view of everything but the bearing lines
+        lo, hi = box.min(axis=0), box.max(axis=0)
+        mid, half = (lo + hi) / 2, 0.54 * (hi - lo).max() + 0.1
+        self.ax.set_xlim(mid[0] - half, mid[0] + half)
+        self.ax.set_ylim(mid[1] - half, mid[1] + half)
+        drawn = [self.lines, self.own] + ([self.track] if finite else []) + (
+            [self.ring] if ring.size else [])
+        self.ax.legend(handles=drawn, loc="best", fontsize=8)
+        self.ax.set_title(title, fontsize=10)
+        save_figure(self.fig, path)
+
+    def close(self):
+        plt.close(self.fig)
 
 
 def write_track_plots(report: pd.DataFrame, estimates: pd.DataFrame, logs, tables_dir,
-                      name: str) -> list[Path]:
-    """``<name>-<label>.png`` per contact (the first ``MAX_PLOTS``); returns their paths."""
+                      name: str, epoch_utc_ns=None, progress=None) -> list[Path]:
+    """``<name>-<label>.png`` per contact (the first ``MAX_PLOTS``), titled with the time of
+    its last bearing in UTC (``epoch_utc_ns``: of t = 0), or in seconds from the log's start
+    when it is not dated; returns their paths. ``progress``: a progress bar (None: on a
+    terminal only)."""
     theta = estimates[["x0_m", "y0_m", "vx_m_s", "vy_m_s"]].to_numpy(float)
     cov_now = position_covariance(theta_covariance(estimates),
                                   estimates["t_last_s"].to_numpy(float))
     where = {int(i): (lg, row) for lg in logs for row, i in enumerate(lg.track_id)}
+    shown = shown_labels(report["label"])
     if len(report) > MAX_PLOTS:
         log.info("%s: plotting the first %d of %d contacts (MAX_PLOTS); the table and the map "
                  "MCAP hold them all", name, MAX_PLOTS, len(report))
+    from tqdm.auto import tqdm  # here: a report without contacts to plot needs none
+
     paths, used = [], set()
-    for n, r in enumerate(report.head(MAX_PLOTS).itertuples(index=False)):
-        lg, row = where[int(r.track_id)]
-        part = safe_label(r.label)
-        if part in used:  # two labels alike once sanitised: the id tells them apart
-            part = f"{part}-{r.track_id}"
-        used.add(part)
-        path = Path(tables_dir) / f"{name}-{part}.png"
-        _track_plot(path, f"{name}: contact {r.label}, status {r.status}\nrange "
-                    f"{r.range_now_m / 1e3:.2f} km, course {r.course_deg:.1f} deg, speed "
-                    f"{r.speed_m_s:.2f} m/s at t = {r.t_now_s:g} s", lg, row, theta[n],
-                    cov_now[n])
-        paths.append(path)
+    plots = _TrackPlots()
+    try:
+        for n, r in enumerate(tqdm(report.head(MAX_PLOTS).itertuples(index=False),
+                                   total=min(len(report), MAX_PLOTS), desc=f"{name} plots",
+                                   unit="contact", disable=None if progress is None
+                                   else not progress)):
+            lg, row = where[int(r.track_id)]
+            part = file_part(shown[n])
+            if part in used:  # two labels alike as file names: the id tells them apart
+                part = f"{part}-{r.track_id}"
+            used.add(part)
+            path = Path(tables_dir) / fit_file_name(name, part, ".png")
+            plots.draw(path, f"{name}: contact {shown[n]}, status {r.status}\nrange "
+                       f"{r.range_now_m / 1e3:.2f} km, course {r.course_deg:.1f} deg, speed "
+                       f"{r.speed_m_s:.2f} m/s at "
+                       + (f"t = {r.t_now_s:g} s from the start" if epoch_utc_ns is None
+                          else r.time_now_utc), lg, row, theta[n], cov_now[n])
+            paths.append(path)
+    finally:
+        plots.close()
     return paths
 
 
@@ -215,39 +248,50 @@ def write_map_mcap(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, ep
         lat, lon = local_to_geodetic(lg.own_x_m, lg.own_y_m, origin_deg)
         parts.append((lg.t_s, lat.tolist(), lon.tolist(), None, OWNSHIP_FRAME))
     skipped, used = [], set()
+    shown = shown_labels(report["label"])
     for n, r in enumerate(report.itertuples(index=False)):
         k, row = where[int(r.track_id)]
         t = logs[k].t_s[np.isfinite(logs[k].bearing_deg[row])]
         x, y = (theta[n, :2, None] + theta[n, 2:, None] * t)
         lat, lon = local_to_geodetic(x, y, origin_deg)
         if not np.isfinite(lat).all():  # no finite estimate, or one farther than a map
-            skipped.append(r.label)
+            skipped.append(shown[n])
             continue
-        topic = ESTIMATE_TOPIC.format(label=r.label)
+        topic = ESTIMATE_TOPIC.format(label=shown[n])
         if topic in used:  # labels of different shards alike: the id tells them apart
             topic = f"{topic}-{r.track_id}"
         used.add(topic)
         cov = position_covariance(theta_cov[n:n + 1], t[None, :])[0]
-        cov = enu_covariance(cov).tolist() if np.isfinite(cov).all() else None
+        cov = enu_covariance(cov) if np.isfinite(cov).all() else None
         channels.append(Channel.protobuf(topic, LocationFix, {
             "track_id": str(r.track_id), "status": r.status,
             "estimate": "constant-velocity fit of all bearings; covariance (J^T J)^-1 sigma^2"}))
-        parts.append((t, lat.tolist(), lon.tolist(), cov, f"contact {r.label}"))
+        parts.append((t, lat.tolist(), lon.tolist(), cov, f"contact {shown[n]}"))
     if skipped:
         log.warning("%s: no finite estimate within %g km of the origin for %s: not in the map",
                     path, MAX_MAPPED_M / 1e3, ", ".join(skipped))
     t_all = np.concatenate([p[0] for p in parts])
     which = np.repeat(np.arange(len(parts)), [p[0].size for p in parts])
-    index = np.concatenate([np.arange(p[0].size) for p in parts])
     order = np.lexsort((which, t_all))  # time order; own-ship first at equal times
     metadata = {GEO: json_record({"origin_lat_deg": origin_deg[0],
                                   "origin_lon_deg": origin_deg[1], "epoch_utc_ns": epoch_utc_ns}),
                 "tma.run": json_record(run)}
-    topics = [ch.topic for ch in channels]
     with LogWriter(path, channels, metadata, epoch_utc_ns=epoch_utc_ns) as w:
-        for m, i, t in zip(which[order].tolist(), index[order].tolist(), t_all[order].tolist(),
-                           strict=True):
-            _, lat, lon, cov, frame = parts[m]
-            w.write(topics[m], t, location_fix(w.time_ns(t), frame, lat[i], lon[i],
-                                               None if cov is None else cov[i]))
+        payloads = [p for t, lat, lon, cov, frame in parts
+                    for p in _fixes(w.log_times(t), frame, lat, lon, cov)]
+        w.write_encoded([ch.topic for ch in channels], which[order], t_all[order],
+                        Encoded.of([payloads[k] for k in order.tolist()]))
     return Path(path)
+
+
+def _fixes(t_ns, frame: str, lat, lon, cov) -> list[bytes]:
+    """``location_fix`` messages, serialised: one message whose changing fields are set anew
+    for each (3x faster than a new message each, the same bytes)."""
+    fix, out = location_fix(0, frame, 0.0, 0.0, None if cov is None else cov[0]), []
+    for k, (ns, a, b) in enumerate(zip(t_ns.tolist(), lat, lon, strict=True)):
+        fix.latitude, fix.longitude = a, b
+        fix.timestamp.seconds, fix.timestamp.nanos = divmod(ns, 10**9)
+        if cov is not None:
+            fix.position_covariance[:] = cov[k]
+        out.append(fix.SerializeToString(deterministic=True))
+    return out

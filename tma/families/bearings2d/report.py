@@ -35,6 +35,7 @@ from tma.families.bearings2d.metrics import (  # noqa: E402
 from tma.families.bearings2d.status import STATUSES  # noqa: E402
 from tma.geo import local_to_geodetic  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
+from tma.sources.labels import shown_labels  # noqa: E402
 from tma.tables import save_figure, write_table  # noqa: E402
 from tma.utc import format_utc  # noqa: E402
 
@@ -134,12 +135,30 @@ def _poor_fit_note(row) -> str:
             f"(chi-square p = {row.fit_p_value:.1e}): {why}")
 
 
-def status_note(report: pd.DataFrame) -> list[str]:
-    """Why a track is not ok, in words (empty for ok tracks), naming the test that decided."""
+NOT_CONVERGED = {  # by stop_reason (estimates.parquet; lm_kernel's STOP_MAX_ITER and
+    # STOP_LAMBDA_MAX, not imported: it loads the compiler, which aggregate never needs)
+    1: "the estimator stopped at max_iter before converging",
+    2: "the estimator stopped at lambda_max (its damping) before converging",
+}
+SINGULAR = ("no finite estimate: the solve was singular (too little change of bearing: no "
+            "own-ship manoeuvre? a target far away?)")
+
+
+def status_note(report: pd.DataFrame, stop_reason=None, sigma_known=True) -> list[str]:
+    """Why a track is not ok, in words (empty for ok tracks), naming the test that decided;
+    ``stop_reason`` (per track) says why an estimator did not converge: LM's ``max_iter`` or
+    ``lambda_max``, or a direct solver's (``iv``, ``nbearings``) singular system.
+    ``sigma_known``: the log declares its noise (the chi-square test decides ``poor_fit``);
+    else a robust fit's runs test on the residuals' signs does."""
     notes = []
-    for row in report.itertuples(index=False):
+    stops = [None] * len(report) if stop_reason is None else list(stop_reason)
+    for row, stop in zip(report.itertuples(index=False), stops, strict=True):
         status = row.status
-        if status == "poor_fit":
+        if status == "poor_fit" and not sigma_known:
+            note = (f"the residuals are not white noise (runs test on their signs, p = "
+                    f"{row.fit_p_value:.1e}): a systematic error (a bias, a drift, outliers in "
+                    "runs?); give sigma_deg= to test them against your sensor's noise")
+        elif status == "poor_fit":
             note = (_poor_fit_note(row) if np.isfinite(row.fit_p_value) and
                     row.sigma_used_deg > 0 else
                     f"the residuals are not noise (p = {row.fit_p_value:.1e})")
@@ -148,7 +167,8 @@ def status_note(report: pd.DataFrame) -> list[str]:
                     "target did not move as assumed (a manoeuvre?); `estimator=last_leg` "
                     "solves its last leg")
         elif status == "not_converged":
-            note = "the estimator stopped before converging (max_iter or lambda_max)"
+            note = (NOT_CONVERGED.get(stop, SINGULAR) if stop is not None else
+                    "the estimator stopped before converging")
         elif status == "unobservable":
             note = (f"range sd {row.range_sd_m / row.range_now_m:.0%} of the range: not "
                     "determined from this geometry (no own-ship manoeuvre? target too far? "
@@ -166,17 +186,20 @@ def status_note(report: pd.DataFrame) -> list[str]:
     return notes
 
 
-def track_report(estimates: pd.DataFrame, time_origin_s=0.0, epoch_utc_ns=None,
-                 origin_deg=None, labels=None) -> pd.DataFrame:
+def track_report(estimates: pd.DataFrame, epoch_utc_ns=None, origin_deg=None,
+                 labels=None, sigma_known=True) -> pd.DataFrame:
     """Per-track state and kinematics at each track's last bearing ("now") with 1-sigma
     errors and the status, as the estimator computed them; a note says why a track is not ok.
 
     ``label``: the contact's name (``labels``: track id -> text; else the id);
-    ``time_now_utc``: ISO-8601 UTC of the last bearing (``epoch_utc_ns``: UTC of t = 0; else
-    blank); ``x_now_m``, ``y_now_m`` (local plane, m) with ``x_sd_m``, ``y_sd_m``;
+    ``t_now_s``: the last bearing, in seconds from the log's start (its first bearing, the
+    dataset's t = 0); ``time_now_utc``: its ISO-8601 UTC (``epoch_utc_ns``: UTC of t = 0;
+    else blank); ``x_now_m``, ``y_now_m`` (local plane, m) with ``x_sd_m``, ``y_sd_m``;
     ``lat_now_deg``, ``lon_now_deg`` (WGS84, from ``origin_deg`` = (lat, lon) of the local
     plane's origin; NaN without one); ``leg_start_s`` (and ``leg_start_utc``): from when the
-    solution holds (its first bearing, or the end of the last manoeuvre ``last_leg`` found).
+    solution holds (its first bearing, or the end of the last manoeuvre ``last_leg`` found),
+    in seconds from the log's start. ``sigma_known``: the log declares its bearing noise
+    (which test a ``poor_fit`` note names).
     """
     e = estimates
 
@@ -195,7 +218,7 @@ def track_report(estimates: pd.DataFrame, time_origin_s=0.0, epoch_utc_ns=None,
         "track_id": e["track_id"],
         "label": [(labels or {}).get(i, str(i)) for i in ids],
         "n_bearings": e["n_bearings"],
-        "t_now_s": t + time_origin_s,
+        "t_now_s": t,
         "time_now_utc": utc(t),
         "x_now_m": x_now, "x_sd_m": np.sqrt(cov[:, 0, 0]),
         "y_now_m": y_now, "y_sd_m": np.sqrt(cov[:, 1, 1]),
@@ -205,8 +228,7 @@ def track_report(estimates: pd.DataFrame, time_origin_s=0.0, epoch_utc_ns=None,
         "sqrt_ka_deg": np.rad2deg(np.sqrt(e["cost_rad2"] / e["n_bearings"])),
         "converged": e["converged"].astype(bool),
     })
-    report["leg_start_s"] += time_origin_s
-    report["note"] = status_note(report)
+    report["note"] = status_note(report, e["stop_reason"].to_numpy(), sigma_known)
     return report
 
 
@@ -223,8 +245,8 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str)
             for a, b in report[["lat_now_deg", "lon_now_deg"]].to_numpy()]}
 
     shown = pd.DataFrame({
-        "track": report["label"], "n": report["n_bearings"],
-        "t now (s)": report["t_now_s"].map("{:.1f}".format),
+        "track": shown_labels(report["label"]), "n": report["n_bearings"],
+        "t now (s from start)": report["t_now_s"].map("{:.1f}".format),
         **({} if report["time_now_utc"].isna().all() else {"now (UTC)": report["time_now_utc"]}),
         **position(),
         "range now (m)": pm("range_now_m", "range_sd_m", ".0f"),
@@ -238,8 +260,10 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str)
         "why": report["note"],
     })
     intro = (f"Estimates per track of `{source}` (no ground truth). 'now' is each track's last "
-             "bearing epoch; ± is one standard deviation (sigma as in column sigma_used_deg "
-             "of the CSV: nominal, or estimated from the residuals), which includes the "
+             "bearing epoch, in seconds from the log's start (its first bearing) and in UTC "
+             "when the log is dated; ± is one standard deviation (sigma as in column "
+             "sigma_used_deg of the CSV: nominal, or estimated from the residuals), which "
+             "includes the "
              "target's own motion (accel_psd_m2_s3: a nearly-constant-velocity target) for "
              "`lm`; 'holds from' is the first bearing the solution rests on. "
              "Trust only `ok` tracks; 'why' says what is wrong with the others. The CSV also "
@@ -250,24 +274,56 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str)
                        shown)
 
 
-def _report_without_truth(entry, tables_dir, name: str) -> list[Path]:
+STATUS_WHY = {  # a verdict in a few words, for the one warning line of its tracks
+    "not_converged": "the estimator did not converge",
+    "manoeuvring": ("the residuals drift: the target did not move as assumed; "
+                    "estimator=last_leg solves the last leg"),
+    "poor_fit": "the residuals are not the declared noise",
+    "unobservable": "the range is not determined from this geometry",
+    "approximate": "the estimator's one-sigma errors are not honest here",
+}
+LISTED = 10  # contacts named in a warning line
+
+
+def warn_not_ok(report: pd.DataFrame, where: str):
+    """One warning per verdict other than ``ok``: a track's note, or for several tracks their
+    count, the verdict in words and the first ``LISTED`` contacts (the table's ``why`` column
+    holds each one's note)."""
+    shown = np.array(shown_labels(report["label"]), dtype=object)
+    for status in [s for s in STATUSES if s != "ok"]:
+        rows = np.flatnonzero((report["status"] == status).to_numpy())
+        if rows.size == 1:
+            log.warning("%s track %s: %s: %s", where, shown[rows[0]], status,
+                        report["note"].iloc[rows[0]])
+        elif rows.size:
+            names = ", ".join(shown[rows[:LISTED]]) + (", ..." if rows.size > LISTED else "")
+            log.warning("%s: %d tracks %s (%s): %s; the table's 'why' column says more for "
+                        "each", where, rows.size, status, STATUS_WHY[status], names)
+
+
+def _report_without_truth(entry, tables_dir, name: str, progress=None) -> list[Path]:
     """The per-track report of a dataset without truth: ``<name>.{csv,md}``, a PNG per
     contact and, with a geographic origin, the map MCAP ``<name>.mcap``."""
     m, dataset = entry.dataset.manifest, entry.dataset
     logs = read_logs(dataset)
     epoch, origin, labels = reference(logs, str(dataset.root))
-    report = track_report(entry.estimates, m.get("time_origin_s", 0.0), epoch, origin, labels)
-    for row in report[report["status"] != "ok"].itertuples(index=False):
-        log.warning("%s track %s: %s: %s", dataset.name, row.label, row.status, row.note)
+    report = track_report(entry.estimates, epoch, origin, labels,
+                          sigma_known=any(lg.sigma_deg is not None for lg in logs))
+    warn_not_ok(report, dataset.name)
     write_parquet_atomic(entry.run_root / "report.parquet",
                          pa.Table.from_pandas(report, preserve_index=False))
     written = write_track_report(report, tables_dir, name,
                                  m.get("input", {}).get("path", dataset.name))
-    written += write_track_plots(report, entry.estimates, logs, tables_dir, name)
+    written += write_track_plots(report, entry.estimates, logs, tables_dir, name, epoch,
+                                 progress)
     if origin is None:
         log.info("%s: no map MCAP (%s.mcap): the dataset has no geographic origin (its "
                  "own-ship is in local metres; ingest latitude/longitude navigation or give "
                  "origin.lat/origin.lon)", dataset.name, name)
+    elif epoch is None:
+        log.info("%s: no map MCAP (%s.mcap): the dataset's times are relative (no UTC), so the "
+                 "map would be dated 1970; ingest it again with time.start_utc=<ISO-8601 UTC of "
+                 "the log's time 0>", dataset.name, name)
     else:
         written.append(write_map_mcap(Path(tables_dir) / f"{name}.mcap", report,
                                       entry.estimates, logs, epoch, origin,
@@ -275,9 +331,10 @@ def _report_without_truth(entry, tables_dir, name: str) -> list[Path]:
     return written
 
 
-def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
+def aggregate_runs(entries, tables_dir, table_name, progress=None) -> list[Path]:
     """Metrics per track into each run dir; the comparison table for simulated datasets, with
-    its section against the paper, and a per-track report for each dataset without truth."""
+    its section against the paper, and a per-track report for each dataset without truth
+    (``progress``: a progress bar over its per-contact plots; None: on a terminal only)."""
     rows, written, runs, truths = [], [], [], {}
     for entry in entries:
         if id(entry.dataset) not in truths:  # read (and checked) once per dataset
@@ -285,7 +342,7 @@ def aggregate_runs(entries, tables_dir, table_name) -> list[Path]:
         truth = truths[id(entry.dataset)]
         if truth is None:
             name = table_name if len(entries) == 1 else f"{entry.dataset.name}-{entry.estimator}"
-            written += _report_without_truth(entry, tables_dir, name)
+            written += _report_without_truth(entry, tables_dir, name, progress)
             continue
         metrics = track_metrics(entry.estimates, truth)
         write_parquet_atomic(entry.run_root / "metrics.parquet",
