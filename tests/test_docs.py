@@ -145,7 +145,9 @@ def logs(tmp_path_factory):
                                 navsatfix_messages(one.navigation)),
                ("/bearing", "std_msgs/msg/Float64", float64_messages(one.bearings)),
                ("/bearing_vec", "geometry_msgs/msg/Vector3Stamped",
-                vector_messages(one.bearings)))
+                vector_messages(one.bearings)),
+               *[(f"/sonar/contact/{c}", "std_msgs/msg/Float64",
+                  float64_messages(one.bearings)) for c in "ab"])  # one topic per contact
     write_foxglove(d / "foxglove.mcap", one)
     return d
 
