@@ -232,7 +232,8 @@ def record_sweep_job(cfg: DictConfig, jobs) -> None:
     if number is None or not hydra_cfg.runtime.get("output_dir"):
         return
     write_json_atomic(Path(hydra_cfg.runtime.output_dir) / SWEEP_RECORD, sweep_record(
-        os.environ.get(SWEEP_ENV), number, cfg.paths.data_dir, cfg.paths.tables_dir, jobs))
+        os.environ.get(SWEEP_ENV), number, cfg.paths.data_dir, cfg.paths.tables_dir, jobs,
+        cfg.get("report")))
 
 
 def write_sweep_table(config: DictConfig, sweep_id: str) -> None:

@@ -17,7 +17,7 @@ def aggregate_stage(cfg):
         table = f"{cfg.table}-{number}" if cfg.table else None
         suffix = f"custom-{number}"
     for path in aggregate(cfg.paths.data_dir, cfg.paths.tables_dir, pairs, table=table,
-                          default_suffix=suffix, progress=cfg.progress):
+                          default_suffix=suffix, progress=cfg.progress, report=cfg.report):
         log.info("wrote %s", path)
     record_sweep_job(cfg, pairs)
 

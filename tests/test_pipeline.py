@@ -64,6 +64,18 @@ def test_end_to_end_table(paths, tmp_path):
     assert manifest["files"]["truth.parquet"]["rows"] == 60
 
 
+def test_the_kind_of_table_is_declared_not_read_off_its_name(paths, tmp_path):
+    """``report=benchmark`` writes the benchmark table under any name; a kind the family
+    does not have is one line naming those it has."""
+    _all_stages([*GRID, *paths])
+    run_stage_here("aggregate", *GRID, *paths, "table=mine", "report=benchmark")
+    assert "efficiency" in (tmp_path / "tables" / "mine.csv").read_text().splitlines()[0]
+    proc = run_stage_here("aggregate", *GRID, *paths, "report=bogus", check=False)
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1
+    assert "report=bogus: bearings2d has no such table; its kinds: benchmark, manoeuvre" \
+        in proc.stderr
+
+
 def test_outputs_do_not_depend_on_n_jobs(tmp_path):
     trees = []
     for n_jobs in (1, 2):

@@ -1,7 +1,7 @@
 """The aggregate stage: finished runs -> per-track metrics (Parquet) -> tables and plots.
 
 Each family's report module (``tma.families.<name>.report``) provides
-``aggregate_runs(entries, tables_dir, table_name, progress)`` where ``entries`` are
+``aggregate_runs(entries, tables_dir, table_name, progress, report)`` where ``entries`` are
 ``RunEntry`` items (``progress``: progress bars, None: on a terminal); it writes per-track
 metrics into each run directory and returns the table files it wrote. ``metrics_dataset``
 reads the metrics of every run back as one Parquet dataset.
@@ -22,7 +22,7 @@ if TYPE_CHECKING:  # pandas (0.2 s) and pyarrow.dataset load where used, not at 
     import pandas as pd
     import pyarrow.dataset as pds
 
-from tma.errors import InputError
+from tma.errors import ConfigError, InputError
 from tma.families import family as family_of
 from tma.io.dataset import Dataset, datasets_dir
 from tma.io.owned import plain_name, remove_stale_temporaries
@@ -54,12 +54,13 @@ class RunEntry:
 
 
 def aggregate(data_dir, tables_dir, jobs, table=None, default_suffix="custom",
-              progress=None) -> list[Path]:
+              progress=None, report=None) -> list[Path]:
     """Aggregate the runs of ``jobs`` (``(Dataset, estimator config)`` pairs) into one table
     per family: ``table`` (``<table>-<family>`` when several families), else
     ``<dataset>-<estimator>`` for a single run, else ``<family>-<default_suffix>``.
     ``progress``: progress bars where a report draws per-contact outputs (None: on a
-    terminal only; the stage passes its ``progress`` option)."""
+    terminal only; the stage passes its ``progress`` option); ``report``: the kind of table,
+    one the family's report module offers (None: its own)."""
     check_datasets(ds for ds, _ in jobs)
     runs = []
     for dataset, est_cfg in jobs:
@@ -75,6 +76,11 @@ def aggregate(data_dir, tables_dir, jobs, table=None, default_suffix="custom",
             RunEntry(dataset, estimator, root, manifest, estimates.to_pandas(),
                      seconds_per_track(root)))
     written = []
+    for family in by_family:
+        kinds = getattr(family_of(family).report, "REPORTS", {})
+        if report is not None and report not in kinds:
+            raise ConfigError(f"report={report}: {family} has no such table; its kinds: "
+                              + (", ".join(kinds) or "none but its own (report=null)"))
     for family, entries in by_family.items():
         module = family_of(family).report
         if table is not None:
@@ -83,7 +89,8 @@ def aggregate(data_dir, tables_dir, jobs, table=None, default_suffix="custom",
             name = f"{entries[0].dataset.name}-{entries[0].estimator}"
         else:
             name = f"{family}-{default_suffix}"
-        written += module.aggregate_runs(entries, Path(tables_dir), name, progress=progress)
+        written += module.aggregate_runs(entries, Path(tables_dir), name, progress=progress,
+                                         report=report)
     for path in written:  # what a killed aggregate left of these files, and nothing else
         remove_stale_temporaries(path.parent, only_dead=True, names=[path.name])
     return written
@@ -115,9 +122,11 @@ def prefetch_report(name: str) -> threading.Thread | None:
 KEY_COLUMNS = ("family", "dataset", "estimator", "run")
 
 
-def sweep_record(sweep: str | None, job: int, data_dir, tables_dir, jobs) -> dict:
-    """What one aggregate job of a sweep read (its runs), for ``aggregate_sweep``."""
+def sweep_record(sweep: str | None, job: int, data_dir, tables_dir, jobs, report=None) -> dict:
+    """What one aggregate job of a sweep read (its runs, the kind of table), for
+    ``aggregate_sweep``."""
     return {"sweep": sweep, "job": job, "data_dir": str(Path(data_dir).resolve()),
+            "report": report,
             "tables_dir": str(Path(tables_dir).resolve()),
             "runs": [{"dataset": str(Path(ds.root).resolve()), "estimator": est}
                      for ds, est in jobs]}
@@ -145,7 +154,9 @@ def aggregate_sweep(records: list[dict], table: str | None = None) -> list[Path]
     written = []
     for (data_dir, tables_dir), runs in groups.items():
         jobs = [(Dataset.open(r["dataset"]), r["estimator"]) for r in runs.values()]
-        written += aggregate(data_dir, tables_dir, jobs, table=table, default_suffix="sweep")
+        report = next((r.get("report") for r in records), None)
+        written += aggregate(data_dir, tables_dir, jobs, table=table, default_suffix="sweep",
+                             report=report)
     return written
 
 

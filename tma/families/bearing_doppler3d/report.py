@@ -41,7 +41,7 @@ def _columns():
                    "us_per_path_obs"]
 
 
-def aggregate_runs(entries, tables_dir, table_name, progress=None) -> list[Path]:
+def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) -> list[Path]:
     rows, curves, runs = [], [], []
     for e in entries:
         err, est, t, ok = errors(e.estimates, e.dataset.read_truth())

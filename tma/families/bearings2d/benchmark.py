@@ -42,7 +42,6 @@ from tma.tables import save_figure, write_table  # noqa: E402
 
 log = logging.getLogger(__name__)
 
-TABLES = ("bearings2d_benchmark", "bearings2d_outliers")  # table names (and "-<job>" of sweeps)
 UNITS = {"range": "m", "course": "deg", "speed": "m_s"}
 COLUMNS = [
     "estimator", "sigma_deg", "outlier_prob", "n_tracks",
@@ -65,12 +64,6 @@ of tracks with status `ok`; consistent: share of the ok tracks whose normalised 
 below the chi-square(4) 95 % point (about 95 % when the one-sigma errors are honest). ms/track:
 the estimator's wall time per track (worker processes; varies with the machine's load).
 Every number is read from the run files under `data/runs/`."""
-
-
-def is_benchmark(table_name: str | None) -> bool:
-    """True for the benchmark tables' names (a sweep job's ``<name>-<N>`` included)."""
-    return bool(table_name) and any(table_name == t or table_name.startswith(f"{t}-")
-                                    for t in TABLES)
 
 
 def estimator_label(name: str, config: dict) -> str:

@@ -41,7 +41,6 @@ from tma.tables import markdown_table, save_figure, write_csv, write_table  # no
 
 log = logging.getLogger(__name__)
 
-TABLE = "bearings2d_manoeuvre"
 SIZE_BINS_DEG = (0, 30, 45, 60, 75, 90, 120)
 COLUMNS = [
     "estimator", "motion", "sigma_deg", "n_tracks",
@@ -62,11 +61,6 @@ detection rate on manoeuvring ones; for `last_leg`, a last leg found); ok: share
 |range error| / range (the tracks with an estimate) and the range RMSE of the ok tracks, at
 the last bearing against the target's state then (on its last leg). 95 % Wilson intervals.
 Every number is read from the run and dataset files under `data/`."""
-
-
-def is_manoeuvre_table(table_name: str | None) -> bool:
-    """True for this table's name (a sweep job's ``<name>-<N>`` included)."""
-    return bool(table_name) and (table_name == TABLE or table_name.startswith(f"{TABLE}-"))
 
 
 def motion_label(scenario: dict) -> str:

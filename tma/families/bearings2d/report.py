@@ -331,10 +331,17 @@ def _report_without_truth(entry, tables_dir, name: str, progress=None) -> list[P
     return written
 
 
-def aggregate_runs(entries, tables_dir, table_name, progress=None) -> list[Path]:
-    """Metrics per track into each run dir; the comparison table for simulated datasets, with
-    its section against the paper, and a per-track report for each dataset without truth
-    (``progress``: a progress bar over its per-contact plots; None: on a terminal only)."""
+# the other kinds of table of simulated runs an experiment may ask for (``report=``): each
+# estimator against the Cramer-Rao bound, and targets that manoeuvre
+REPORTS = {"benchmark": benchmark.write_benchmark,
+           "manoeuvre": manoeuvre_table.write_manoeuvre_table}
+
+
+def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) -> list[Path]:
+    """Metrics per track into each run dir; for simulated datasets the comparison table with
+    its section against the paper, or the kind of table ``report`` names (``REPORTS``), and
+    a per-track report for each dataset without truth (``progress``: a progress bar over its
+    per-contact plots; None: on a terminal only)."""
     rows, written, runs, truths = [], [], [], {}
     for entry in entries:
         if id(entry.dataset) not in truths:  # read (and checked) once per dataset
@@ -352,10 +359,8 @@ def aggregate_runs(entries, tables_dir, table_name, progress=None) -> list[Path]
         runs.append(paper.Run(entry.estimator, sigma, metrics,
                               entry.estimates["n_bearings"].to_numpy(),
                               entry.dataset.manifest["config"], entry.manifest["config"]))
-    if rows and benchmark.is_benchmark(table_name):  # estimators x sigma against the CRLB
-        written += benchmark.write_benchmark(entries, tables_dir, table_name)
-    elif rows and manoeuvre_table.is_manoeuvre_table(table_name):  # targets that manoeuvre
-        written += manoeuvre_table.write_manoeuvre_table(entries, tables_dir, table_name)
+    if rows and report is not None:  # another kind of table, declared by the experiment
+        written += REPORTS[report](entries, tables_dir, table_name)
     elif rows:
         written += write_success_table(rows, tables_dir, table_name,
                                        (paper.against_paper(runs), paper.INTRO))

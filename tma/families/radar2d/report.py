@@ -76,7 +76,7 @@ def _intro(by_dataset: dict) -> str:
     return intro + "\n\n" + "\n".join(lines)
 
 
-def aggregate_runs(entries, tables_dir, table_name, progress=None) -> list[Path]:
+def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) -> list[Path]:
     # one set of segments per dataset, so that its rows are measured on the same scans: the
     # rule's J is the longest memory among the dataset's trackers (the default if none has one)
     configs = {e.dataset.name: e.dataset.manifest["config"] for e in entries}

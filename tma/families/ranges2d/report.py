@@ -24,7 +24,7 @@ from tma.io.atomic import write_parquet_atomic  # noqa: E402
 from tma.tables import save_figure, write_table  # noqa: E402
 
 
-def aggregate_runs(entries, tables_dir, table_name, progress=None) -> list[Path]:
+def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) -> list[Path]:
     reference = next((e for e in entries if estimator_class(e.estimator).reference), None)
     if reference is None:
         raise ConfigError("the ranges2d table measures errors against 'quadrature': "
