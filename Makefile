@@ -38,7 +38,7 @@ test: $(STAMP)  ## run the test suite (pytest, one worker per core)
 	$(PY) -m pytest -q -n $(TEST_JOBS) $(ARGS)
 
 lint: $(STAMP)  ## ruff
-	$(VENV)/bin/ruff check tma pipeline tests bench
+	$(VENV)/bin/ruff check tma pipeline tests bench examples
 
 bench: $(STAMP)  ## benchmarks of every family (ratios against named baselines, stage times)
 	$(PY) bench/bench.py $(ARGS)

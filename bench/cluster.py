@@ -20,10 +20,10 @@ sys.path.insert(0, str(REPO))
 from hydra import compose, initialize_config_dir  # noqa: E402
 
 from pipeline._common import CONF_DIR, estimator_nodes, scenario_nodes  # noqa: E402
+from tma.estimation import estimate_runs  # noqa: E402
 from tma.io.dataset import Dataset  # noqa: E402
 from tma.parallel import Engine, close_dask_clients, dask_client, run_tasks  # noqa: E402
-from tma.runs import estimate_runs  # noqa: E402
-from tma.simulate import simulate_datasets  # noqa: E402
+from tma.simulation import simulate_datasets  # noqa: E402
 
 
 def _nothing(task):

@@ -1,7 +1,7 @@
 """Run estimators over stored datasets: ``python -m pipeline.estimate [overrides]``."""
 
 from pipeline._common import engine, jobs, log, run_stage, stage_main
-from tma.runs import estimate_runs
+from tma.estimation import estimate_runs
 
 
 def estimate_stage(cfg):

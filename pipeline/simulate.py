@@ -2,7 +2,7 @@
 
 from pipeline._common import engine, estimator_nodes, log, run_stage, scenario_nodes, stage_main
 from tma.errors import ConfigError
-from tma.simulate import simulate_datasets
+from tma.simulation import simulate_datasets
 
 
 def simulate_stage(cfg):

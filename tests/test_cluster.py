@@ -23,7 +23,7 @@ from tests.conftest import REPO, compose_cfg, run_cli, run_stage_here
 from tests.test_pipeline import GRID, _all_stages, _files
 from tma.errors import ConfigError, InputError
 from tma.parallel import Engine, close_dask_clients, dask_client, run_tasks
-from tma.simulate import simulate_datasets
+from tma.simulation import simulate_datasets
 
 pytest.importorskip("distributed")
 DASK = Engine(kind="dask", n_workers=2)

@@ -105,8 +105,12 @@ def small_for(overrides: list[str]) -> list[str]:
 
 @pytest.fixture(scope="module")
 def logs(tmp_path_factory):
-    """The logs the README's ingest commands name, written as recorders write them (the
-    reader tests' writers and the recorded encounter of ``recorded_geometry``)."""
+    return write_logs(tmp_path_factory.mktemp("logs"))
+
+
+def write_logs(d: Path) -> Path:
+    """The logs the README's ingest commands name, written into ``d`` as recorders write
+    them (the reader tests' writers and the recorded encounter of ``recorded_geometry``)."""
     from tests.families.bearings2d.recorded_geometry import EPOCH_NS, iso, recorded
     from tests.families.bearings2d.test_bearings2d_sources_foxglove import write_foxglove
     from tests.families.bearings2d.test_bearings2d_sources_nmea import write_nmea
@@ -119,7 +123,6 @@ def logs(tmp_path_factory):
     from tma.families.bearings2d.log import write_bearings_log
     from tma.families.bearings2d.scenario import Config, simulate_shard
 
-    d = tmp_path_factory.mktemp("logs")
     log, _ = simulate_shard(Config(n_tracks=3, shard_size=3, sigma_deg=0.2, seed=11), 0)
     pd.DataFrame([{"time_s": t + 1.7e9, "own_x_m": log.own_x_m[k], "own_y_m": log.own_y_m[k],
                    "bearing_deg": log.bearing_deg[i, k], "track_id": int(log.track_id[i])}
@@ -310,20 +313,6 @@ def test_every_documented_command_runs(command, logs, tmp_path, monkeypatch):
         assert extra in project["optional-dependencies"], command
     else:
         raise AssertionError(f"no rule checks the documented command {command!r}")
-
-
-def test_the_metrics_dataset_example_runs(tmp_path, monkeypatch):
-    (python,) = [text for doc in DOCS for _, _, text in fenced(doc, "python")]
-    monkeypatch.chdir(tmp_path)
-    args = [*SMALL, "parallel=serial", "scenario.sigma_deg=0.5", "paths.data_dir=data",
-            "paths.tables_dir=tables"]
-    run_stage_here("simulate", *args)
-    for verb in ("estimate", "aggregate"):
-        run_stage_here(verb, "-m", *args, "estimator=lm,nbearings")
-    namespace = {}
-    exec("import pyarrow.compute\nimport tma.aggregate\n" + python, namespace)
-    assert set(namespace["ds"].to_table().column("estimator").to_pylist()) == {"lm",
-                                                                                "nbearings"}
 
 
 # -- what the docs quote -----------------------------------------------------------------------

@@ -16,7 +16,7 @@ from tma.experiment import (
     scenario_points,
 )
 from tma.families import dataset_name, estimator_class, load_scenario, scenario_module
-from tma.simulate import simulate_datasets
+from tma.simulation import simulate_datasets
 
 
 def _scenario(family="bearings2d", **values):

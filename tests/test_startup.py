@@ -45,8 +45,8 @@ from tma.config import to_plain
 from tma.families import build_estimator
 from tma.families.bearings2d.scenario import Config
 from tma.io.dataset import write_manifest
-from tma.runs import ShardTask, estimate_shard_group
-from tma.simulate import ShardTask as SimulateTask, simulate_group
+from tma.estimation import ShardTask, estimate_shard_group
+from tma.simulation import ShardTask as SimulateTask, simulate_group
 
 root = r"{tmp_path}"
 config = to_plain(Config(n_tracks=20, shard_size=20))

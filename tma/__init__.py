@@ -3,6 +3,11 @@
 Angles are degrees in configs, logs and tables and radians inside the code; bearings and
 courses are measured clockwise from north (x east, y north, metres, seconds) unless a
 scenario family documents otherwise.
+
+From Python (``docs/api.md``): ``tma.read_log``, ``tma.Recording.from_frames``,
+``tma.estimate``, ``tma.plot_contact``, ``tma.write_map``, ``tma.open_dataset``,
+``tma.runs`` and ``tma.simulate`` (``tma.api``), loaded when first used so that ``import
+tma`` stays light.
 """
 
 from importlib.metadata import PackageNotFoundError, version
@@ -11,3 +16,19 @@ try:
     __version__ = version("tma")
 except PackageNotFoundError:  # running from a checkout without installation
     __version__ = "0.0.0+checkout"
+
+API = ("Recording", "read_log", "estimate", "plot_contact", "write_map", "open_dataset",
+       "runs", "simulate")
+__all__ = [*API, "__version__"]
+
+
+def __getattr__(name: str):
+    if name in API:
+        from tma import api
+
+        return getattr(api, name)
+    raise AttributeError(f"module 'tma' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted([*globals(), *API])

@@ -23,11 +23,7 @@ if TYPE_CHECKING:  # pandas (0.2 s) and pyarrow.dataset load where used, not at 
     import pyarrow.dataset as pds
 
 from tma.errors import ConfigError, InputError
-from tma.families import family as family_of
-from tma.io.dataset import Dataset, datasets_dir
-from tma.io.owned import plain_name, remove_stale_temporaries
-from tma.parallel import in_threads
-from tma.runs import (
+from tma.estimation import (
     MANIFEST,
     check_datasets,
     full_config,
@@ -37,12 +33,16 @@ from tma.runs import (
     runs_dir,
     seconds_per_track,
 )
+from tma.families import family as family_of
+from tma.io.dataset import Dataset, datasets_dir
+from tma.io.owned import plain_name, remove_stale_temporaries
+from tma.parallel import in_threads
 
 
 @dataclass
 class RunEntry:
     """A finished run as a report sees it: its dataset, estimator, directory, manifest and
-    estimates, and its wall seconds per track (``tma.runs.seconds_per_track``; NaN when
+    estimates, and its wall seconds per track (``tma.estimation.seconds_per_track``; NaN when
     unknown), read once here."""
 
     dataset: Dataset
@@ -184,6 +184,23 @@ def _constant_type(values: list) -> pa.DataType:
         return pa.array(present).type
     except (pa.ArrowInvalid, pa.ArrowTypeError):  # mixed types: compare as text
         return pa.string()
+
+
+def runs_without_metrics(data_dir="data", family=None, name="metrics") -> list[str]:
+    """Runs (``<dataset>/<run>``) under ``<data_dir>/runs/`` that are finished (a manifest)
+    but hold no ``<name>.parquet``: never aggregated, or computed again since
+    (``estimate force=true`` removes it); ``metrics_dataset`` cannot include them."""
+    missing = []
+    for manifest_path in sorted(runs_dir(data_dir).glob(f"*/*/{MANIFEST}")):
+        run_root = manifest_path.parent
+        if run_root.name.startswith(".") or run_root.parent.name.startswith("."):
+            continue  # staging directories
+        if family is not None and (_read_json(manifest_path).get("dataset") or {}).get(
+                "family") != family:
+            continue
+        if not (run_root / f"{name}.parquet").exists():
+            missing.append(f"{run_root.parent.name}/{run_root.name}")
+    return missing
 
 
 def metrics_dataset(data_dir="data", name="metrics", family=None) -> "pds.Dataset":

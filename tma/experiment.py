@@ -35,10 +35,10 @@ from pathlib import Path
 
 from tma.config import to_plain
 from tma.errors import ConfigError, InputError
+from tma.estimation import dataset_config
 from tma.families import build_estimator, dataset_name, load_scenario, scenario_module
 from tma.io.dataset import MANIFEST, Dataset, datasets_dir
 from tma.io.owned import plain_name
-from tma.runs import dataset_config
 
 
 @dataclasses.dataclass(frozen=True)
@@ -223,7 +223,7 @@ def open_datasets(data_dir, dataset: str | None, scenarios: list[dict],
 def dataset_jobs(datasets: list[Dataset], estimators: list[dict],
                  overrides: list[Override]) -> list[tuple[Dataset, dict]]:
     """``(dataset, estimator config)`` of every dataset and estimator, each config as it runs
-    on its dataset (``tma.runs.dataset_config``): on a recorded log an estimator's
+    on its dataset (``tma.estimation.dataset_config``): on a recorded log an estimator's
     ``recorded_defaults`` (``lm``: ``initial_bearing_deg`` null, from the first bearing) replace
     its defaults where the command line sets no value (``estimator.KEY=``,
     ``grid.estimators.NAME.KEY=``)."""

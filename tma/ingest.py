@@ -18,7 +18,7 @@ complete, so a failed ingest (even with ``force=true``) leaves an existing datas
 """
 
 import logging
-from dataclasses import fields
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 from tma.config import to_plain
@@ -116,13 +116,24 @@ def _require(rec, path, kind, options):
                          + ", or give them in a separate file with navigation=FILE")
 
 
-def ingest(input_path, *, data_dir, family: str, name=None, fmt="auto", force=False,
-           navigation=None, options=None, **settings) -> Path:
-    """Validate a recorded log and write it as a dataset of ``family``; returns the dataset
-    directory.
+@dataclass
+class Read:
+    """A recorded log read into a family's logs (``logs``: one per own-ship), before it is
+    stored: the reading ``config`` and ``sources`` the manifest records, and the ``summary``
+    of what was found, noted, dropped and skipped."""
 
-    ``fmt``: auto | csv | nmea | mcap (the input's kind); ``navigation``: a separate own-ship
-    file or None; ``options``: the family's reading options or a config node of their groups
+    family: str
+    logs: list
+    config: dict
+    sources: dict
+    summary: dict
+
+
+def read_log(input_path, *, family: str, fmt="auto", navigation=None, options=None,
+             **settings) -> Read:
+    """Read and check a recorded log as ``ingest`` does, without storing it: ``fmt``: auto |
+    csv | nmea | mcap (the input's kind); ``navigation``: a separate own-ship file or None;
+    ``options``: the family's reading options or a config node of their groups
     (``columns``, ``bearing``, ``ownship``, ``csv``, ``time``, ``nav``, ``origin``), e.g.
     ``{"bearing": {"units": "rad"}}``; ``settings``: the family's own (``bearings2d``:
     ``sigma_deg``, ``min_bearings``)."""
@@ -131,61 +142,103 @@ def ingest(input_path, *, data_dir, family: str, name=None, fmt="auto", force=Fa
         raise ConfigError(f"ingest needs input=<path to the {reader.OBSERVATION.role} log: "
                           ".csv, .tsv or .mcap>")
     settings = reader.Settings(**settings)
-    if not isinstance(force, bool):
-        raise ConfigError(f"force must be true or false, got '{force}'")
     options = source_options(options, reader.OBSERVATION)
     if fmt not in ("auto", *KINDS):
         raise ConfigError(f"format must be auto, csv, nmea or mcap, got '{fmt}'")
-    path = Path(str(input_path))
-    name = plain_name(name if name is not None else path.stem, "name")
-    room = name_room(family_named(family).estimators)
-    if len(name.encode()) > room:
-        raise ConfigError(f"name={name[:40]}... is too long: its tables are named "
-                          "<name>-<estimator>-<contact>.png and must fit a file name; give "
-                          f"name= of at most {room} characters")
     path = _file(input_path, "input")
     nav_path = None if navigation is None else _file(navigation, "navigation")
-
     recordings, kind, nav_kind = read_recordings(path, fmt, nav_path, options)
-    aligned = align(recordings, options, str(path))
+    sources = {"input": {"path": str(path), "sha256": sha256_file(path), "kind": kind}}
+    if nav_path is not None:
+        sources["navigation"] = {"path": str(nav_path), "sha256": sha256_file(nav_path),
+                                 "kind": nav_kind}
+    return _read(family, recordings, options, settings, {"format": fmt}, sources, str(path))
+
+
+def read_frames(bearings, navigation=None, *, family: str, options=None, **settings) -> Read:
+    """``read_log`` of pandas DataFrames: ``bearings`` (time, the observation and, unless
+    ``navigation`` gives them, own-ship fixes: the columns a CSV table would have), read by
+    the CSV reader (``tma.sources.csv_table.read_frame``)."""
+    from tma.sources.csv_table import read_frame
+
+    reader = family_named(family).ingest
+    settings = reader.Settings(**settings)
+    options = source_options(options, reader.OBSERVATION)
+    complaint = inapplicable(options, {"frame": "csv"})
+    if complaint:
+        raise ConfigError(complaint)
+    name = f"{reader.OBSERVATION.plural} frame"
+    if navigation is None:
+        recordings = read_frame(bearings, name, options, navigation=True, contacts=True)
+        for r in recordings:
+            _require(r, name, "csv", options)
+    else:
+        found = read_frame(bearings, name, options, navigation=False, contacts=True)
+        nav = read_frame(navigation, "navigation frame", options, navigation=True,
+                         contacts=False)
+        rec = found[0]
+        rec.navigation, rec.notes = nav[0].navigation, [*rec.notes, *nav[0].notes]
+        rec.dropped.merge(nav[0].dropped)
+        recordings = [rec]
+    return _read(family, recordings, options, settings, {"format": "frame"},
+                 {"input": {"path": name, "kind": "frame"}}, name)
+
+
+def _read(family, recordings, options, settings, config, sources, where) -> Read:
+    """Align ``recordings``, make the family's logs, log what was noted and dropped."""
+    reader = family_named(family).ingest
+    aligned = align(recordings, options, where)
     summary = aligned.summary
     for note in summary["notes"]:
         log.info("%s", note)
     dropped = summary[f"dropped_{options.observation.plural}"]
     if dropped["count"]:
         log.warning("%s: dropped %d %s(s) (%d before, %d after the own-ship fixes): %s",
-                    path, dropped["count"], options.observation.role,
+                    where, dropped["count"], options.observation.role,
                     dropped["before_navigation"], dropped["after_navigation"], dropped["why"])
     if aligned.epoch_utc_ns is None and aligned.origin_deg is not None:
         log.warning("%s: relative times: the outputs give no UTC and no map MCAP is written (it "
                     "would be dated 1970); give time.start_utc=<ISO-8601 UTC of the log's time "
-                    "0> to date them", path)
+                    "0> to date them", where)
     gaps = summary["nav_gaps"]
     if gaps["count"]:
         log.warning("own-ship navigation has %d gap(s) longer than nav.max_gap_s = %g s "
                     "(longest %.3g s, the first from t = %.3f s): own-ship is interpolated "
                     "across them", gaps["count"], gaps["max_gap_s"], gaps["longest_s"],
                     gaps["gaps"][0]["from_s"])
-    logs, config, extra = reader.logs(aligned, settings, str(path))
+    logs, family_config, extra = reader.logs(aligned, settings, where)
     bad = aligned.dropped
     if bad.count:
-        log.warning("%s: left out %d bad row(s) (bad_rows=%s): %s", path, bad.count,
+        log.warning("%s: left out %d bad row(s) (bad_rows=%s): %s", where, bad.count,
                     bad.policy, bad.text())
     summary["bad_rows"] = bad.record()
+    config = {**config, **family_config, "options": to_plain(options)}
+    return Read(family, logs, config, sources, {**summary, **extra})
 
-    sources = {"input": {"path": str(path), "sha256": sha256_file(path), "kind": kind}}
-    if nav_path is not None:
-        sources["navigation"] = {"path": str(nav_path), "sha256": sha256_file(nav_path),
-                                 "kind": nav_kind}
-    config = {"format": fmt, **config, "options": to_plain(options)}
+
+def ingest(input_path, *, data_dir, family: str, name=None, fmt="auto", force=False,
+           navigation=None, options=None, **settings) -> Path:
+    """Validate a recorded log and write it as a dataset of ``family`` (``read_log``, whose
+    arguments these are); returns the dataset directory."""
+    if not isinstance(force, bool):
+        raise ConfigError(f"force must be true or false, got '{force}'")
+    if input_path is not None and str(input_path).strip():
+        name = plain_name(name if name is not None else Path(str(input_path)).stem, "name")
+        room = name_room(family_named(family).estimators)
+        if len(name.encode()) > room:
+            raise ConfigError(f"name={name[:40]}... is too long: its tables are named "
+                              "<name>-<estimator>-<contact>.png and must fit a file name; "
+                              f"give name= of at most {room} characters")
+    read = read_log(input_path, family=family, fmt=fmt, navigation=navigation,
+                    options=options, **settings)
     root = datasets_dir(data_dir) / name
     with building([root], resume=False) as outputs:  # a failure leaves nothing behind
         if root.exists() and not is_owned(root):
             raise InputError(f"{root} exists and was not created by tma: choose another name=")
         if (root / MANIFEST).exists() and not force:
             raise InputError(f"dataset {root} exists: choose another name= or set force=true")
-        _write_dataset(outputs.stage(root, fresh=True), family, name, logs, config, sources,
-                       {**summary, **extra})
+        _write_dataset(outputs.stage(root, fresh=True), family, name, read.logs, read.config,
+                       read.sources, read.summary)
         return outputs.swap(root)
 
 

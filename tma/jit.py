@@ -69,6 +69,29 @@ def _stamp_dependencies(kernel, depends):
     cache_file._source_stamp = (cache_file._source_stamp, tuple(sorted(stamps)))
 
 
+_ANNOUNCED: set[str] = set()
+
+
+def _say_if_compiling(kernel, function):
+    """Say once per process and module, on stderr (worker processes' logging is not the
+    command's), that a module's kernels are about to be compiled: the first run on a machine
+    spends seconds there, silently otherwise. Later runs load them from numba's cache."""
+    cache_file = getattr(getattr(kernel, "_cache", None), "_cache_file", None)
+    index = getattr(cache_file, "_index_path", None)
+    module = function.__module__
+    if index is None or os.path.exists(index) or module in _ANNOUNCED:
+        return
+    _ANNOUNCED.add(module)
+    parts = module.split(".")
+    name = module.rsplit(".", 1)[-1].removesuffix("_kernel")
+    if parts[:2] == ["tma", "families"] and len(parts) > 3:  # "bearings2d lm"
+        name = f"{parts[2]} {name}"
+    import sys
+
+    print(f"note: compiling {name} kernels (numba), once per machine: later runs load them "
+          "from its cache", file=sys.stderr, flush=True)
+
+
 class Kernel:
     """A kernel whose numba dispatcher is made on first use. Called from Python it calls the
     dispatcher; inside another kernel numba types it as that dispatcher (``_numba_type_``);
@@ -88,6 +111,7 @@ class Kernel:
                 if self._dispatcher is None:
                     kernel = _compile(self.py_func, self._options)
                     _stamp_dependencies(kernel, self._depends)
+                    _say_if_compiling(kernel, self.py_func)
                     self._dispatcher = kernel
         return self._dispatcher
 

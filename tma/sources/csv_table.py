@@ -77,8 +77,23 @@ def read_csv_table(path, options, *, navigation: bool, contacts: bool) -> list[R
     own-ship). Rows with a missing or unreadable time, value, track id or own-ship position,
     or a time not absolute among absolute ones, are left out and counted
     (``options.bad_rows``; under ``fail`` the first refuses the file)."""
-    path = Path(path)
-    table = _Table(path, options)
+    return read_table(_Table(Path(path), options), options, navigation=navigation,
+                      contacts=contacts)
+
+
+def read_frame(frame: pd.DataFrame, name: str, options, *, navigation: bool,
+               contacts: bool) -> list[Recording]:
+    """``read_csv_table`` of a pandas DataFrame (``name``: what messages call it), read as
+    the same table written to a file would be: the same columns found, the same checks and
+    notes; a datetime64 column is UTC times (a zone-less one is taken as UTC and noted), and
+    a row's "line" is its position in the frame, from 0."""
+    return read_table(_Frame(frame, name, options), options, navigation=navigation,
+                      contacts=contacts)
+
+
+def read_table(table, options, *, navigation: bool, contacts: bool) -> list[Recording]:
+    """The Recordings of a ``_Table`` (a file's layout) or ``_Frame``."""
+    path = table.path
     role = options.observation.role
     cols = table.columns(navigation=navigation, contacts=contacts)
     df = table.read(cols)
@@ -344,6 +359,44 @@ class _Table:
     def lines(self, n: int) -> np.ndarray:
         """File line number of each data row (1 = the header)."""
         return np.arange(n) + (3 if self.units is not None else 2)
+
+
+class _Frame(_Table):
+    """A pandas DataFrame as a table: its columns are the header, its rows the lines."""
+
+    def __init__(self, frame: pd.DataFrame, name: str, options):
+        if not isinstance(frame, pd.DataFrame):
+            raise InputError(f"{name}: a pandas DataFrame is needed, got {type(frame).__name__}")
+        if frame.empty:
+            raise InputError(f"{name}: no rows")
+        self.path, self.options, self.notes = Path(name), options, []
+        self.frame = frame.reset_index(drop=True)
+        self.header = [str(c) for c in frame.columns]
+        if len(set(self.header)) != len(self.header):
+            raise InputError(f"{name}: two columns share a name: {', '.join(self.header)}")
+        self.units, self.delimiter, self.decimal = None, ",", "."
+
+    def read(self, cols: dict[str, str]) -> pd.DataFrame:
+        """The chosen columns; datetime64 ones as ISO-8601 UTC text (nanoseconds kept), the
+        track column as text as written (numbers as Python prints them: ``7``, ``7.5``)."""
+        out = {}
+        for role, name in cols.items():
+            series = self.frame.iloc[:, self.header.index(name)]
+            if pd.api.types.is_datetime64_any_dtype(series):
+                if getattr(series.dt, "tz", None) is None:
+                    self.notes.append(f"{self.path}: {name} without time zone read as UTC")
+                    series = series.dt.tz_localize("UTC")
+                text = series.dt.tz_convert("UTC").dt.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+                nanos = (series.dt.nanosecond % 1000).astype(str).str.zfill(3)
+                series = text.str[:-1] + nanos + "Z"  # %f stops at microseconds
+                series = series.where(self.frame.iloc[:, self.header.index(name)].notna())
+            elif role == "track":
+                series = series.map(lambda v: "" if pd.isna(v) else str(v)).astype(object)
+            out[name] = series
+        return pd.DataFrame(out)
+
+    def lines(self, n: int) -> np.ndarray:
+        return np.arange(n)
 
 
 def _is_number(text: str, decimal: str = ".") -> bool:

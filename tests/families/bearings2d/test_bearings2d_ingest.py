@@ -59,8 +59,8 @@ def test_csv_ingest_estimate_report(tmp_path, monkeypatch):
     assert (root / "manifest.json").exists() and not (root / "truth.parquet").exists()
     titles = []
     draw = map_outputs._TrackPlots.draw
-    monkeypatch.setattr(map_outputs._TrackPlots, "draw", lambda self, path, title, *a: (
-        titles.append(title) or draw(self, path, title, *a)))
+    monkeypatch.setattr(map_outputs._TrackPlots, "draw", lambda self, title, *a: (
+        titles.append(title) or draw(self, title, *a)))
     report = _estimate_and_report(tmp_path, "rec")
     assert list(report.track_id) == [0, 1, 2]
     # times from the log's start and in UTC, never Unix seconds

@@ -143,10 +143,12 @@ class _TrackPlots:
         ax.grid(True, alpha=0.3)
         self.fig.subplots_adjust(left=0.1, right=0.97, bottom=0.07, top=0.91)
 
-    def draw(self, path: Path, title: str, lg: BearingsLog, row: int, theta, cov_now):
-        """One contact: own-ship, bearing lines, estimated track, 95 % ellipse (km)."""
+    def draw(self, title: str, lg: BearingsLog, row: int, theta, cov_now, t_from=-np.inf):
+        """One contact: own-ship, bearing lines, the estimated track from ``t_from`` (where
+        its solution holds: ``leg_start_s``), 95 % ellipse (km)."""
         valid = np.flatnonzero(np.isfinite(lg.bearing_deg[row]))
         t = lg.t_s[valid]
+        t = t[t >= t_from] if (t >= t_from).any() else t
         own = np.column_stack([lg.own_x_m, lg.own_y_m])
         track = theta[:2] + np.outer(t, theta[2:])  # estimated positions over its span
         finite = np.isfinite(track).all()
@@ -183,7 +185,7 @@ class _TrackPlots:
             [self.ring] if ring.size else [])
         self.ax.legend(handles=drawn, loc="best", fontsize=8)
         self.ax.set_title(title, fontsize=10)
-        save_figure(self.fig, path)
+        return self.fig
 
     def close(self):
         plt.close(self.fig)
@@ -200,6 +202,7 @@ def write_track_plots(report: pd.DataFrame, estimates: pd.DataFrame, logs, table
                                   estimates["t_last_s"].to_numpy(float))
     where = {int(i): (lg, row) for lg in logs for row, i in enumerate(lg.track_id)}
     shown = shown_labels(report["label"])
+    time_origin = (report["t_now_s"] - estimates["t_last_s"]).to_numpy()  # the report's clock
     if len(report) > MAX_PLOTS:
         log.info("%s: plotting the first %d of %d contacts (MAX_PLOTS); the table and the map "
                  "MCAP hold them all", name, MAX_PLOTS, len(report))
@@ -218,15 +221,40 @@ def write_track_plots(report: pd.DataFrame, estimates: pd.DataFrame, logs, table
                 part = f"{part}-{r.track_id}"
             used.add(part)
             path = Path(tables_dir) / fit_file_name(name, part, ".png")
-            plots.draw(path, f"{name}: contact {shown[n]}, status {r.status}\nrange "
-                       f"{r.range_now_m / 1e3:.2f} km, course {r.course_deg:.1f} deg, speed "
-                       f"{r.speed_m_s:.2f} m/s at "
-                       + (f"t = {r.t_now_s:g} s from the start" if epoch_utc_ns is None
-                          else r.time_now_utc), lg, row, theta[n], cov_now[n])
+            save_figure(plots.draw(plot_title(name, shown[n], r, epoch_utc_ns), lg, row,
+                                   theta[n], cov_now[n], r.leg_start_s - time_origin[n]), path)
             paths.append(path)
     finally:
         plots.close()
     return paths
+
+
+def plot_title(name: str, shown: str, r, epoch_utc_ns) -> str:
+    """A contact plot's title: the contact, its status and its kinematics now (UTC, or
+    seconds from the log's start when it is not dated). ``r``: its report row."""
+    return (f"{name}: contact {shown}, status {r.status}\nrange {r.range_now_m / 1e3:.2f} km, "
+            f"course {r.course_deg:.1f} deg, speed {r.speed_m_s:.2f} m/s at "
+            + (f"t = {r.t_now_s:g} s from the start" if epoch_utc_ns is None
+               else r.time_now_utc))
+
+
+def contact_figure(report: pd.DataFrame, estimates: pd.DataFrame, logs, label: str,
+                   name: str = "tma", epoch_utc_ns=None):
+    """The matplotlib Figure of one contact's plot (as ``write_track_plots`` draws it),
+    ``label`` its report label; KeyError naming the labels when there is no such contact."""
+    match = np.flatnonzero(report["label"].astype(str).to_numpy() == str(label))
+    if match.size == 0:
+        raise KeyError(f"no contact {label!r}; contacts: {', '.join(map(str, report['label']))}")
+    n = int(match[0])
+    r = report.iloc[n]
+    est = estimates.iloc[[n]]
+    theta = est[["x0_m", "y0_m", "vx_m_s", "vy_m_s"]].to_numpy(float)[0]
+    cov_now = position_covariance(theta_covariance(est), est["t_last_s"].to_numpy(float))[0]
+    lg, row = next((lg, row) for lg in logs for row, i in enumerate(lg.track_id)
+                   if int(i) == int(r.track_id))
+    plots = _TrackPlots()
+    return plots.draw(plot_title(name, shown_labels(report["label"])[n], r, epoch_utc_ns), lg,
+                      row, theta, cov_now, r.leg_start_s - (r.t_now_s - est["t_last_s"].iloc[0]))
 
 
 # -- the estimated tracks as an MCAP ---------------------------------------------------------
@@ -252,6 +280,8 @@ def write_map_mcap(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, ep
     for n, r in enumerate(report.itertuples(index=False)):
         k, row = where[int(r.track_id)]
         t = logs[k].t_s[np.isfinite(logs[k].bearing_deg[row])]
+        held = t >= r.leg_start_s - (r.t_now_s - estimates["t_last_s"].iloc[n])
+        t = t[held] if held.any() else t  # where the solution holds (its leg)
         x, y = (theta[n, :2, None] + theta[n, 2:, None] * t)
         lat, lon = local_to_geodetic(x, y, origin_deg)
         if not np.isfinite(lat).all():  # no finite estimate, or one farther than a map
@@ -265,7 +295,8 @@ def write_map_mcap(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, ep
         cov = enu_covariance(cov) if np.isfinite(cov).all() else None
         channels.append(Channel.protobuf(topic, LocationFix, {
             "track_id": str(r.track_id), "status": r.status,
-            "estimate": "constant-velocity fit of all bearings; covariance (J^T J)^-1 sigma^2"}))
+            "estimate": "the estimator's track over the bearings its solution rests on (from "
+                        "leg_start_s); covariance as in the report"}))
         parts.append((t, lat.tolist(), lon.tolist(), cov, f"contact {shown[n]}"))
     if skipped:
         log.warning("%s: no finite estimate within %g km of the origin for %s: not in the map",

@@ -301,14 +301,21 @@ def warn_not_ok(report: pd.DataFrame, where: str):
                         "each", where, rows.size, status, STATUS_WHY[status], names)
 
 
+def contact_report(estimates: pd.DataFrame, logs, where: str) -> pd.DataFrame:
+    """``track_report`` of the estimates of ``logs`` (a recorded log's, one per own-ship):
+    their UTC epoch, origin and labels. What aggregate writes, and ``tma.estimate`` returns."""
+    epoch, origin, labels = reference(logs, where)
+    return track_report(estimates, epoch, origin, labels,
+                        sigma_known=any(lg.sigma_deg is not None for lg in logs))
+
+
 def _report_without_truth(entry, tables_dir, name: str, progress=None) -> list[Path]:
     """The per-track report of a dataset without truth: ``<name>.{csv,md}``, a PNG per
     contact and, with a geographic origin, the map MCAP ``<name>.mcap``."""
     m, dataset = entry.dataset.manifest, entry.dataset
     logs = read_logs(dataset)
-    epoch, origin, labels = reference(logs, str(dataset.root))
-    report = track_report(entry.estimates, epoch, origin, labels,
-                          sigma_known=any(lg.sigma_deg is not None for lg in logs))
+    epoch, origin, _ = reference(logs, str(dataset.root))
+    report = contact_report(entry.estimates, logs, str(dataset.root))
     warn_not_ok(report, dataset.name)
     write_parquet_atomic(entry.run_root / "report.parquet",
                          pa.Table.from_pandas(report, preserve_index=False))

@@ -121,22 +121,29 @@ def _finished_record(task: ShardTask):
     return record if whole else None
 
 
+def estimate_log(estimator, log):
+    """``estimator`` over one log: its output as a table (a row per track, ``track_id``
+    first), its side tables (small tables it declares, e.g. sample points for plots) and the
+    seconds it took. What every shard of a run, and ``tma.estimate``, computes."""
+    start = perf_counter()
+    columns = estimator.estimate(log)
+    seconds = perf_counter() - start
+    extras = columns.pop("extras", {})
+    if not set(extras) <= set(estimator.side_tables):  # a shard may hold none of them
+        raise RuntimeError(f"estimator '{estimator.name}' returned side tables "
+                           f"{sorted(extras)}, declared {sorted(estimator.side_tables)}")
+    return columns_to_table(log.track_id, columns), extras, seconds
+
+
 def estimate_shard(task: ShardTask, log) -> dict:
     """Run one estimator over one dataset shard's log and write its output."""
     out = Path(task.out_path)
     estimator = build_estimator(task.estimator_config)
     estimator.data_dir = Path(task.data_dir)
-    start = perf_counter()
-    columns = estimator.estimate(log)
-    seconds = perf_counter() - start
-    # Optional small side tables (e.g. sample points for plots): written beside the shard.
-    extras = columns.pop("extras", {})
-    if not set(extras) <= set(estimator.side_tables):  # a shard may hold none of them
-        raise RuntimeError(f"estimator '{estimator.name}' returned side tables "
-                           f"{sorted(extras)}, declared {sorted(estimator.side_tables)}")
-    for name, table in extras.items():
-        write_parquet_atomic(extra_path(out, name), arrow.table(table))
-    write_parquet_atomic(out, columns_to_table(log.track_id, columns))
+    table, extras, seconds = estimate_log(estimator, log)
+    for name, side in extras.items():  # written beside the shard
+        write_parquet_atomic(extra_path(out, name), arrow.table(side))
+    write_parquet_atomic(out, table)
     epochs = int(log.t_s.size)
     return mark_finished(out, task.key, rows=int(log.n_tracks), epochs=epochs, seconds=seconds,
                          extras=sorted(extras))

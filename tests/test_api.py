@@ -1,0 +1,216 @@
+"""tma from Python (``tma.api``, issue 23): the documented examples run as written, and every
+function gives what the commands give for the same input."""
+
+import logging
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import tma
+from tests.conftest import REPO, run_stage_here
+from tests.test_docs import fenced, write_logs
+
+SMALL = ["scenario.n_tracks=20", "scenario.shard_size=20", "progress=false", "parallel=serial"]
+
+
+@pytest.fixture(scope="module")
+def workdir(tmp_path_factory):
+    """The logs the README names, ``trial7`` ingested from one, and a small aggregated table
+    of two estimators at sigma 0.5 (data/, tables/)."""
+    root = write_logs(tmp_path_factory.mktemp("api"))
+    paths = [f"paths.data_dir={root / 'data'}", f"paths.tables_dir={root / 'tables'}"]
+    run_stage_here("ingest", f"input={root / 'my_log.csv'}", "name=trial7", *paths,
+                   "progress=false")
+    run_stage_here("simulate", *SMALL, *paths, "scenario.sigma_deg=0.5")
+    for verb in ("estimate", "aggregate"):
+        run_stage_here(verb, "-m", *SMALL, *paths, "scenario.sigma_deg=0.5",
+                       "estimator=lm,nbearings")
+    return root
+
+
+@pytest.mark.parametrize("doc", ["docs/api.md", "README.md"])
+def test_the_documented_python_runs_as_written(doc, workdir, monkeypatch):
+    """Every python block of the page, in order, in one namespace, nothing prepended."""
+    monkeypatch.chdir(workdir)
+    blocks = [text for _, _, text in fenced(REPO / doc, "python")]
+    assert blocks
+    namespace = {}
+    for block in blocks:
+        exec(compile(block, doc, "exec"), namespace)
+    assert len(namespace["results"]) >= 1
+
+
+def test_two_lines_from_a_dataframe_to_its_contacts():
+    """The README's count: ``import tma`` and one call."""
+    text = (REPO / "README.md").read_text()
+    assert "```python\nimport tma\nresults = tma.estimate(frame)\n```" in text
+
+
+def test_the_example_runs_as_a_script(tmp_path):
+    env = {**os.environ, "TMA_EXAMPLE_OUT": str(tmp_path), "PYTHONWARNINGS": "ignore"}
+    proc = subprocess.run([sys.executable, str(REPO / "examples" / "real_log.py")], env=env,
+                          capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert {"contacts.csv", "contacts.mcap", "247007000.png"} <= {
+        p.name for p in tmp_path.iterdir()}
+    assert " ok " in proc.stdout and "truth" in proc.stdout
+    first = (REPO / "examples" / "real_log.py").read_text().splitlines()[:8]
+    assert "#   jupytext:" in first and "#       format_name: percent" in first
+
+
+def test_estimate_is_what_the_commands_report(workdir, tmp_path):
+    """``pipeline.table input=`` and ``tma.estimate(tma.read_log(...))`` on one log: the
+    same numbers in the same columns."""
+    paths = [f"paths.data_dir={tmp_path / 'data'}", f"paths.tables_dir={tmp_path / 't'}"]
+    run_stage_here("table", f"input={workdir / 'nav_export.csv'}", "name=nav", "sigma_deg=0.5",
+                   *paths, "progress=false", "parallel=serial")
+    cli = pd.read_csv(tmp_path / "t" / "nav-lm.csv")
+    api = tma.estimate(tma.read_log(workdir / "nav_export.csv", sigma_deg=0.5))
+    assert list(api.columns[:len(cli.columns)]) == list(cli.columns)
+    for column in ("range_now_m", "range_sd_m", "course_deg", "speed_sd_m_s",
+                   "motion_p_value", "lat_now_deg"):
+        np.testing.assert_allclose(api[column], cli[column], rtol=1e-12)
+    assert list(api["status"]) == list(cli["status"])
+    assert list(api["time_now_utc"]) == list(cli["time_now_utc"])
+
+
+def _export(workdir) -> pd.DataFrame:
+    return pd.read_csv(workdir / "nav_export.csv")
+
+
+@pytest.mark.parametrize("form", ["iso text", "datetime64 utc", "datetime64 naive",
+                                  "unix seconds"])
+def test_frames_read_as_the_same_table_written_to_a_file(workdir, form, caplog):
+    frame = _export(workdir)
+    times = pd.to_datetime(frame["timestamp_utc"], utc=True)
+    if form == "datetime64 utc":
+        frame["timestamp_utc"] = times
+    elif form == "datetime64 naive":
+        frame["timestamp_utc"] = times.dt.tz_localize(None)
+    elif form == "unix seconds":
+        frame["timestamp_utc"] = (times - pd.Timestamp(0, tz="UTC")).dt.total_seconds()
+    with caplog.at_level(logging.INFO, logger="tma"):
+        rec = tma.Recording.from_frames(frame, sigma_deg=0.5)
+    from_file = tma.read_log(workdir / "nav_export.csv", sigma_deg=0.5)
+    np.testing.assert_allclose(rec.logs[0].bearing_deg, from_file.logs[0].bearing_deg)
+    np.testing.assert_allclose(rec.logs[0].own_x_m, from_file.logs[0].own_x_m, atol=1e-6)
+    assert rec.start_utc == from_file.start_utc
+    if form == "datetime64 naive":
+        assert any("without time zone read as UTC" in n for n in rec.notes)
+    pd.testing.assert_frame_equal(tma.estimate(rec)[["range_now_m", "status"]],
+                                  tma.estimate(from_file)[["range_now_m", "status"]],
+                                  rtol=1e-6)
+
+
+def test_own_ship_in_its_own_frame_and_bad_frames(workdir):
+    frame = _export(workdir)
+    bearings = frame[["timestamp_utc", "bearing_deg", "contact"]]
+    navigation = frame[["timestamp_utc", "latitude_deg", "longitude_deg"]].drop_duplicates(
+        "timestamp_utc")
+    apart = tma.Recording.from_frames(bearings, navigation)
+    together = tma.Recording.from_frames(frame)
+    np.testing.assert_allclose(apart.logs[0].bearing_deg, together.logs[0].bearing_deg)
+    np.testing.assert_allclose(apart.logs[0].own_y_m, together.logs[0].own_y_m, atol=1e-6)
+    from tma.errors import InputError
+    with pytest.raises(InputError, match="no bearing column"):
+        tma.Recording.from_frames(frame.drop(columns="bearing_deg"))
+    with pytest.raises(InputError, match="bearings frame: no rows"):
+        tma.Recording.from_frames(frame.iloc[:0])
+    bad = frame.copy()
+    bad.loc[3, "bearing_deg"] = np.nan  # one bad row: dropped and counted, named by position
+    rec = tma.Recording.from_frames(bad)
+    assert rec.dropped["bad_rows"]["count"] == 1
+    assert "line 3" in str(rec.dropped["bad_rows"])
+
+
+def test_recording_frames_and_options(workdir):
+    rec = tma.read_log(workdir / "log.csv", options={"columns.time": "tid",
+                                                     "columns.lat": "breite"},
+                       columns={"lon": "laenge", "bearing": "peilung", "track": "kontakt"},
+                       csv={"delimiter": "semicolon", "decimal": "comma"},
+                       bearing={"units": "rad"}, time={"format": "unix_ms"})
+    b = rec.bearings
+    assert list(b.columns) == ["log", "t_s", "time_utc", "track_id", "label", "bearing_deg"]
+    assert set(b.label) == {"T1", "T2"} and len(b) == int(np.isfinite(
+        rec.logs[0].bearing_deg).sum())
+    own = rec.ownship
+    assert {"lat_deg", "lon_deg", "x_m"} <= set(own.columns) and len(own) == rec.logs[0].t_s.size
+    assert rec.origin_deg is not None and rec.start_utc.endswith("Z")
+    assert "Recording of" in repr(rec)
+
+
+def test_simulate_gives_the_numbers_of_the_stored_dataset(workdir):
+    sim = tma.simulate("bearings2d", n_tracks=20, shard_size=20, sigma_deg=0.5)
+    stored = next(d for d in (workdir / "data" / "datasets").iterdir()
+                  if d.name.startswith("bearings2d-sigma0.5-n20"))
+    opened = tma.open_dataset(stored)
+    assert len(opened.logs) == len(sim.logs) == 1
+    np.testing.assert_array_equal(opened.logs[0].bearing_deg, sim.logs[0].bearing_deg)
+    pd.testing.assert_frame_equal(opened.truth.to_pandas() if hasattr(opened.truth, "to_pandas")
+                                  else opened.truth, sim.truth)
+    assert not opened.recorded and tma.open_dataset("trial7", workdir / "data").recorded
+
+
+def test_runs_name_those_without_metrics(workdir, caplog):
+    metrics = tma.runs(workdir / "data", family="bearings2d")
+    assert set(metrics["estimator"]) == {"lm", "nbearings"} and not metrics.attrs[
+        "without_metrics"]
+    run = next((workdir / "data" / "runs").glob("bearings2d-*/lm-*"))
+    (run / "metrics.parquet").rename(run / "metrics.kept")
+    try:
+        with caplog.at_level(logging.WARNING, logger="tma"):
+            metrics = tma.runs(workdir / "data", family="bearings2d")
+        assert metrics.attrs["without_metrics"] == [f"{run.parent.name}/{run.name}"]
+        assert "without metrics.parquet" in caplog.text and run.name in caplog.text
+        assert set(metrics["estimator"]) == {"nbearings"}
+    finally:
+        (run / "metrics.kept").rename(run / "metrics.parquet")
+
+
+def test_plot_and_map(workdir, tmp_path):
+    rec = tma.read_log(workdir / "nav_export.csv")
+    found = tma.estimate(rec, estimator="last_leg")
+    figure = tma.plot_contact(found, rec, "T2")
+    assert "contact T2" in figure.axes[0].get_title()
+    with pytest.raises(KeyError, match="no contact 'T9'; contacts: T1, T2"):
+        tma.plot_contact(found, rec, "T9")
+    path = tma.write_map(found, rec, tmp_path / "m.mcap")
+    from tests.conftest import plain_messages
+    topics = {ch.topic for ch, _, _ in plain_messages(path)}
+    assert {"/tma/estimate/T1", "/tma/estimate/T2", "/ownship/location_fix"} <= topics
+    with pytest.raises(ValueError, match="estimate's columns"):
+        tma.plot_contact(found[["label", "status"]], rec, "T1")
+
+
+def test_import_tma_is_light():
+    code = ("import sys, time; t = time.perf_counter(); import tma; "
+            "print(time.perf_counter() - t, 'numpy' in sys.modules, 'pandas' in sys.modules)")
+    seconds, numpy_loaded, pandas_loaded = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True,
+        cwd=REPO).stdout.split()
+    assert numpy_loaded == pandas_loaded == "False"
+    assert float(seconds) < 0.3
+    assert set(tma.API) <= set(dir(tma))
+    with pytest.raises(AttributeError):
+        tma.nothing_here  # noqa: B018
+
+
+def test_compiling_is_said_once_per_module(tmp_path):
+    """A cold numba cache: the first estimate says it compiles, once for each module of
+    kernels; a second process with the cache warm says nothing."""
+    code = ("import tma; sim = tma.simulate(n_tracks=4, shard_size=4); "
+            "tma.estimate(sim); tma.estimate(sim)")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path), "PYTHONWARNINGS": "ignore"}
+    start = time.perf_counter()
+    cold = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                          text=True, check=True, cwd=REPO).stderr
+    assert cold.count("note: compiling bearings2d lm kernels (numba), once per machine") == 1, cold
+    warm = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                          text=True, check=True, cwd=REPO).stderr
+    assert "compiling" not in warm, warm
+    assert time.perf_counter() - start < 240
