@@ -98,7 +98,8 @@ def test_unknown_keys_wrong_types_and_names_fail_clearly():
     with pytest.raises(ConfigError, match="sigmaa_deg"):
         load_scenario(OmegaConf.to_container(cfg.scenario))
     cfg = compose_cfg(["scenario.sigma_deg=half"])
-    with pytest.raises(ConfigError, match="could not be converted to Float"):
+    with pytest.raises(ConfigError, match=r"^scenario 'bearings2d': sigma_deg must be a number "
+                                          r"in \[0, 90\), got 'half'$"):
         load_scenario(OmegaConf.to_container(cfg.scenario))
     cfg = compose_cfg(["scenario.sigma_deg=-1"])
     with pytest.raises(ConfigError, match=r"sigma_deg must be in \[0, 90\)"):
