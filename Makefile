@@ -43,7 +43,7 @@ lint: $(STAMP)  ## ruff
 bench: $(STAMP)  ## benchmarks of every family (ratios against named baselines, stage times)
 	$(PY) bench/bench.py $(ARGS)
 
-options: $(STAMP)  ## every scenario and estimator option: key, default, range, meaning (ARGS=lm)
+options: $(STAMP)  ## every scenario, estimator, ingest, parallel option: key, default, range, meaning (ARGS=lm)
 	$(PY) -m tma.options $(ARGS)
 
 clean:  ## remove generated data, tables, Hydra outputs and caches (keeps .venv)

@@ -26,7 +26,7 @@ from tma.parallel import Engine, close_dask_clients, dask_client, run_tasks
 from tma.simulation import simulate_datasets
 
 pytest.importorskip("distributed")
-DASK = Engine(kind="dask", n_workers=2)
+DASK = Engine(engine="dask", n_workers=2)
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -74,7 +74,9 @@ def test_a_worker_killed_mid_run_costs_only_its_shard(tmp_path, cluster):
 
 
 @pytest.mark.parametrize(("override", "message"), [
-    ("parallel.address=nowhere", "parallel.address=nowhere: not a scheduler address"),
+    ("parallel.address=nowhere", "parallel.address=nowhere: not a scheduler address; "
+                                 "parallel.address must be a Dask scheduler address such as "
+                                 "tcp://scheduler:8786"),
     ("parallel.address='foo://bar:1'", "parallel.address=foo://bar:1: unknown scheme 'foo://'"),
     ("parallel.address='tcp://localhost:notaport'", "port 'notaport' is not a number"),
     ("parallel.address='tcp://localhost:99999'", "port '99999' is not a number from 1 to 65535"),
@@ -83,10 +85,13 @@ def test_a_worker_killed_mid_run_costs_only_its_shard(tmp_path, cluster):
     ("parallel.address='inproc://x'", "unknown scheme 'inproc://'"),
     ("parallel.address='tcp://h:8786/x'", "unexpected text around host:port"),
     ("parallel.address='tcp://[::1'", "not a scheduler address"),
-    ("parallel.n_workers=0", "parallel.n_workers must be a whole number >= 1"),
-    ("parallel.connect_timeout=0", "parallel.connect_timeout must be a number of seconds > 0"),
-    ("parallel.connect_timeout=abc", "parallel.connect_timeout must be a number of seconds"),
-    ("parallel.verbose=maybe", "parallel.verbose must be true or false"),
+    ("parallel.n_workers=0", "parallel.n_workers must be >= 1, got 0"),
+    ("parallel.n_workers=1.5", "parallel.n_workers must be a whole number >= 1, got 1.5"),
+    ("parallel.retries=-1", "parallel.retries must be >= 0, got -1"),
+    ("parallel.connect_timeout=0", "parallel.connect_timeout must be > 0, got 0"),
+    ("parallel.connect_timeout=abc", "parallel.connect_timeout must be a number > 0, got 'abc'"),
+    ("parallel.verbose=maybe", "parallel.verbose must be true or false, got 'maybe'"),
+    ("parallel.engine=ray", "parallel.engine must be one of joblib, dask, got 'ray'"),
     ("+parallel.threads=4", "unknown option(s) parallel.threads"),
 ])
 def test_bad_cluster_options_are_one_clear_line(override, message):

@@ -98,7 +98,8 @@ def test_unknown_keys_wrong_types_and_names_fail_clearly():
     with pytest.raises(ConfigError, match="sigmaa_deg"):
         load_scenario(OmegaConf.to_container(cfg.scenario))
     cfg = compose_cfg(["scenario.sigma_deg=half"])
-    with pytest.raises(ConfigError, match="could not be converted to Float"):
+    with pytest.raises(ConfigError, match=r"^scenario 'bearings2d': sigma_deg must be a number "
+                                          r"in \[0, 90\), got 'half'$"):
         load_scenario(OmegaConf.to_container(cfg.scenario))
     cfg = compose_cfg(["scenario.sigma_deg=-1"])
     with pytest.raises(ConfigError, match=r"sigma_deg must be in \[0, 90\)"):
@@ -229,4 +230,101 @@ def test_the_options_of_everything_are_listed(capsys):
             if key not in ("family", "name"):
                 assert key in text, (where, key)
     assert options.main(["nope"]) == 2
-    assert capsys.readouterr().err.startswith("error: no scenario or estimator 'nope'")
+    assert capsys.readouterr().err.startswith("error: no scenario or estimator 'nope', nor "
+                                              "ingest or parallel")
+
+
+# -- the ingest and parallel options: declared, listed and checked as the others --------------
+
+def _option_schemas():
+    """``(what, schema, check)`` of every declared group of ingest and parallel options:
+    ``check(key, value)`` builds it from one value as a command line would give it."""
+    from tma.parallel import Engine, engine_from
+    from tma.sources.base import options_schema, source_options
+
+    out = []
+    for name in options.ingest_families():
+        reader = family(name).ingest
+        out += [(f"ingest settings of {name}", reader.Settings,
+                 lambda key, value, reader=reader: reader.Settings(**{key: value})),
+                (f"reading options of {name}", options_schema(reader.OBSERVATION),
+                 lambda key, value, reader=reader: source_options(
+                     _nest(key.split("."), value), reader.OBSERVATION))]
+    return out + [("parallel", Engine, lambda key, value: engine_from({key: value}))]
+
+
+# a value not of its form, for each option declared with a form (a new one comes with its own)
+NOT_OF_THE_FORM = {"bearing.topic": [], "csv.delimiter": "::", "time.start_utc": "yesterday",
+                   "nmea.date": "1.6.2025", "address": "tcp://localhost"}
+WRONG_TYPE = {bool: "maybe", int: "abc", float: "abc", str: ["a", "b"]}
+
+
+def _bad_values(declared):
+    """``(kind, value)`` of each kind of value ``declared`` (a field) refuses: of a wrong
+    type, beyond each finite end of its range, not among its choices, not of its form."""
+    types = [t for t in typing.get_args(declared.type) or (declared.type,)
+             if t is not type(None)]
+    yield "type", WRONG_TYPE.get(types[0], {"a": 1}) if len(types) == 1 else {"a": 1}
+    interval = declared.metadata.get("range")
+    for bad in _beyond(interval, declared.type) if interval else ():
+        yield "range", bad
+    if "choices" in declared.metadata:
+        yield "choices", "bogus"
+
+
+def _shown(value) -> list[str]:
+    return [f"{value:g}"] if isinstance(value, float) else [repr(value), str(value)]
+
+
+@pytest.mark.parametrize("what, schema, check", _option_schemas(),
+                         ids=lambda v: v if isinstance(v, str) else "")
+def test_every_ingest_and_parallel_option_says_what_it_is_and_refuses_bad_values(what, schema,
+                                                                                 check):
+    """Each has a doc (with its units), and a value of each kind it refuses (a wrong type,
+    beyond its range, not a choice, not of its form) is one line naming the key as the
+    command line writes it (``csv.delimiter``, ``parallel.n_jobs``), the value and what is
+    allowed."""
+    rows = describe(schema)
+    assert all(doc for *_, doc in rows), [key for key, *_, doc in rows if not doc]
+    prefix = "parallel." if what == "parallel" else ""
+    kinds = set()
+    for key, *_ in rows:
+        declared = _declared(schema, key)
+        bads = list(_bad_values(declared))
+        if "form" in declared.metadata:
+            bads.append(("form", NOT_OF_THE_FORM[key]))
+        for kind, bad in bads:
+            kinds.add(kind)
+            with pytest.raises(ConfigError) as caught:
+                check(key, bad)
+            message = str(caught.value)
+            assert "\n" not in message, message
+            named = f"{prefix}{key} must be " in message or f"{prefix}{key}={bad}: " in message
+            assert named, (kind, message)
+            assert any(shown in message for shown in _shown(bad)), (kind, message)
+    assert kinds >= {"type", "range"} | (set() if what.startswith("ingest settings") else
+                                         {"choices", "form"}), kinds
+
+
+def test_the_ingest_and_parallel_options_are_listed_with_their_declared_defaults(capsys):
+    """``python -m tma.options ingest parallel`` lists every key; ``conf/ingest.yaml`` and
+    the ``parallel`` presets set only declared keys, and ingest's YAML the declared defaults
+    (for its default family)."""
+    from tma.ingest import option_groups, setting_names
+    from tma.parallel import Engine
+    from tma.sources.base import options_schema
+
+    assert options.main(["ingest", "parallel"]) == 0
+    text = capsys.readouterr().out
+    for what, schema, _ in _option_schemas():
+        for key, *_ in describe(schema):
+            shown = ("parallel." if what == "parallel" else "") + key
+            assert re.search(rf"^  {re.escape(shown)} ", text, re.M), (what, key)
+    conf = OmegaConf.to_container(OmegaConf.load(CONF / "ingest.yaml"))
+    reader = family(conf["family"]).ingest
+    declared = to_plain(options_schema(reader.OBSERVATION)())
+    assert {g: conf[g] for g in option_groups(conf["family"])} == declared
+    assert {k: conf[k] for k in setting_names(conf["family"])} == to_plain(reader.Settings())
+    for name in _options("parallel"):
+        preset = OmegaConf.to_container(OmegaConf.load(CONF / "parallel" / f"{name}.yaml"))
+        assert set(preset) <= {f.name for f in fields(Engine)}, name

@@ -266,8 +266,10 @@ class Session:
             return
         if target in ("lint", "help", "options"):
             out = self.make_here([target, *(f"{k}={v}" for k, v in variables.items())])
-            if target == "options":
-                assert f"estimator={args}" in out if args else "scenario=bearings2d" in out
+            if target == "options":  # one estimator's, ingest's or parallel's; or all
+                header = {"ingest": "ingest family=", "parallel": "parallel ("}.get(
+                    args, f"estimator={args}")
+                assert header in out if args else "scenario=bearings2d" in out
             return
         raise AssertionError(f"no rule runs make {target}")
 

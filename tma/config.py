@@ -7,20 +7,27 @@ types fail with a message that names the key, instead of surfacing later as a nu
 Every float anywhere in the config (nested dataclasses and lists included) must be finite; a
 ``param(..., nonfinite=True)`` may be +-inf (e.g. "no limit"), never NaN. ``Params`` (the
 base of every scenario and estimator config) then checks every declared range, in nested
-configs too (``check_params``: one line naming the key, the value and the range), before the
-class's own ``__post_init__`` checks what relates several fields. ``describe`` lists them
-(``python -m tma.options``).
+configs too (``check_params``: one line naming the key, the value and what is allowed), before
+the class's own ``__post_init__`` checks what relates several fields. A field of text may
+declare its ``form`` instead (a date, an address: ``Form``), and a value of the wrong type,
+caught here or by OmegaConf's typed merge, is the same one line. ``describe`` lists them
+(``python -m tma.options``). The ingest reading options (``tma.sources.base``), the family's
+ingest settings and the ``parallel`` options are declared and checked the same way.
 """
 
 import copy
 import functools
 import json
 import math
+import numbers
 import re
+import types
+import typing
+from collections.abc import Callable
 from dataclasses import MISSING, Field, asdict, dataclass, field, fields, is_dataclass
 
 from omegaconf import DictConfig, ListConfig, OmegaConf
-from omegaconf.errors import OmegaConfBaseException
+from omegaconf.errors import OmegaConfBaseException, ValidationError
 
 from tma.errors import ConfigError
 
@@ -84,11 +91,56 @@ def _validate(schema, node, where: str):
         check_finite(merged, where)  # before __post_init__: its range checks assume numbers
         return OmegaConf.to_object(merged)
     except OmegaConfBaseException as exc:
-        msg = getattr(exc, "msg", None) or str(exc).splitlines()[0]
         key = getattr(exc, "full_key", None)
-        raise ConfigError(f"{where}: {msg}" + (f" (key '{key}')" if key else "")) from None
+        declared = _declared(schema, key) if key else None
+        if isinstance(exc, ValidationError) and declared is not None:  # a value of a wrong type
+            value = _given(node, key, getattr(exc, "value", None))
+            raise ConfigError(_at(where, f"{key} must be {allowed(declared)}, got "
+                                         f"{_shown(value)}")) from None
+        msg = (getattr(exc, "msg", None) or str(exc)).splitlines()[0]
+        raise ConfigError(_at(where, msg + (f" (key '{key}')" if key else ""))) from None
     except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{where}: {exc}") from None
+        raise ConfigError(_at(where, str(exc))) from None
+
+
+def _at(where: str, text: str) -> str:
+    """``where: text`` (``scenario 'bearings2d': ...``); the text alone where ``where`` is
+    empty (options whose keys say where they are: ``csv.delimiter``, ``parallel.n_jobs``)."""
+    return f"{where}: {text}" if where else text
+
+
+def _path(key: str) -> list:
+    """``legs[1].duration_s`` -> ``['legs', 1, 'duration_s']``."""
+    return [int(p) if p.isdigit() else p for p in re.findall(r"[^.\[\]]+", key)]
+
+
+def _declared(schema, key: str) -> Field | None:
+    """The field of dataclass ``schema`` at dotted ``key`` (nested and listed configs
+    included); None where there is none, or the key names no single value."""
+    found = None
+    for part in _path(key):
+        if isinstance(part, int):
+            continue  # an element of a list of configs: the same schema
+        found = next((f for f in fields(schema) if f.name == part), None) if is_dataclass(
+            schema) else None
+        if found is None:
+            return None
+        default = (found.default_factory() if found.default_factory is not MISSING
+                   else found.default)
+        if isinstance(default, list) and default and is_dataclass(default[0]):
+            default = default[0]
+        schema = type(default) if is_dataclass(default) else None
+    return found if schema is None else None
+
+
+def _given(node, key: str, fallback):
+    """The value given at dotted ``key`` of ``node`` (a plain dict), as written."""
+    try:
+        for part in _path(key):
+            node = node[part]
+        return node
+    except (KeyError, IndexError, TypeError):
+        return OmegaConf.to_container(fallback) if OmegaConf.is_config(fallback) else fallback
 
 
 MAX_INT = 2**53  # larger integers are not exact as JSON numbers (and no count is that big)
@@ -111,13 +163,13 @@ def check_finite(node, where: str, key: str = "", allow_inf: bool = False,
     elif isinstance(node, ListConfig):
         for i, value in enumerate(node):
             if numbers and (isinstance(value, bool) or not isinstance(value, int | float)):
-                raise ConfigError(f"{where}: {key}[{i}] must be a number, got {value}")
+                raise ConfigError(_at(where, f"{key}[{i}] must be a number, got {value}"))
             check_finite(value, where, f"{key}[{i}]", allow_inf)
     elif isinstance(node, float) and not (math.isfinite(node)
                                           or (allow_inf and math.isinf(node))):
-        raise ConfigError(f"{where}: {key} must be finite, got {node}")
+        raise ConfigError(_at(where, f"{key} must be finite, got {node}"))
     elif isinstance(node, int) and not isinstance(node, bool) and abs(node) > MAX_INT:
-        raise ConfigError(f"{where}: {key} = {node} is too large (at most 2^53)")
+        raise ConfigError(_at(where, f"{key} = {node} is too large (at most 2^53)"))
 
 
 def to_plain(obj):
@@ -166,13 +218,29 @@ class Interval:
                 f"{')' if self.hi_open else ']'}")
 
 
+@dataclass(frozen=True)
+class Form:
+    """The form a text value must have where no interval or list of choices says it (a date,
+    a scheduler address, one character): ``text``, what is allowed, as messages and
+    ``describe`` say it (``a date YYYY-MM-DD``); ``problem(value)``: None when the value has
+    the form, else what is wrong with it ('' when ``text`` says it all). A message says
+    ``key must be <text>, got <value>``, or ``key=<value>: <what is wrong>; key must be
+    <text>``."""
+
+    text: str
+    problem: Callable[[typing.Any], str | None]
+
+
 def param(default=MISSING, doc: str = "", range: str | None = None, *, choices=None,
-          each: str | None = None, factory=None, nonfinite: bool = False):
+          each: str | None = None, form: Form | None = None, factory=None,
+          nonfinite: bool = False):
     """A config field, declared once: its ``default`` (or ``factory``, a default factory),
     its ``doc`` (meaning and units) and the values it allows: ``range``, an interval such as
-    ``"[0, 90)"`` or ``"(0, inf)"``; ``choices``, the allowed values; ``each``, the interval
-    of every element of a list. None passes where the field's type allows it. ``nonfinite``:
-    the value may be +-inf. ``check_params`` checks them all."""
+    ``"[0, 90)"`` or ``"(0, inf)"``; ``choices``, the allowed values (None among them when
+    null is one); ``each``, the interval of every element of a list; ``form``, the form of a
+    text (``Form``). The field's type allows what it says (a whole number, a number, true or
+    false, text, None where it is optional). ``nonfinite``: the value may be +-inf.
+    ``check_params`` checks them all."""
     metadata = {"doc": doc, "nonfinite": nonfinite}
     if range is not None:
         metadata["range"] = Interval.parse(range)
@@ -180,6 +248,8 @@ def param(default=MISSING, doc: str = "", range: str | None = None, *, choices=N
         metadata["each"] = Interval.parse(each)
     if choices is not None:
         metadata["choices"] = tuple(choices)
+    if form is not None:
+        metadata["form"] = form
     if factory is not None:
         return field(default_factory=factory, metadata=metadata)
     return field(default=default, metadata=metadata)
@@ -192,10 +262,62 @@ def _shown(value) -> str:
         value, str) else str(value)
 
 
+def _choice(value) -> str:
+    return "null" if value is None else str(value)
+
+
+SIMPLE = {bool: "true or false", int: "a whole number", float: "a number", str: "text"}
+
+
+def _simple(tp) -> tuple[type, bool] | None:
+    """``(type, optional)`` of a field declared as one of ``SIMPLE``'s types (or it or None);
+    None for any other declaration (lists, nested configs, Any)."""
+    union = isinstance(tp, types.UnionType) or typing.get_origin(tp) is typing.Union
+    args = typing.get_args(tp) if union else (tp,)
+    rest = [a for a in args if a is not type(None)]
+    return (rest[0], len(rest) < len(args)) if len(rest) == 1 and rest[0] in SIMPLE else None
+
+
+def _optional(f) -> bool:
+    return f.type is typing.Any or "None" in str(f.type)
+
+
+def _fits(value, tp: type) -> bool:
+    """``value`` is of ``tp`` (a ``SIMPLE`` type): any integer for int, any number for float,
+    never a bool for either."""
+    if tp is bool or isinstance(value, bool):
+        return tp is bool and isinstance(value, bool)
+    return isinstance(value, {int: numbers.Integral, float: numbers.Real, str: str}[tp])
+
+
+def allowed(f) -> str:
+    """What field ``f`` (a ``param``) allows, as messages say it: ``one of null, deg, rad``,
+    ``null or a number in (0, 90)``, ``a whole number >= 1``, ``a date YYYY-MM-DD``."""
+    meta, simple = f.metadata, _simple(f.type)
+    if "choices" in meta:
+        text = f"one of {', '.join(map(_choice, meta['choices']))}"
+        return text if None in meta["choices"] or not _optional(f) else f"null or {text}"
+    if "form" in meta:
+        return meta["form"].text
+    if simple is not None:
+        text = SIMPLE[simple[0]]
+        if "range" in meta and str(meta["range"]) != "any number":
+            text += f" {_in(meta['range'])}"
+    elif typing.get_origin(f.type) is list:
+        text = "a list" + (" of numbers" if typing.get_args(f.type)[0] in (int, float) else "")
+        text += f" each {_in(meta['each'])}" if "each" in meta else ""
+    else:
+        text = f"a {getattr(f.type, '__name__', f.type)}"
+    return f"null or {text}" if _optional(f) else text
+
+
 def check_params(config, where: str, prefix: str = ""):
     """ConfigError naming the dotted key (``observer.legs[0].duration_s``), the value and
     what is allowed, for the first field of ``config`` (a dataclass, nested ones and lists of
-    them included) outside its declared ``range``, ``each`` or ``choices``."""
+    them included) that is not of its declared type (``allowed``), not finite, or outside its
+    declared ``range``, ``each``, ``choices`` or ``form``. ``where`` (``scenario
+    'bearings2d'``) starts the message, unless empty; ``prefix`` starts every key
+    (``parallel.``)."""
     for f in fields(config):
         value, key = getattr(config, f.name), f"{prefix}{f.name}"
         if is_dataclass(value):
@@ -205,18 +327,31 @@ def check_params(config, where: str, prefix: str = ""):
             for i, item in enumerate(value):
                 check_params(item, where, f"{key}[{i}].")
             continue
-        if value is None or isinstance(value, bool):
+        meta, simple = f.metadata, _simple(f.type)
+        if simple is not None and not (_fits(value, simple[0]) or value is None and simple[1]):
+            raise ConfigError(_at(where, f"{key} must be {allowed(f)}, got {_shown(value)}"))
+        if value is None or isinstance(value, bool) and "form" not in meta:
             continue
-        interval, choices, each = (f.metadata.get(k) for k in ("range", "choices", "each"))
+        if isinstance(value, float) and not math.isfinite(value) and not meta.get("nonfinite"):
+            raise ConfigError(_at(where, f"{key} must be finite, got {_shown(value)}"))
+        interval, choices, each, form = (meta.get(k) for k in ("range", "choices", "each",
+                                                               "form"))
         if choices is not None and value not in choices:
-            raise ConfigError(f"{where}: {key} must be one of "
-                              f"{', '.join(map(str, choices))}, got {_shown(value)}")
+            raise ConfigError(_at(where, f"{key} must be one of "
+                                         f"{', '.join(map(_choice, choices))}, got "
+                                         f"{_shown(value)}"))
         if interval is not None and value not in interval:
-            raise ConfigError(f"{where}: {key} must be {_in(interval)}, got {_shown(value)}")
+            raise ConfigError(_at(where, f"{key} must be {_in(interval)}, got "
+                                         f"{_shown(value)}"))
         for i, item in enumerate(value if each is not None else ()):
             if item not in each:
-                raise ConfigError(f"{where}: {key}[{i}] must be {_in(each)}, got "
-                                  f"{_shown(item)}")
+                raise ConfigError(_at(where, f"{key}[{i}] must be {_in(each)}, got "
+                                             f"{_shown(item)}"))
+        problem = form.problem(value) if form is not None else None
+        if problem:  # what is wrong, then what is allowed
+            raise ConfigError(_at(where, f"{key}={value}: {problem}; {key} must be {form.text}"))
+        if problem is not None:
+            raise ConfigError(_at(where, f"{key} must be {form.text}, got {_shown(value)}"))
 
 
 def _in(interval: Interval) -> str:
@@ -244,11 +379,17 @@ class Params:
 
     @property
     def where(self) -> str:
-        """How messages name the config (``scenario 'bearings2d'``, ``estimator 'lm'``)."""
+        """How messages name the config (``scenario 'bearings2d'``, ``estimator 'lm'``); ''
+        where the keys say it (``parallel.n_jobs``)."""
         return type(self).__name__
 
+    @property
+    def key_prefix(self) -> str:
+        """What starts every key in messages (``parallel.``)."""
+        return ""
+
     def __post_init__(self):
-        check_params(self, self.where)
+        check_params(self, self.where, self.key_prefix)
 
 
 def describe(schema, prefix: str = "") -> list[tuple[str, str, str, str]]:
@@ -264,17 +405,21 @@ def describe(schema, prefix: str = "") -> list[tuple[str, str, str, str]]:
         if isinstance(default, list) and default and is_dataclass(default[0]):
             rows += describe(type(default[0]), f"{key}[i].")
             continue
-        allowed = []
+        shown = []
         if "choices" in f.metadata:
-            allowed.append(" | ".join(map(str, f.metadata["choices"])))
+            shown.append(" | ".join(map(_choice, f.metadata["choices"])))
+        if "form" in f.metadata:
+            shown.append(f.metadata["form"].text)
         if "range" in f.metadata:
-            allowed.append(str(f.metadata["range"]))
+            shown.append(str(f.metadata["range"]))
         if "each" in f.metadata:
-            allowed.append(f"each {f.metadata['each']}")
-        if "None" in str(f.type):
-            allowed.append("or null")
+            shown.append(f"each {f.metadata['each']}")
+        if not shown and _simple(f.type) is not None:
+            shown.append(SIMPLE[_simple(f.type)[0]])
+        if _optional(f) and None not in f.metadata.get("choices", ()):
+            shown.append("or null")
         rows.append((key, "???" if default is MISSING else _shown(default),
-                     " ".join(allowed), f.metadata.get("doc", "")))
+                     " ".join(shown), f.metadata.get("doc", "")))
     return rows
 
 

@@ -23,6 +23,7 @@ from urllib.parse import urlsplit
 
 from threadpoolctl import threadpool_limits
 
+from tma.config import Form, Params, param
 from tma.errors import ConfigError
 
 log = logging.getLogger(__name__)
@@ -34,54 +35,48 @@ CONNECT_TIMEOUT = 10.0  # s: parallel.connect_timeout's default
 ADDRESS_FORM = "a scheduler address looks like tcp://scheduler:8786"
 
 
+def _address_problem(address) -> str | None:
+    return address_problem(address) or None
+
+
 @dataclass(frozen=True)
-class Engine:
-    """Where shard tasks run (the ``parallel`` config group).
+class Engine(Params):
+    """Where shard tasks run: the ``parallel`` config group (``conf/parallel/*.yaml`` are
+    presets of these keys), each option declared once (``python -m tma.options parallel``)
+    and checked as declared (``Params``: one line naming ``parallel.<key>``). A task whose
+    worker died is run again on another worker by Dask itself, up to
+    ``distributed.scheduler.allowed-failures`` (3) times, besides ``retries``."""
 
-    kind: ``joblib`` (``n_jobs`` local worker processes; 1 = in this process) or ``dask``.
-    address: dask only; None starts a ``distributed.LocalCluster`` of ``n_workers`` worker
-    processes here, ``tcp://host:8786`` uses the scheduler of an existing cluster.
-    retries: dask only; how often a task that raised (e.g. an OSError of a flaky shared disk)
-    is run again. A task whose worker died is run again on another worker by Dask itself, up
-    to ``distributed.scheduler.allowed-failures`` (3) times.
-    connect_timeout: dask only; seconds to wait for the scheduler at ``address`` to accept a
-    connection, then as long for it to answer as a Dask scheduler.
-    verbose: dask only; True shows Dask's own INFO logging (scheduler, nannies, workers);
-    False shows its warnings only, and nothing from the workers of a LocalCluster.
-    """
+    engine: str = param("joblib", "where shards run: joblib (local worker processes, or this "
+                        "process) or dask (a Dask cluster)", choices=ENGINES)
+    n_jobs: int = param(1, "joblib: worker processes (1: in this process)", "[1, inf)")
+    address: str | None = param(None, "dask: the scheduler of an existing cluster; null: a "
+                                "LocalCluster of n_workers processes on this machine",
+                                form=Form("a Dask scheduler address such as "
+                                          "tcp://scheduler:8786", _address_problem))
+    n_workers: int = param(2, "dask, LocalCluster only: worker processes (one thread each)",
+                           "[1, inf)")
+    retries: int = param(2, "dask: re-runs of a task that raised (e.g. an OSError of a flaky "
+                         "shared disk)", "[0, inf)")
+    connect_timeout: float = param(CONNECT_TIMEOUT, "dask: seconds (s) to wait for the "
+                                   "scheduler at address to accept a connection, then as long "
+                                   "for it to answer", "(0, inf)")
+    verbose: bool = param(False, "dask: true shows Dask's own INFO logging (scheduler, "
+                          "nannies, workers); false its warnings only, nothing from the "
+                          "workers of a LocalCluster")
 
-    kind: str = "joblib"
-    n_jobs: int = 1
-    address: str | None = None
-    n_workers: int = 2
-    retries: int = 2
-    connect_timeout: float = CONNECT_TIMEOUT
-    verbose: bool = False
+    @property
+    def where(self) -> str:
+        return ""
 
-    def __post_init__(self):
-        if self.kind not in ENGINES:
-            raise ConfigError(f"parallel.engine must be one of {', '.join(ENGINES)}, "
-                              f"got '{self.kind}'")
-        for key in ("n_jobs", "n_workers"):
-            value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ConfigError(f"parallel.{key} must be a whole number >= 1, got '{value}'")
-        if isinstance(self.retries, bool) or not isinstance(self.retries, int) \
-                or self.retries < 0:
-            raise ConfigError(f"parallel.retries must be a whole number >= 0, "
-                              f"got '{self.retries}'")
-        timeout = self.connect_timeout
-        if isinstance(timeout, bool) or not isinstance(timeout, int | float) \
-                or not 0 < timeout < float("inf"):
-            raise ConfigError(f"parallel.connect_timeout must be a number of seconds > 0, "
-                              f"got '{timeout}'")
-        if not isinstance(self.verbose, bool):
-            raise ConfigError(f"parallel.verbose must be true or false, got '{self.verbose}'")
-        if self.address is not None:
-            problem = address_problem(self.address)
-            if problem:
-                raise ConfigError(f"parallel.address={self.address}: {problem}; {ADDRESS_FORM} "
-                                  f"(null starts a LocalCluster here)")
+    @property
+    def key_prefix(self) -> str:
+        return "parallel."
+
+    @property
+    def kind(self) -> str:
+        """The engine: ``joblib`` or ``dask``."""
+        return self.engine
 
     @property
     def in_process(self) -> bool:
@@ -95,13 +90,12 @@ def engine_from(node, launcher: str = "") -> Engine:
     if not isinstance(node, dict):
         raise ConfigError(f"parallel must be a config group entry (default, serial, dask), "
                           f"got '{node}'")
-    known = {f.name for f in fields(Engine)} - {"kind"} | {"engine"}
+    known = {f.name for f in fields(Engine)}
     unknown = sorted(set(node) - known)
     if unknown:
         raise ConfigError(f"unknown option(s) parallel.{', parallel.'.join(unknown)} (known: "
                           f"{', '.join(sorted(known))})")
-    values = dict(node)
-    requested = Engine(kind=values.pop("engine", "joblib"), **values)
+    requested = Engine(**node)
     launcher = launcher.lower()
     if ("joblib" in launcher or "submitit" in launcher) and requested.kind == "joblib" \
             and requested.n_jobs != 1:

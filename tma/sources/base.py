@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
-from tma.config import validate
+from tma.config import Form, Params, param, validate
 from tma.errors import ConfigError, InputError
 from tma.utc import parse_utc
 
@@ -192,33 +192,39 @@ class Recording:
 
 
 # -- the reading options (conf/ingest.yaml) ----------------------------------------------------
+# Each option is a ``param``: its default, its doc (with units) and what it allows, in one
+# place; ``check_params`` checks them all (one line naming the key, the value and what is
+# allowed) and ``python -m tma.options ingest`` lists them. The rules between options stay as
+# code (``ReadingOptions.__post_init__``).
 
 POSITION_ROLES = ("time", "x", "y", "lat", "lon")  # table columns besides value and track
+COLUMN_DOCS = {  # what each column of a table holds (the observation's is the family's)
+    "time": "the times (relative s, Unix time or ISO-8601: time.format)",
+    "x": "own-ship's position east (m)", "y": "own-ship's position north (m)",
+    "lat": "own-ship's latitude (deg, WGS84)", "lon": "own-ship's longitude (deg, WGS84)",
+    "track": "the contact of each row (an integer id, or a label kept as written; a table "
+             "without one holds one contact)"}
+FOUND = "; null: tma's name or a common one, found automatically (any case)"
 
 
-@dataclass
+def _topics_problem(value) -> str | None:
+    entries = list(value) if isinstance(value, list | tuple) else [value]
+    fine = entries and all(isinstance(e, str | int | float) and not isinstance(e, bool)
+                           and str(e).strip() for e in entries)
+    return None if fine else ""
+
+
+TOPICS = Form("a topic, a pattern or a list of them", _topics_problem)
+
+
 class ContactSource:
-    """Where the values are: MCAP topics, and a dotted field path (``data``, ``vector``,
-    ``bearing_deg``), and their units (None: the first unit unless a name says another).
-    ``topic``: a topic, a pattern (fnmatch: ``/sonar/contact/*``) or a list of them; None: the
-    family's own topic or schema. Each topic read is a contact, or holds contacts by a track
-    field."""
+    """Where the values are in an MCAP log: ``topic`` (a topic, a pattern or a list of them),
+    ``field`` and ``units``; a family's options declare them in its observation's words
+    (``options_schema``)."""
 
-    topic: Any = None
-    field: str | None = None
-    units: str | None = None
-
-    def check(self, role: str):
-        """``topic`` as text (a number is a topic's name), or a list of them."""
-        t = self.topic
-        if t is None:
-            return
-        entries = list(t) if isinstance(t, list | tuple) else [t]
-        if not entries or not all(isinstance(e, str | int | float) and not isinstance(e, bool)
-                                  and str(e).strip() for e in entries):
-            raise ConfigError(f"{role}.topic must be a topic, a pattern or a list of them, "
-                              f"got {t!r}")
-        self.topic = [str(e) for e in entries] if isinstance(t, list | tuple) else str(t)
+    topic: Any
+    field: str | None
+    units: str | None
 
     @property
     def topics(self) -> list[str] | None:
@@ -229,7 +235,10 @@ class ContactSource:
 
 @dataclass
 class OwnshipSource:
-    topic: str | None = None  # None: found by its schema (NavSatFix, LocationFix, Odometry...)
+    """Where the own-ship's fixes are in an MCAP log (``ownship.*``)."""
+
+    topic: str | None = param(None, "MCAP topic of the own-ship's fixes; null: found by its "
+                              "schema (NavSatFix, LocationFix, Odometry, PoseStamped...)")
 
 
 DELIMITER_NAMES = {"comma": ",", "semicolon": ";", "tab": "\t", "\\t": "\t", "pipe": "|",
@@ -237,50 +246,57 @@ DELIMITER_NAMES = {"comma": ",", "semicolon": ";", "tab": "\t", "\\t": "\t", "pi
 DECIMAL_NAMES = {"dot": ".", "comma": ","}
 
 
+def _delimiter_problem(value) -> str | None:
+    fine = value in DELIMITER_NAMES or len(value) == 1 and value not in "\"\r\n"
+    return None if fine else ""
+
+
 @dataclass
 class CsvFormat:
-    """``delimiter``: one character or its name (comma, semicolon, tab, pipe, space); None:
-    sniffed among ``,`` ``;`` tab. ``decimal``: ``.`` or ``,`` (or dot, comma); None: ``.``,
-    or ``,`` when the delimiter is not a comma and the numbers are written ``12,5``."""
+    """How a table is written (``csv.*``)."""
 
-    delimiter: str | None = None
-    decimal: str | None = None
-
-    def __post_init__(self):
-        if self.delimiter is not None:
-            self.delimiter = DELIMITER_NAMES.get(self.delimiter, self.delimiter)
-            if len(self.delimiter) != 1 or self.delimiter in "\"\r\n":
-                raise ConfigError(f"csv.delimiter must be one character or one of "
-                                  f"{', '.join(DELIMITER_NAMES)}, got '{self.delimiter}'")
-        if self.decimal is not None:
-            self.decimal = DECIMAL_NAMES.get(self.decimal, self.decimal)
-            one_of("csv.decimal", self.decimal, (None, ".", ",", "dot", "comma"))
-            if self.decimal == self.delimiter:
-                raise ConfigError(f"csv.decimal and csv.delimiter are both '{self.decimal}'")
+    delimiter: str | None = param(
+        None, "the separator of a table's fields: one character or its name; null: sniffed "
+        "among , ; and tab", form=Form(f"one character or one of {', '.join(DELIMITER_NAMES)}",
+                                       _delimiter_problem))
+    decimal: str | None = param(None, "the decimal mark: . or , (or dot, comma); null: ., or , "
+                                "when the delimiter is not a comma and the numbers are written "
+                                "12,5", choices=(None, ".", ",", *DECIMAL_NAMES))
 
 
 TIME_FORMATS = ("auto", "s", "unix_s", "unix_ms", "unix_us", "unix_ns", "iso", "iso_utc")
 
 
+def _utc_problem(value) -> str | None:
+    try:
+        parse_utc(str(value))
+    except ValueError as exc:  # "'...' is not a valid time (...)": what is wrong, if more
+        return "" if "ISO-8601" in str(exc) else str(exc).rpartition("' is ")[2]
+    return None
+
+
+def _date_problem(value) -> str | None:
+    try:
+        datetime.date.fromisoformat(str(value))
+    except ValueError:
+        return ""
+    return None if len(str(value)) == 10 else ""
+
+
 @dataclass
 class TimeFormat:
-    """``format``: ``auto``: numbers by magnitude (Unix seconds from 1e8, ms from 1e11, us
-    from 1e14, ns from 1e17; smaller: relative seconds), text as ISO-8601 with a zone; ``s``:
-    relative seconds; ``unix_s|ms|us|ns``: Unix time; ``iso``: ISO-8601 with a zone (``Z``,
-    ``+01:00``); ``iso_utc``: ISO-8601, a time without zone taken as UTC.
-    ``start_utc``: the UTC (ISO-8601 with a zone) of time 0 of a log of relative times, which
-    makes it absolute; None: such a log stays undated."""
+    """How a table's times are written, and when a relative log starts (``time.*``)."""
 
-    format: str = "auto"
-    start_utc: str | None = None
-
-    def __post_init__(self):
-        one_of("time.format", self.format, TIME_FORMATS)
-        if self.start_utc is not None:
-            try:
-                parse_utc(str(self.start_utc))
-            except ValueError as exc:
-                raise ConfigError(f"time.start_utc: {exc}") from None
+    format: str = param("auto", "how the times are written: auto: numbers by magnitude (Unix "
+                        "s from 1e8, ms from 1e11, us from 1e14, ns from 1e17; smaller: relative "
+                        "s), text as ISO-8601 with a zone; s: relative seconds; unix_s|ms|us|ns: "
+                        "Unix time; iso: ISO-8601 with a zone (Z, +01:00); iso_utc: ISO-8601, a "
+                        "time without zone taken as UTC", choices=TIME_FORMATS)
+    start_utc: str | None = param(
+        None, "the UTC of time 0 of a log of relative times, which makes it absolute; null: "
+        "such a log stays undated",
+        form=Form("an ISO-8601 time with a zone (e.g. 2026-01-01T08:00:00Z or "
+                  "2026-01-01T09:00:00+01:00)", _utc_problem))
 
     @property
     def start_ns(self) -> int | None:
@@ -289,64 +305,50 @@ class TimeFormat:
 
 @dataclass
 class NmeaOptions:
-    """``date``: the UTC date (YYYY-MM-DD) of NMEA GGA fixes where no RMC sentence dates them
-    and the bearings' times do not either; None: dated by RMC or the bearings."""
+    """What NMEA navigation does not say (``nmea.*``)."""
 
-    date: str | None = None
-
-    def __post_init__(self):
-        if self.date is not None:
-            try:
-                datetime.date.fromisoformat(str(self.date))
-                valid = len(str(self.date)) == 10
-            except ValueError:
-                valid = False
-            if not valid:
-                raise ConfigError(f"nmea.date must be a date YYYY-MM-DD, got '{self.date}'")
+    date: str | None = param(None, "the UTC date of NMEA GGA fixes that no RMC sentence dates; "
+                             "null: from RMC, else from the values' absolute times",
+                             form=Form("a date YYYY-MM-DD", _date_problem))
 
 
 @dataclass
 class NavLimits:
-    max_extrapolation_s: float = 1.0  # a contact value further outside the nav span is dropped
-    max_gap_s: float = 10.0  # a longer gap between fixes is reported
-    max_speed_m_s: float = 50.0  # own-ship never moves faster: a fix off by more is an outlier
+    """What own-ship's navigation may do (``nav.*``)."""
 
-    def __post_init__(self):
-        if not 0 < self.max_speed_m_s < 1e5:
-            raise ConfigError(f"nav.max_speed_m_s must be a speed in (0, 1e5) m/s, "
-                              f"got {self.max_speed_m_s}")
-        if not 0 <= self.max_extrapolation_s < 1e9:
-            raise ConfigError(f"nav.max_extrapolation_s must be a number of seconds in "
-                              f"[0, 1e9), got {self.max_extrapolation_s}")
-        if not 0 < self.max_gap_s < 1e9:
-            raise ConfigError(f"nav.max_gap_s must be a number of seconds in (0, 1e9), "
-                              f"got {self.max_gap_s}")
+    max_extrapolation_s: float = param(1.0, "a value further than this (s) outside the "
+                                       "own-ship's fixes is dropped", "[0, 1e9)")
+    max_gap_s: float = param(10.0, "a gap between own-ship's fixes longer than this (s) is "
+                             "reported", "(0, 1e9)")
+    max_speed_m_s: float = param(50.0, "own-ship never moves faster (m/s): a fix farther off "
+                                 "its neighbours is an outlier", "(0, 1e5)")
 
 
 @dataclass
 class Origin:
-    lat: float | None = None  # deg; None: the first own-ship fix
-    lon: float | None = None
-    max_distance_km: float = 100.0  # a given origin lies this close to an own-ship fix
+    """The local east-north plane's origin (``origin.*``)."""
 
-    def __post_init__(self):
-        if not 0 < self.max_distance_km < 2e4:
-            raise ConfigError(f"origin.max_distance_km must be a distance in (0, 20000) km, "
-                              f"got {self.max_distance_km}")
-        if (self.lat is None) != (self.lon is None):
-            raise ConfigError("origin.lat and origin.lon go together: give both or neither")
-        if self.lat is not None and not (-90 < self.lat < 90 and -180 <= self.lon <= 360):
-            raise ConfigError(f"origin.lat must lie in (-90, 90) and origin.lon in [-180, 360] "
-                              f"degrees, got {self.lat}, {self.lon}")
+    lat: float | None = param(None, "latitude (deg, WGS84) of the local east-north plane's "
+                              "origin; null: the first own-ship fix", "(-90, 90)")
+    lon: float | None = param(None, "longitude (deg, WGS84) of the origin (with lat)",
+                              "[-180, 360]")
+    max_distance_km: float = param(100.0, "a given origin lies at most this far (km) from an "
+                                   "own-ship fix", "(0, 20000)")
 
 
-class ReadingOptions:
+class ReadingOptions(Params):
     """Base of a family's ``SourceOptions`` (``options_schema``): the groups ``columns``,
     ``<role>`` (the observation's ``ContactSource``), ``ownship``, ``csv``, ``time``, ``nmea``,
     ``nav``, ``origin`` and the option ``bad_rows``. ``observation`` is the family's;
-    ``contact`` its group."""
+    ``contact`` its group. Every option's declared type and values are checked first
+    (``Params``, keys as the command line writes them), then the rules between options; the
+    names of delimiters and decimal marks become the characters, a topic's number its text."""
 
     observation: Observation
+
+    @property
+    def where(self) -> str:
+        return ""  # the keys say it: csv.delimiter, nav.max_gap_s
 
     @property
     def contact(self) -> ContactSource:
@@ -356,10 +358,18 @@ class ReadingOptions:
         return getattr(self.columns, role)
 
     def __post_init__(self):
-        role, units = self.observation.role, self.observation.units
-        one_of(f"{role}.units", self.contact.units, (None, *(u.name for u in units)))
-        self.contact.check(role)
-        one_of("bad_rows", self.bad_rows, BAD_ROWS)
+        super().__post_init__()
+        topic = self.contact.topic
+        if topic is not None:
+            self.contact.topic = ([str(e) for e in topic] if isinstance(topic, list | tuple)
+                                  else str(topic))
+        csv = self.csv
+        csv.delimiter = DELIMITER_NAMES.get(csv.delimiter, csv.delimiter)
+        csv.decimal = DECIMAL_NAMES.get(csv.decimal, csv.decimal)
+        if csv.decimal is not None and csv.decimal == csv.delimiter:
+            raise ConfigError(f"csv.decimal and csv.delimiter are both '{csv.decimal}'")
+        if (self.origin.lat is None) != (self.origin.lon is None):
+            raise ConfigError("origin.lat and origin.lon go together: give both or neither")
 
     def dropped(self) -> Dropped:
         """A new count of the rows left out, under this policy."""
@@ -369,21 +379,43 @@ class ReadingOptions:
 @functools.cache
 def options_schema(observation: Observation) -> type:
     """The reading options (a dataclass) of a family reading ``observation``: its column
-    under ``columns`` and its group named by its role (``bearing.topic|field|units``)."""
-    role = observation.role
-    columns = make_dataclass("Columns", [(r, str | None, None) for r in (
-        *POSITION_ROLES, role, "track")])
+    under ``columns`` and its group named by its role (``bearing.topic|field|units``), their
+    docs in its words."""
+    role, plural, units = observation.role, observation.plural, observation.units
+    docs = {**COLUMN_DOCS, role: f"the {plural} ({' or '.join(u.name for u in units)}: "
+                                 f"{role}.units)"}
+    columns = make_dataclass("Columns", [(r, str | None, param(None, f"column of {docs[r]}"
+                                                              f"{FOUND}"))
+                                         for r in (*POSITION_ROLES, role, "track")])
     columns.__doc__ = ("Table column names; None = tma's name or a common one found "
                        "automatically.")
+    source = make_dataclass(f"{role.title()}Source", [
+        ("topic", Any, param(None, f"MCAP topic(s) of the {plural}: a topic, a pattern "
+                                   "(fnmatch: /sonar/contact/*) or a list of them; each topic "
+                                   "is a contact (named by its topic) unless its messages "
+                                   f"name contacts (track_id); null: {observation.topic} or "
+                                   "the family's schema", form=TOPICS)),
+        ("field", str | None, param(None, f"dotted field path of the {role} in its messages; "
+                                          f"null: the first of {', '.join(observation.fields)} "
+                                          "found")),
+        ("units", str | None, param(None, f"units of the {plural}: "
+                                          f"{', '.join(f'{u.name} ({u.words})' for u in units)};"
+                                          f" null: {units[0].name} unless a column's or field's "
+                                          "name or a units row says another",
+                                    choices=(None, *(u.name for u in units))))],
+        bases=(ContactSource,))
     groups = [("columns", columns, field(default_factory=columns)),
-              (role, ContactSource, field(default_factory=ContactSource)),
+              (role, source, field(default_factory=source)),
               ("ownship", OwnshipSource, field(default_factory=OwnshipSource)),
               ("csv", CsvFormat, field(default_factory=CsvFormat)),
               ("time", TimeFormat, field(default_factory=TimeFormat)),
               ("nmea", NmeaOptions, field(default_factory=NmeaOptions)),
               ("nav", NavLimits, field(default_factory=NavLimits)),
               ("origin", Origin, field(default_factory=Origin)),
-              ("bad_rows", str, field(default="drop"))]  # a top-level option, not a group
+              ("bad_rows", str, param("drop", "drop: a row with a missing or unreadable value, "
+                                      "time or fix, or a fix off the track, is left out and "
+                                      "counted (log line, manifest); fail: the first such row "
+                                      "refuses the file", choices=BAD_ROWS))]  # a value
     return make_dataclass("SourceOptions", groups, bases=(ReadingOptions,),
                           namespace={"observation": observation})
 
@@ -424,12 +456,6 @@ def _set_options(options) -> dict:
             if getattr(value, g.name) != getattr(default, g.name):
                 out[f"{f.name}.{g.name}"] = getattr(value, g.name)
     return out
-
-
-def one_of(key: str, value, allowed):
-    if value not in allowed:
-        shown = ", ".join("null" if a is None else str(a) for a in allowed)
-        raise ConfigError(f"{key} must be one of {shown}, got '{value}'")
 
 
 def groups(observation: Observation) -> tuple[str, ...]:
@@ -492,4 +518,4 @@ def source_options(node, observation: Observation):
             complaint = unknown_option(f"{group}.{key}", observation)
             if complaint:
                 raise ConfigError(complaint)
-    return validate(schema, node, "ingest")  # types, finiteness, then the ranges
+    return validate(schema, node, "")  # types, finiteness, the declared values, the rules

@@ -118,5 +118,6 @@ def test_unknown_estimator_and_bad_parameters():
         build_estimator({"name": "lm", "lambda_up": 0.5})
     with pytest.raises(ConfigError, match="bogus"):
         build_estimator({"name": "lm", "bogus": 1})
-    with pytest.raises(ConfigError, match="could not be converted"):
+    with pytest.raises(ConfigError,
+                       match="^estimator 'lm': lambda0 must be a number > 0, got 'ten'$"):
         build_estimator({"name": "lm", "lambda0": "ten"})

@@ -230,11 +230,17 @@ def _one_line(proc, expected):
     ("nav.max_gap=3", "unknown option nav.max_gap (the nav options: nav.max_extrapolation_s, "
                       "nav.max_gap_s, nav.max_speed_m_s)"),
     ("bad_rows=skip", "bad_rows must be one of drop, fail, got 'skip'"),
-    ("nav.max_speed_m_s=0", "nav.max_speed_m_s must be a speed in (0, 1e5) m/s"),
+    ("nav.max_speed_m_s=0", "nav.max_speed_m_s must be in (0, 1e5), got 0"),
     ("bearing.units=grad", "bearing.units must be one of null, deg, rad, got 'grad'"),
     ("time.format=local", "time.format must be one of auto, s, unix_s"),
-    ("nav.max_extrapolation_s=abc", "nav.max_extrapolation_s"),
-    ("origin.lat=95", "origin.lat and origin.lon go together"),
+    ("nav.max_extrapolation_s=abc", "nav.max_extrapolation_s must be a number in [0, 1e9), "
+                                    "got 'abc'"),
+    ("origin.lat=95", "origin.lat must be in (-90, 90), got 95"),
+    ("origin.lat=59.9", "origin.lat and origin.lon go together"),
+    ("nmea.date=1.6.2025", "nmea.date must be a date YYYY-MM-DD, got '1.6.2025'"),
+    ("columns.time=[a,b]", "columns.time must be null or text, got ['a', 'b']"),
+    ("sigma_deg=abc", "sigma_deg must be null or a number in (0, 90), got 'abc'"),
+    ("min_bearings=4", "min_bearings must be >= 5, got 4"),
 ])
 def test_cli_bad_reading_options_are_one_line(tmp_path, override, expected):
     _, _, df = _recording()
@@ -352,7 +358,8 @@ def test_start_utc_makes_a_relative_log_absolute(tmp_path):
                                           r"of relative times: .*abs.csv has UTC times"):
         ingest(tmp_path / "abs.csv", data_dir=tmp_path / "data",
                options={"time": {"start_utc": "2025-06-01T08:00:00Z"}})
-    with pytest.raises(ConfigError, match="time.start_utc: '08:00' is not an ISO-8601 time"):
+    with pytest.raises(ConfigError, match=r"time.start_utc must be an ISO-8601 time with a zone "
+                                          r"\(e.g. .*\), got '08:00'$"):
         ingest(path, data_dir=tmp_path / "data", options={"time": {"start_utc": "08:00"}})
 
 

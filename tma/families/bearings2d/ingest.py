@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.config import Params, param
-from tma.errors import ConfigError, InputError
+from tma.errors import InputError
 from tma.families.bearings2d.log import BEARINGS_TOPIC, SCHEMAS, BearingsLog, nominal_sigma
 from tma.geo import MAX_MAPPED_M
 from tma.sources.base import Observation, Unit
@@ -58,7 +58,8 @@ OBSERVATION = Observation(
 
 @dataclass
 class Settings(Params):
-    """The family's own ingest settings (given as they come from the command line)."""
+    """The family's own ingest settings (given as they come from the command line; their
+    types and values checked as declared: ``Params``)."""
 
     sigma_deg: float | None = param(None, "nominal bearing noise (deg) for covariances, over "
                                     "what an MCAP log declares; null: the log's, else "
@@ -69,16 +70,6 @@ class Settings(Params):
     @property
     def where(self) -> str:
         return "ingest"
-
-    def __post_init__(self):
-        sigma, count = self.sigma_deg, self.min_bearings
-        if sigma is not None and (isinstance(sigma, bool) or not isinstance(sigma, int | float)):
-            raise ConfigError(f"sigma_deg must be null or a number in (0, 90) degrees, "
-                              f"got '{sigma}'")
-        if isinstance(count, bool) or not isinstance(count, int):
-            raise ConfigError(f"min_bearings must be a whole number >= 5 (4 unknowns and one "
-                              f"degree of freedom for the noise), got '{count}'")
-        super().__post_init__()
 
 
 def _enough_bearings(aligned, settings: Settings, where: str) -> dict:
