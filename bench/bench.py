@@ -5,16 +5,13 @@
     time per track (CPU time of this single-threaded process, so that other load on the
     machine does not enter the ratio; wall time beside it), the ratio, how many minima agree,
     the median counters.
-(b) The default table (``experiment=bearings2d_table``, 2 workers) on a fresh data directory
-    as ``make table`` runs it (``pipeline.table``: the three stages in one process), each
-    stage and the whole, then a re-run that reuses every finished shard, and the three stages
-    as three commands; beside the floor: the
-    in-memory work (simulation, estimation with the compiled kernels loaded; CPU time /
-    workers) plus the bytes the stage writes and reads at this disk's measured speed (write
-    with fsync; read from the page cache, where the stages find files just written), and
-    where the rest goes (encoding and decoding of the logs, measured in memory). The table
-    and each part of the floor are the best of ``--repeat`` measurements (3): what the
-    machine gives when nothing else gets in the way, on both sides of the ratio.
+(b) Every default table (``make table``: ``python -m pipeline.table experiment=NAME``, 2
+    workers, fresh data) and a sweep of 24 small jobs (sigma x estimator, 1,000 tracks each,
+    the joblib launcher), then the same 24 points as one command's grid, each beside its
+    floor (``bench/floors.py``): the in-memory simulation and estimation at perfect 2-core
+    scaling plus the bytes written and read at this disk's speed; each stage, and for a
+    family that trains (``bearing_doppler3d``) each artefact it builds, beside its own floor.
+    Best of ``--repeat`` (3) on both sides of the ratio.
 (c) ``ranges2d``: 10,000 bisections, 1e5 samples of each sampler, samples and time per run to
     the accuracy target, the headline ratio of samples (prior / adaptive).
 (d) ``bearing_doppler3d``: microseconds per path per observation of each filter, vectorised
@@ -32,14 +29,13 @@
     against protobuf's serializer; and reading, by protobuf's parser (a hand-made parser was
     measured no more than 1.2x faster on both logs, and removed).
 
-Options: ``--tracks N`` (2000), ``--sigma DEG`` (0.5), ``--runs N`` (30), ``--skip-stages``,
-``--only SECTION`` (lm, stages, ranges2d, filters3d, cmnf, compile, cluster, io),
+Options: ``--tracks N`` (2000), ``--sigma DEG`` (0.5), ``--runs N`` (30), ``--skip-tables``,
+``--only SECTION`` (lm, tables, ranges2d, filters3d, cmnf, compile, real_motion, cluster, io),
 ``--paths3d N`` (2500), ``--cmnf-paths N`` (100000), ``--repeat N`` (3).
 """
 
 import argparse
 import os
-import re
 import subprocess
 import sys
 import tempfile
@@ -59,7 +55,7 @@ from tma.parallel import keep_freed_memory
 
 REPO = Path(__file__).resolve().parents[1]
 THETA = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")
-SECTIONS = ("lm", "stages", "ranges2d", "filters3d", "cmnf", "compile", "real_motion", "cluster",
+SECTIONS = ("lm", "tables", "ranges2d", "filters3d", "cmnf", "compile", "real_motion", "cluster",
             "io")
 
 
@@ -113,139 +109,6 @@ def bench_lm(n_tracks: int, sigma_deg: float):
     print(f"    minima agreeing                         {agree.sum():5d} / {n_tracks}"
           f"  (lm lower: {better.sum()}, scipy lower: {n_tracks - agree.sum() - better.sum()})")
     print(f"    medians Nf {np.median(out['n_f_evals']):.0f}, Iter {np.median(out['n_iter']):.0f}")
-
-
-def _tree_bytes(*paths) -> int:
-    return sum(f.stat().st_size for p in paths if Path(p).exists()
-               for f in Path(p).rglob("*") if f.is_file())
-
-
-def _disk_speed(directory, size=256 << 20):
-    """(write bytes/s with fsync, read bytes/s of the file just written)."""
-    path = Path(directory) / "speed.bin"
-    block = np.random.default_rng(0).bytes(16 << 20)
-    start = time.perf_counter()
-    with open(path, "wb") as f:
-        for _ in range(size // len(block)):
-            f.write(block)
-        f.flush()
-        os.fsync(f.fileno())
-    write = size / (time.perf_counter() - start)
-    start = time.perf_counter()
-    with open(path, "rb") as f:
-        while f.read(16 << 20):
-            pass
-    read = size / (time.perf_counter() - start)
-    path.unlink()
-    return write, read
-
-
-def _experiment():
-    """The default table's sigmas, tracks and estimators (conf/experiment)."""
-    from omegaconf import OmegaConf
-
-    exp = OmegaConf.to_container(OmegaConf.load(
-        REPO / "conf" / "experiment" / "bearings2d_table.yaml"))
-    keys = [key for entry in exp["defaults"] if isinstance(entry, dict) for key in entry]
-    names = [key.split("grid.estimators.")[1] for key in keys if "grid.estimators." in key]
-    return exp["scenario"]["sigma_deg"], exp["scenario"]["n_tracks"], names
-
-
-def _in_memory(workdir, workers):
-    """CPU seconds of the work itself (simulation, estimation) and of the log encoding and
-    decoding, over every shard of the default table, one process."""
-    from tma.families.bearings2d.scenario import read_log, write_log
-
-    sigmas, n_tracks, names = _experiment()
-    estimators = [build_estimator({"name": name}) for name in names]
-    cost = {"simulate": 0.0, "estimate": 0.0, "encode": 0.0, "decode": 0.0}
-    Path(workdir).mkdir(parents=True, exist_ok=True)
-    with threadpool_limits(limits=1):
-        warm_up, _ = simulate_shard(Config(n_tracks=20, shard_size=20), 0)
-        for estimator in estimators:  # compiled kernels loaded: the floor is the work alone
-            estimator.estimate(warm_up)
-        for sigma in sigmas:
-            cfg = Config(n_tracks=n_tracks, sigma_deg=sigma)
-            for shard in range(-(-n_tracks // cfg.shard_size)):
-                (log, _), seconds, _ = timed(simulate_shard, cfg, shard)
-                cost["simulate"] += seconds
-                # a new file each, as the stages write them (replacing one costs more here)
-                path = Path(workdir) / f"sigma{sigma:g}-{shard}.mcap"
-                cost["encode"] += timed(write_log, path, log)[1]
-                cost["decode"] += timed(read_log, path)[1]
-                for estimator in estimators:
-                    cost["estimate"] += timed(estimator.estimate, log)[1]
-    return {k: v / workers for k, v in cost.items()}, names
-
-
-STAGE_LINE = re.compile(r"stage (simulate|estimate|aggregate): ([0-9.]+) s")
-
-
-def _table_command(overrides) -> tuple[float, dict]:
-    """``python -m pipeline.table`` (what ``make table`` runs): its wall time and each
-    stage's, as the command logs them."""
-    start = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", "pipeline.table", *overrides], cwd=REPO,
-                          check=True, capture_output=True, text=True)
-    total = time.perf_counter() - start
-    return total, {m[1]: float(m[2]) for m in STAGE_LINE.finditer(proc.stdout + proc.stderr)}
-
-
-def bench_stages(workers: int = 2, repeat: int = 3):
-    print(f"(b) the default table (experiment=bearings2d_table, {workers} workers) on fresh data: "
-          f"wall time beside the floor, each the best of {repeat}")
-    with tempfile.TemporaryDirectory() as tmp:
-        data = Path(tmp) / "verbs" / "data"
-        overrides = ["experiment=bearings2d_table", f"paths.data_dir={data}",
-                     f"paths.tables_dir={tmp}/verbs/tables", "progress=false"]
-        wall, sizes = {}, {}
-        for verb in ("simulate", "estimate", "aggregate"):  # three commands: bytes per stage
-            start = time.perf_counter()
-            subprocess.run([sys.executable, "-m", f"pipeline.{verb}", *overrides],
-                           cwd=REPO, check=True, capture_output=True)
-            wall[verb] = time.perf_counter() - start
-            sizes[verb] = _tree_bytes(data / "datasets", data / "runs", f"{tmp}/verbs/tables")
-        truth = sum(f.stat().st_size for f in (data / "datasets").rglob("truth.parquet"))
-        runs = _tree_bytes(data / "runs")  # after aggregate: with its metrics files
-        tables, passes = [], []
-        # interleaved, so that a slow spell of the machine is shared; nothing is deleted
-        # until the end (this disk discards freed blocks: a deletion slows what follows it)
-        for k in range(repeat):
-            one = ["experiment=bearings2d_table", f"paths.data_dir={tmp}/one-{k}/data",
-                   f"paths.tables_dir={tmp}/one-{k}/tables", "progress=false"]
-            tables.append(_table_command(one))  # each on fresh data
-            passes.append(_in_memory(Path(tmp) / f"memory-{k}", workers))
-        total, stages = min(tables, key=lambda run: run[0])
-        rerun, _ = _table_command(one)
-        write_bps, read_bps = (max(speeds) for speeds in zip(
-            *(_disk_speed(tmp) for _ in range(repeat)), strict=True))
-        work = {key: min(p[0][key] for p in passes) for key in passes[0][0]}
-        names = passes[0][1]
-    written = {"simulate": sizes["simulate"], "estimate": sizes["estimate"] - sizes["simulate"],
-               "aggregate": sizes["aggregate"] - sizes["estimate"]}
-    # aggregate reads the runs' estimates and the truth
-    read = {"simulate": 0, "estimate": sizes["simulate"],
-            "aggregate": runs - written["aggregate"] + truth}
-    floor = {verb: written[verb] / write_bps + read[verb] / read_bps + work.get(verb, 0.0)
-             for verb in written}
-    lowest = sum(floor.values())
-    print(f"    disk: write {write_bps / 1e6:.0f} MB/s (fsync), read {read_bps / 1e6:.0f} MB/s "
-          f"(page cache); estimators {', '.join(names)}")
-    print("    `make table` (python -m pipeline.table: one process, one worker pool):")
-    for verb in written:
-        print(f"      {verb:9s} {stages[verb]:6.2f} s   floor {floor[verb]:5.2f} s "
-              f"(in memory {work.get(verb, 0.0):5.2f} s, {written[verb] / 1e6:5.0f} MB written, "
-              f"{read[verb] / 1e6:5.0f} MB read)   ratio {stages[verb] / floor[verb]:5.1f}x")
-    print(f"      start-up and exit {total - sum(stages.values()):5.2f} s (Python, Hydra, once)")
-    print(f"      total     {total:6.2f} s   floor {lowest:5.2f} s   ratio {total / lowest:4.2f}x  "
-          "(target <= 2x)")
-    print("      all runs: " + ", ".join(f"{t:.2f} s" for t, _ in tables)
-          + f" (ratios {', '.join(f'{t / lowest:.2f}x' for t, _ in tables)})")
-    print(f"      re-run    {rerun:6.2f} s  (every shard reused: start-up and the checks)")
-    print("    as three commands: " + ", ".join(f"{v} {wall[v]:.2f} s" for v in written)
-          + f"; total {sum(wall.values()):.2f} s, ratio {sum(wall.values()) / lowest:4.2f}x")
-    print(f"    where the rest goes (in memory, CPU s / {workers} workers): encoding the logs "
-          f"{work['encode']:.2f} s (simulate), decoding them {work['decode']:.2f} s (estimate)")
 
 
 def bench_ranges(runs: int):
@@ -571,9 +434,9 @@ def main():
     parser.add_argument("--tracks", type=int, default=2000)
     parser.add_argument("--sigma", type=float, default=0.5)
     parser.add_argument("--runs", type=int, default=30, help="ranges2d repeated runs")
-    parser.add_argument("--skip-stages", action="store_true")
+    parser.add_argument("--skip-tables", action="store_true")
     parser.add_argument("--repeat", type=int, default=3,
-                        help="(b): the best of this many runs of the table and the floor")
+                        help="(b): the best of this many runs of each table and its floor")
     parser.add_argument("--only", choices=SECTIONS, default=None, help="one section")
     parser.add_argument("--paths3d", type=int, default=2500, help="3D filter benchmark paths")
     parser.add_argument("--cmnf-paths", type=int, default=100_000,
@@ -581,12 +444,14 @@ def main():
     args = parser.parse_args()
 
     def wanted(section):
-        return args.only in (None, section) and not (section == "stages" and args.skip_stages)
+        return args.only in (None, section) and not (section == "tables" and args.skip_tables)
 
     if wanted("lm"):
         bench_lm(args.tracks, args.sigma)
-    if wanted("stages"):
-        bench_stages(repeat=args.repeat)
+    if wanted("tables"):
+        from floors import bench_tables  # bench/floors.py (run as a script)
+
+        bench_tables(repeat=args.repeat)
     if wanted("ranges2d"):
         bench_ranges(args.runs)
     if wanted("filters3d"):

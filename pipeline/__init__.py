@@ -1,5 +1,36 @@
 """Thin Hydra entry points, one verb each: ``python -m pipeline.<verb>``."""
 
-from tma.families import register_configs
+import os
+import sys
+import uuid
+
+from tma.parallel import preload_workers, workers_from_server
+
+SWEEP_ENV = "TMA_SWEEP_ID"  # the multirun's id, seen by its jobs (pipeline._common.SweepTable)
+
+
+def _command() -> str | None:
+    """``pipeline.<verb>`` when this process is the command ``python -m pipeline.<verb>``."""
+    argv = sys.orig_argv
+    module = argv[argv.index("-m") + 1] if "-m" in argv[:-1] else ""
+    return module if module.startswith("pipeline.") else None
+
+
+if _command():
+    # the command's local workers start from a server that imports what they need meanwhile
+    # (tma.parallel.preload_workers); they see the environment as it is now, sweep id included
+    multirun = "-m" in sys.argv[1:] or "--multirun" in sys.argv[1:]  # argv[0] is "-m" here
+    if multirun:
+        os.environ.setdefault(SWEEP_ENV, uuid.uuid4().hex)
+    # the command's module is what forked workers re-import as their __main__; its imports are
+    # the other verbs' (runpy warns when the module itself is already imported)
+    verbs = ["pipeline._common", "pipeline.simulate", "pipeline.estimate", "pipeline.aggregate",
+             "pipeline.ingest"]
+    preload_workers([v for v in verbs if v != _command()]
+                    + (["matplotlib.pyplot"] if multirun else []))  # jobs aggregate there
+    if multirun:
+        workers_from_server()  # the joblib Hydra launcher's pool too
+
+from tma.families import register_configs  # noqa: E402
 
 register_configs()  # scenario/* and estimator/* from the Config dataclasses, before Hydra composes

@@ -18,6 +18,7 @@ from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import ConfigAttributeError, ConfigKeyError, OmegaConfBaseException
 
+from pipeline import SWEEP_ENV  # set while a multirun runs
 from tma import experiment
 from tma.errors import TmaError
 from tma.io.atomic import write_json_atomic
@@ -26,7 +27,6 @@ from tma.parallel import Engine, engine_from, keep_freed_memory, quick_exit
 CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
 log = logging.getLogger("tma")
 _stage_hydra = None  # Hydra's config of the stage run_stage is running (else None)
-SWEEP_ENV = "TMA_SWEEP_ID"  # set by SweepTable while a multirun runs
 SWEEP_RECORD = "tma-aggregate.json"  # what an aggregate job of a multirun read
 PROBE_BYTES = 1 << 16  # more than Hydra writes of its own before the stage starts
 # the top-level keys of conf/config.yaml and conf/ingest.yaml and their groups (+key adds none)
@@ -189,6 +189,9 @@ class CheckOutputDir(Callback):
                 print(line)
 
 
+_prefetch = []  # SweepTable's thread importing the report while the jobs run
+
+
 class SweepTable(Callback):
     """Hydra callback: when a multirun of ``aggregate`` ends, one table of all its jobs.
 
@@ -200,11 +203,23 @@ class SweepTable(Callback):
     sweep_id = None
 
     def on_multirun_start(self, config, **kwargs):
-        self.sweep_id = uuid.uuid4().hex
-        os.environ[SWEEP_ENV] = self.sweep_id  # inherited by the jobs, in or out of process
+        # inherited by the jobs, in or out of process; a command sets it as it starts, before
+        # its worker server (``pipeline/__init__.py``)
+        self.sweep_id = os.environ.get(SWEEP_ENV) or uuid.uuid4().hex
+        os.environ[SWEEP_ENV] = self.sweep_id
+        if config.hydra.job.name in ("aggregate", "table"):  # while this process waits
+            from tma.aggregate import prefetch_report
+
+            # not an attribute: Hydra sends its callbacks to the jobs, and a thread does not
+            # pickle
+            _prefetch.append(prefetch_report(str(config.get("scenario", {}).get("family"))))
 
     def on_multirun_end(self, config, **kwargs):
         os.environ.pop(SWEEP_ENV, None)
+        while _prefetch:
+            thread = _prefetch.pop()
+            if thread is not None:
+                thread.join()
         if self.sweep_id is not None:
             guarded(write_sweep_table, config, self.sweep_id)
 

@@ -16,6 +16,7 @@ import gc
 import logging
 import os
 import socket
+import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, fields, replace
@@ -138,6 +139,72 @@ def quick_exit() -> None:
     atexit.register(gc.freeze)
 
 
+# what local workers import before their first task (besides the command's own modules): the
+# stages' core and the libraries the families' simulations and estimators load when first used
+WORKER_MODULES = ("numpy", "pyarrow.parquet", "tma.simulation", "tma.estimation", "tma.aggregate",
+                  )
+# no thread may run in a process that forks: in the fork server one BLAS or OpenMP thread,
+# and no background thread of the jemalloc that pyarrow links (it starts one when loaded)
+SINGLE_THREADED = {**{name: "1" for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
+                                             "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
+                                             "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")},
+                   "JE_ARROW_MALLOC_CONF": "background_thread:false"}
+FORK_SERVER = "TMA_FORK_SERVER"  # set in the fork server (and so its workers): no second one
+
+
+def preload_workers(modules=()) -> bool:
+    """Start this process's local workers (joblib's process pool, loky, and so the joblib
+    Hydra launcher's too) as forks of a server process that has imported ``WORKER_MODULES``
+    and ``modules`` once (``multiprocessing``'s forkserver, ``set_forkserver_preload``): a
+    worker then starts in milliseconds with its imports done, where a fresh interpreter would
+    spend a third of a second starting and as long importing. Called as a command starts (the
+    first lines of ``pipeline``), the server imports while the command composes its config;
+    loky is told to use it when a pool is first made (``workers_from_server``).
+
+    Only on Linux and only for commands: the server forks from a process where no thread runs
+    (it imports with one BLAS and OpenMP thread, ``SINGLE_THREADED``, as every task computes
+    anyway), which is safe on Linux; macOS's system libraries are not safe to use after a fork,
+    so there, and in Python sessions (whose main module, re-run in each forked worker, may be
+    unguarded), workers start as loky starts them: a fresh interpreter each. The workers see
+    the environment as it is when this is called; a forked worker re-imports the command's
+    ``__main__`` (its imports preloaded: at no cost). Idempotent; returns whether workers
+    will start from the server."""
+    global _server
+    if _server or sys.platform != "linux" or os.environ.get(FORK_SERVER):
+        return _server
+    import multiprocessing
+    from multiprocessing import forkserver
+
+    multiprocessing.set_forkserver_preload([*WORKER_MODULES, *modules])
+    saved = {k: os.environ.get(k) for k in [*SINGLE_THREADED, FORK_SERVER]}
+    os.environ.update({**SINGLE_THREADED, FORK_SERVER: "1"})
+    try:
+        forkserver.ensure_running()
+    finally:
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key)
+            else:
+                os.environ[key] = value
+    _server = True
+    return True
+
+
+_server = False  # preload_workers started the fork server
+
+
+def workers_from_server() -> bool:
+    """Have loky (joblib's pool) fork its workers from ``preload_workers``'s server, if it was
+    started and no other start method was chosen; whether it does."""
+    if not _server:
+        return False
+    from joblib.externals.loky.backend import context as loky_context
+
+    if loky_context.get_start_method() is None:
+        loky_context.set_start_method("forkserver")
+    return loky_context.get_start_method() == "forkserver"
+
+
 def _single_threaded(fn, task):
     keep_freed_memory()
     quick_exit()
@@ -171,6 +238,7 @@ def iter_tasks(fn, tasks, *, engine=1, desc: str = "", progress: bool = True):
             return
         from joblib import Parallel, delayed
 
+        workers_from_server()
         parallel = Parallel(n_jobs=engine.n_jobs, return_as="generator")
         for result in parallel(delayed(_single_threaded)(fn, t) for t in tasks):
             bar.update()

@@ -46,6 +46,32 @@ def write_table(tables_dir, name: str, title: str, intro: str, data: pd.DataFram
     return paths
 
 
+def table_subplots(*args, **kwargs):
+    """``plt.subplots`` for a table's plot, its axes titles at the top of their axes (no plot
+    here has ticks there) instead of placed by measuring every tick label on each draw,
+    matplotlib's default (a third of the drawing time of a small plot)."""
+    import matplotlib.pyplot as plt
+
+    with plt.rc_context({"axes.titley": 1.0}):
+        return plt.subplots(*args, **kwargs)
+
+
+def fixed_layout(fig, *, left=0.8, right=0.25, bottom=0.6, top=0.45, wspace=0.75,
+                 hspace=0.85, title=True):
+    """Margins and gaps of ``fig``'s grid of axes, in inches (the width of tick labels and an
+    axis label, a title): the layout ``tight_layout`` would find for the tables' plots, whose
+    labels are short and known, without its measuring pass over every text (a third of the
+    time of a small table's plot). ``title``: room for a ``suptitle`` above the axes."""
+    width, height = fig.get_size_inches()
+    top += 0.35 if title else 0.0
+    grid = fig.axes[0].get_subplotspec().get_gridspec()
+    rows, cols = grid.get_geometry()
+    cell_w = (width - left - right - (cols - 1) * wspace) / cols
+    cell_h = (height - top - bottom - (rows - 1) * hspace) / rows
+    fig.subplots_adjust(left=left / width, right=1 - right / width, bottom=bottom / height,
+                        top=1 - top / height, wspace=wspace / cell_w, hspace=hspace / cell_h)
+
+
 def save_figure(fig, path: Path):
     from matplotlib.layout_engine import PlaceHolderLayoutEngine
 

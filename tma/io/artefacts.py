@@ -9,7 +9,9 @@ does not depend on how ``paths.data_dir`` is spelled.
 """
 
 import json
+import logging
 from pathlib import Path
+from time import perf_counter
 
 import numpy as np
 
@@ -19,6 +21,7 @@ from tma.io.atomic import atomic_path, sha256_file, sha256_json, write_json_atom
 from tma.io.owned import locked, remove_stale_temporaries
 
 ARRAYS = "arrays.npz"
+log = logging.getLogger(__name__)
 
 
 def artefact_dir(data_dir, kind: str, spec: dict) -> Path:
@@ -44,7 +47,10 @@ def _load_or_build(root: Path, kind: str, spec: dict, build) -> tuple[Path, str]
             return root / ARRAYS, record["sha256"]
     except (OSError, ValueError, KeyError, TypeError):  # absent or damaged: build it again
         pass
+    start = perf_counter()
     arrays = build()
+    # what a run spends before its shards (e.g. simulating a training bundle, training)
+    log.info("artefact %s built in %.2f s", kind, perf_counter() - start)
     with atomic_path(root / ARRAYS) as tmp, open(tmp, "wb") as f:
         np.savez(f, **arrays)
     sha = sha256_file(root / ARRAYS)

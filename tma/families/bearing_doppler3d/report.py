@@ -26,7 +26,7 @@ from tma.families.bearing_doppler3d.metrics import (  # noqa: E402
 from tma.families.bearing_doppler3d.model import STATE_NAMES  # noqa: E402
 from tma.io import arrow  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
-from tma.tables import save_figure, write_table  # noqa: E402
+from tma.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
 
 SHORT = {"X_m": "X", "Y_m": "Y", "Z_m": "Z", "v_m_s": "v", "phi_rad": "phi", "a_m_s2": "a"}
 MID_S = 50.0
@@ -120,7 +120,7 @@ vectorised filters (2 workers share the shards) and vary between machines."""
 
 
 def _plot(path, curves, doppler):
-    fig, axes = plt.subplots(2, 3, figsize=(15, 8))
+    fig, axes = table_subplots(2, 3, figsize=(15, 8))
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for ax, comp in zip(axes.flat, STATE_NAMES, strict=True):
         for i, (name, _, steps) in enumerate(sorted(curves, key=lambda c: c[0])):
@@ -135,6 +135,6 @@ def _plot(path, curves, doppler):
     axes.flat[0].legend(fontsize=7)
     fig.suptitle("RMSE vs time (solid) and each filter's own std (dashed), "
                  + ("with Doppler" if doppler else "bearings only"))
-    fig.tight_layout()
+    fixed_layout(fig)
     save_figure(fig, path)
     plt.close(fig)

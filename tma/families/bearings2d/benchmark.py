@@ -38,7 +38,7 @@ from tma.families.bearings2d.metrics import (  # noqa: E402
     track_metrics,
 )
 from tma.stats import wilson_interval  # noqa: E402
-from tma.tables import save_figure, write_table  # noqa: E402
+from tma.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
 
 log = logging.getLogger(__name__)
 
@@ -176,7 +176,7 @@ def _plot(table: pd.DataFrame, path: Path):
                       else ("sigma_deg", "bearing noise sigma (deg)"))
     lines = ["estimator"] if by_prob or table["outlier_prob"].nunique() == 1 \
         else ["estimator", "outlier_prob"]
-    fig, axes = plt.subplots(2, 2, figsize=(11, 8), sharex=True)
+    fig, axes = table_subplots(2, 2, figsize=(11, 8), sharex=True)
     for (ax, (q, unit)) in zip(axes.flat, UNITS.items(), strict=False):
         for key, rows in table.groupby(lines, sort=True):
             with np.errstate(divide="ignore", invalid="ignore"):
@@ -198,7 +198,7 @@ def _plot(table: pd.DataFrame, path: Path):
         ax.set_xlabel(x_label)
     axes[0, 0].legend(fontsize=8)
     fig.suptitle("Bearings-only TMA: estimators against the Cramer-Rao bound")
-    fig.tight_layout()
+    fixed_layout(fig)
     save_figure(fig, path)
     plt.close(fig)
 

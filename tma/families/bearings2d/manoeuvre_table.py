@@ -37,7 +37,14 @@ from tma.families.bearings2d.metrics import (  # noqa: E402
     track_metrics,
 )
 from tma.stats import wilson_interval  # noqa: E402
-from tma.tables import markdown_table, save_figure, write_csv, write_table  # noqa: E402
+from tma.tables import (  # noqa: E402
+    fixed_layout,
+    markdown_table,
+    save_figure,
+    table_subplots,
+    write_csv,
+    write_table,
+)
 
 log = logging.getLogger(__name__)
 
@@ -161,7 +168,7 @@ def shown_table(table: pd.DataFrame) -> pd.DataFrame:
 
 
 def _plot(table: pd.DataFrame, detections: pd.DataFrame, path: Path):
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
+    fig, axes = table_subplots(1, 2, figsize=(12, 4.5))
     ax = axes[0]
     if not detections.empty:
         for (estimator, motion), rows in detections.groupby(["estimator", "motion"], sort=True):
@@ -194,7 +201,7 @@ def _plot(table: pd.DataFrame, detections: pd.DataFrame, path: Path):
     ax.set_title("Share ok, and consistent among them")
     ax.legend(fontsize=7)
     fig.suptitle("Bearings-only TMA of targets that move like ships")
-    fig.tight_layout()
+    fixed_layout(fig, right=0.7)  # the last bar label reaches past the axes
     save_figure(fig, path)
     plt.close(fig)
 

@@ -36,7 +36,7 @@ from tma.families.bearings2d.status import STATUSES  # noqa: E402
 from tma.geo import local_to_geodetic  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
 from tma.sources.labels import shown_labels  # noqa: E402
-from tma.tables import save_figure, write_table  # noqa: E402
+from tma.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
 from tma.utc import format_utc  # noqa: E402
 
 INTRO = """Bearings-only TMA of a constant-velocity target from a manoeuvring observer
@@ -96,7 +96,7 @@ def write_success_table(rows: list[dict], tables_dir, name="bearings2d",
                         notes="Success regions:\n" + REGION_NOTE, paper=paper_section)
     paths.append(tables_dir / f"{name}.png")
 
-    fig, axes = plt.subplots(2, 2, figsize=(10, 7), sharex=True, sharey=True)
+    fig, axes = table_subplots(2, 2, figsize=(10, 7), sharex=True, sharey=True)
     for ax, region in zip(axes.flat, REGIONS, strict=True):
         for estimator, rows_e in table.groupby("estimator", sort=True):
             x = rows_e["sigma_deg"].to_numpy()
@@ -112,7 +112,7 @@ def write_success_table(rows: list[dict], tables_dir, name="bearings2d",
         ax.set_ylabel("success rate (%)")
     axes[0, 0].legend()
     fig.suptitle("Bearings-only TMA: success rate vs noise (95 % Wilson bands)")
-    fig.tight_layout()
+    fixed_layout(fig)
     save_figure(fig, paths[-1])
     plt.close(fig)
     return paths

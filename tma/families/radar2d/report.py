@@ -24,7 +24,7 @@ from tma.families.radar2d.metrics import (  # noqa: E402
     table_columns,
 )
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
-from tma.tables import save_figure, write_table  # noqa: E402
+from tma.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
 
 INTRO = """Tracking a small fast boat that turns sharply{radius} in front of a coastal
 radar (`../shared/specs/radar2d.md`); one row per tracker and boat speed over the Monte Carlo
@@ -152,7 +152,7 @@ def _shade(ax, segs):
 
 def _plot(error_path, memory_path, curves):
     speeds = sorted({s for _, s, _, _ in curves})
-    fig, axes = plt.subplots(1, len(speeds), figsize=(6 * len(speeds), 4.5), squeeze=False)
+    fig, axes = table_subplots(1, len(speeds), figsize=(6 * len(speeds), 4.5), squeeze=False)
     for ax, speed in zip(axes[0], speeds, strict=True):
         _shade(ax, next(segs for _, s, _, segs in curves if s == speed))
         for name, s, curve, _ in sorted(curves, key=lambda c: c[0]):
@@ -164,11 +164,11 @@ def _plot(error_path, memory_path, curves):
         ax.set_ylabel("mean position error (m)")
         ax.grid(alpha=0.3)
         ax.legend()
-    fig.tight_layout()
+    fixed_layout(fig, title=False)
     save_figure(fig, error_path)
     plt.close(fig)
 
-    fig, axes = plt.subplots(1, len(speeds), figsize=(6 * len(speeds), 4.5), squeeze=False)
+    fig, axes = table_subplots(1, len(speeds), figsize=(6 * len(speeds), 4.5), squeeze=False)
     for ax, speed in zip(axes[0], speeds, strict=True):
         _shade(ax, next(segs for _, s, _, segs in curves if s == speed))
         for name, s, curve, _ in curves:
@@ -184,6 +184,6 @@ def _plot(error_path, memory_path, curves):
         ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:  # a speed without a memory-selecting tracker
             ax.legend()
-    fig.tight_layout()
+    fixed_layout(fig, title=False)
     save_figure(fig, memory_path)
     plt.close(fig)

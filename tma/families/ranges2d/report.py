@@ -21,7 +21,7 @@ from tma.families.ranges2d.metrics import COLUMNS, summary_row, track_metrics  #
 from tma.families.ranges2d.model import RangeModel  # noqa: E402
 from tma.io import arrow  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
-from tma.tables import save_figure, write_table  # noqa: E402
+from tma.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
 
 
 def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) -> list[Path]:
@@ -98,7 +98,7 @@ def _plot(path, dataset, reference, samples):
         log.model["prior_sd_m"])
     centre = reference.set_index("track_id").loc[log.track_id[0], ["x_m", "y_m"]].to_numpy()
     names = sorted(samples) or ["(no samplers)"]
-    fig, axes = plt.subplots(1, len(names), figsize=(5.5 * len(names), 5), squeeze=False)
+    fig, axes = table_subplots(1, len(names), figsize=(5.5 * len(names), 5), squeeze=False)
     for ax, name in zip(axes[0], names, strict=True):
         pts = samples.get(name)
         span = 400.0
@@ -118,6 +118,6 @@ def _plot(path, dataset, reference, samples):
         ax.set_ylabel("y north (m)")
         ax.legend(loc="lower left", fontsize=8)
     fig.suptitle("First draws of each sampler over the posterior (contours of f2/max)")
-    fig.tight_layout()
+    fixed_layout(fig)
     save_figure(fig, path)
     plt.close(fig)

@@ -1,0 +1,83 @@
+"""Local workers of a command fork from a server that imported what they need
+(``tma.parallel.preload_workers``): no thread runs in it when it forks, Python sessions keep
+loky's own start, and a sweep's jobs (the joblib Hydra launcher's workers) see the sweep and
+write what the same points give as one command's grid, byte for byte."""
+
+import hashlib
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from tests.conftest import REPO, run_cli
+
+LINUX = pytest.mark.skipif(sys.platform != "linux", reason="the fork server is Linux's only")
+
+PROBE = """
+import json, os, sys
+from tma.parallel import preload_workers, run_tasks
+
+def probe(_):
+    ppid = os.getppid()
+    with open(f"/proc/{ppid}/status") as f:
+        threads = next(int(line.split()[1]) for line in f if line.startswith("Threads:"))
+    return {"ppid": ppid, "parent_threads": threads, "preloaded": "tma.estimation" in sys.modules}
+
+if __name__ == "__main__":
+    server = preload_workers(["pipeline._common", "matplotlib.pyplot"])  # as a sweep does
+    print(json.dumps({"server": server, "main": os.getpid(),
+                      "workers": run_tasks(probe, [0, 1, 2, 3], engine=2, progress=False)}))
+"""
+
+
+@LINUX
+def test_workers_fork_from_a_server_where_no_thread_runs(tmp_path):
+    script = tmp_path / "probe.py"
+    script.write_text(PROBE)
+    out = json.loads(subprocess.run([sys.executable, str(script)], cwd=REPO, check=True,
+                                    capture_output=True, text=True).stdout)
+    assert out["server"] is True
+    parents = {w["ppid"] for w in out["workers"]}
+    assert len(parents) == 1 and out["main"] not in parents  # forked by the server
+    assert all(w["parent_threads"] == 1 for w in out["workers"])
+    assert all(w["preloaded"] for w in out["workers"])  # its imports came with the fork
+
+
+def test_a_python_session_keeps_the_default_start(tmp_path):
+    """Importing ``pipeline`` (tests, notebooks) starts no server: a session's main module
+    may be unguarded, and forked workers would run it again."""
+    code = ("import pipeline, tma.parallel as p, json; "
+            "print(json.dumps([p._server, p.workers_from_server()]))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, check=True,
+                         capture_output=True, text=True).stdout
+    assert json.loads(out) == [False, False]
+
+
+def _estimates(data: Path) -> dict:
+    return {p.relative_to(data).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(data.glob("runs/*/*/estimates.parquet"))}
+
+
+def test_a_sweep_on_the_joblib_launcher_gives_the_grid_of_one_command(tmp_path):
+    """``-m hydra/launcher=parallel``: four jobs in forked workers, each one point; their
+    sweep table has the four rows (the jobs saw the sweep's id), and the same points as one
+    command's grid give the same runs byte for byte."""
+    small = ["scenario.n_tracks=30", "scenario.shard_size=15", "progress=false"]
+    sweep = tmp_path / "sweep"
+    proc = run_cli("table", "-m", "hydra/launcher=parallel", *small,
+                   "scenario.sigma_deg=0.1,0.5", "estimator=lm,nbearings",
+                   f"paths.data_dir={sweep}/data", f"paths.tables_dir={sweep}/tables",
+                   f"hydra.sweep.dir={sweep}/multirun")
+    assert "Traceback" not in proc.stderr and "RuntimeWarning" not in proc.stderr
+    table = pd.read_csv(sweep / "tables" / "bearings2d-sweep.csv")
+    assert sorted(zip(table.estimator, table.sigma_deg, strict=True)) == [
+        ("lm", 0.1), ("lm", 0.5), ("nbearings", 0.1), ("nbearings", 0.5)]
+    grid = tmp_path / "grid"
+    run_cli("table", *small, "scenario.sigma_deg=[0.1,0.5]",
+            "+estimator@grid.estimators.lm=lm", "+estimator@grid.estimators.nbearings=nbearings",
+            f"paths.data_dir={grid}/data", f"paths.tables_dir={grid}/tables")
+    runs = _estimates(sweep / "data")
+    assert len(runs) == 4 and runs == _estimates(grid / "data")
