@@ -145,7 +145,8 @@ def in_memory_work(job_overrides, data_dir: Path) -> Work:
     artefact_log.addHandler(handler)
     artefact_log.setLevel(logging.INFO)
     cfgs = [compose(overrides) for overrides in job_overrides]
-    with threadpool_limits(limits=1), tempfile.TemporaryDirectory(dir="/dev/shm") as scratch:
+    memory = "/dev/shm" if os.path.isdir("/dev/shm") else None  # artefacts built in RAM (Linux)
+    with threadpool_limits(limits=1), tempfile.TemporaryDirectory(dir=memory) as scratch:
         scenarios, warm = {}, set()
         for cfg in cfgs:
             for node in scenario_nodes(cfg):

@@ -10,10 +10,14 @@ SWEEP_ENV = "TMA_SWEEP_ID"  # the multirun's id, seen by its jobs (pipeline._com
 
 
 def _command() -> str | None:
-    """``pipeline.<verb>`` when this process is the command ``python -m pipeline.<verb>``."""
-    argv = sys.orig_argv
-    module = argv[argv.index("-m") + 1] if "-m" in argv[:-1] else ""
-    return module if module.startswith("pipeline.") else None
+    """``pipeline.<verb>`` when this process is the command ``python -m pipeline.<verb>``: the
+    interpreter's own options read up to the first that names what it runs."""
+    argv, i = sys.orig_argv[1:], 0
+    while i < len(argv) and argv[i].startswith("-") and argv[i] not in ("-", "-c", "-m"):
+        i += 2 if argv[i] in ("-W", "-X", "--check-hash-based-pycs") else 1
+    if argv[i:i + 1] != ["-m"] or i + 1 >= len(argv):
+        return None  # a script, -c, stdin or a session
+    return argv[i + 1] if argv[i + 1].startswith("pipeline.") else None
 
 
 if _command():
@@ -21,7 +25,7 @@ if _command():
     # (tma.parallel.preload_workers); they see the environment as it is now, sweep id included
     multirun = "-m" in sys.argv[1:] or "--multirun" in sys.argv[1:]  # argv[0] is "-m" here
     if multirun:
-        os.environ.setdefault(SWEEP_ENV, uuid.uuid4().hex)
+        os.environ[SWEEP_ENV] = uuid.uuid4().hex  # a new sweep, whatever the shell exported
     # the command's module is what forked workers re-import as their __main__; its imports are
     # the other verbs' (runpy warns when the module itself is already imported)
     verbs = ["pipeline._common", "pipeline.simulate", "pipeline.estimate", "pipeline.aggregate",

@@ -5,6 +5,7 @@ write what the same points give as one command's grid, byte for byte."""
 
 import hashlib
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -33,12 +34,17 @@ if __name__ == "__main__":
 """
 
 
-@LINUX
-def test_workers_fork_from_a_server_where_no_thread_runs(tmp_path):
+def _probe(tmp_path, env=None) -> tuple[dict, str]:
     script = tmp_path / "probe.py"
     script.write_text(PROBE)
-    out = json.loads(subprocess.run([sys.executable, str(script)], cwd=REPO, check=True,
-                                    capture_output=True, text=True).stdout)
+    proc = subprocess.run([sys.executable, str(script)], cwd=REPO, check=True,
+                          capture_output=True, text=True, env={**os.environ, **(env or {})})
+    return json.loads(proc.stdout), proc.stderr
+
+
+@LINUX
+def test_workers_fork_from_a_server_where_no_thread_runs(tmp_path):
+    out, _ = _probe(tmp_path)
     assert out["server"] is True
     parents = {w["ppid"] for w in out["workers"]}
     assert len(parents) == 1 and out["main"] not in parents  # forked by the server
@@ -46,14 +52,46 @@ def test_workers_fork_from_a_server_where_no_thread_runs(tmp_path):
     assert all(w["preloaded"] for w in out["workers"])  # its imports came with the fork
 
 
-def test_a_python_session_keeps_the_default_start(tmp_path):
-    """Importing ``pipeline`` (tests, notebooks) starts no server: a session's main module
-    may be unguarded, and forked workers would run it again."""
-    code = ("import pipeline, tma.parallel as p, json; "
-            "print(json.dumps([p._server, p.workers_from_server()]))")
-    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, check=True,
-                         capture_output=True, text=True).stdout
-    assert json.loads(out) == [False, False]
+@LINUX
+def test_a_module_that_fails_in_the_server_is_left_to_the_workers(tmp_path):
+    """matplotlib refuses an unknown backend with a ValueError: multiprocessing's server would
+    die of it (it survives ImportError only); tma's leaves the module to the worker."""
+    out, err = _probe(tmp_path, {"MPLBACKEND": "no-such-backend"})
+    assert len({w["ppid"] for w in out["workers"]}) == 1 and out["main"] not in {
+        w["ppid"] for w in out["workers"]}
+    assert "Traceback" not in err
+
+
+@pytest.mark.parametrize(("argv", "command"), [
+    (["python", "-m", "pipeline.table", "-m", "estimator=lm"], "pipeline.table"),
+    (["python", "-X", "importtime", "-m", "pipeline.simulate"], "pipeline.simulate"),
+    (["python", "-m", "pipeline"], None),
+    (["python", "-c", "import pipeline"], None),
+    (["python", "-m", "pytest", "-m", "pipeline.table"], None),
+    (["python", "script.py", "-m", "pipeline.table"], None),
+    (["python", "-W", "error", "-m", "pipeline.aggregate", "table=x"], "pipeline.aggregate"),
+    (["python", "-m"], None),
+])
+def test_a_command_is_recognised_by_how_python_was_started(monkeypatch, argv, command):
+    import pipeline
+
+    monkeypatch.setattr(sys, "orig_argv", argv)
+    assert pipeline._command() == command
+
+
+@LINUX
+def test_a_command_runs_its_shards_in_forked_workers_and_says_nothing_else(tmp_path):
+    """The command line itself, with warnings shown: its workers fork from the server."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONWARNINGS"}
+    proc = subprocess.run(
+        [sys.executable, "-m", "pipeline.simulate", "scenario.n_tracks=40",
+         "scenario.shard_size=20", "progress=false", "parallel.n_jobs=2",
+         "hydra.verbose=tma.parallel", f"paths.data_dir={tmp_path}"],
+        cwd=REPO, capture_output=True, text=True, env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    output = proc.stdout + proc.stderr
+    assert "local workers fork from the server that preloaded their modules" in output
+    assert "Warning" not in output and "Traceback" not in output
 
 
 def _estimates(data: Path) -> dict:

@@ -141,8 +141,8 @@ def quick_exit() -> None:
 
 # what local workers import before their first task (besides the command's own modules): the
 # stages' core and the libraries the families' simulations and estimators load when first used
-WORKER_MODULES = ("numpy", "pyarrow.parquet", "tma.simulation", "tma.estimation", "tma.aggregate",
-                  )
+# (tma.worker_preload imports them)
+WORKER_MODULES = ("numpy", "pyarrow.parquet", "tma.simulation", "tma.estimation", "tma.aggregate")
 # no thread may run in a process that forks: in the fork server one BLAS or OpenMP thread,
 # and no background thread of the jemalloc that pyarrow links (it starts one when loaded)
 SINGLE_THREADED = {**{name: "1" for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
@@ -150,6 +150,7 @@ SINGLE_THREADED = {**{name: "1" for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_TH
                                              "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")},
                    "JE_ARROW_MALLOC_CONF": "background_thread:false"}
 FORK_SERVER = "TMA_FORK_SERVER"  # set in the fork server (and so its workers): no second one
+PRELOAD = "TMA_PRELOAD"  # the modules tma.worker_preload imports in the fork server
 
 
 def preload_workers(modules=()) -> bool:
@@ -166,18 +167,21 @@ def preload_workers(modules=()) -> bool:
     anyway), which is safe on Linux; macOS's system libraries are not safe to use after a fork,
     so there, and in Python sessions (whose main module, re-run in each forked worker, may be
     unguarded), workers start as loky starts them: a fresh interpreter each. The workers see
-    the environment as it is when this is called; a forked worker re-imports the command's
-    ``__main__`` (its imports preloaded: at no cost). Idempotent; returns whether workers
-    will start from the server."""
+    the environment as it is when this is called (a variable set later in the command does
+    not reach them), with one BLAS thread; a forked worker re-imports the command's
+    ``__main__`` (its imports preloaded: at no cost). A module that fails to import in the
+    server is imported again by the worker that needs it (``tma.worker_preload``).
+    Idempotent; returns whether workers will start from the server."""
     global _server
     if _server or sys.platform != "linux" or os.environ.get(FORK_SERVER):
         return _server
     import multiprocessing
     from multiprocessing import forkserver
 
-    multiprocessing.set_forkserver_preload([*WORKER_MODULES, *modules])
-    saved = {k: os.environ.get(k) for k in [*SINGLE_THREADED, FORK_SERVER]}
-    os.environ.update({**SINGLE_THREADED, FORK_SERVER: "1"})
+    multiprocessing.set_forkserver_preload(["tma.worker_preload"])  # never imported here
+    saved = {k: os.environ.get(k) for k in [*SINGLE_THREADED, FORK_SERVER, PRELOAD]}
+    os.environ.update({**SINGLE_THREADED, FORK_SERVER: "1",
+                       PRELOAD: ",".join([*WORKER_MODULES, *modules])})
     try:
         forkserver.ensure_running()
     finally:
@@ -202,7 +206,10 @@ def workers_from_server() -> bool:
 
     if loky_context.get_start_method() is None:
         loky_context.set_start_method("forkserver")
-    return loky_context.get_start_method() == "forkserver"
+    forked = loky_context.get_start_method() == "forkserver"
+    if forked:
+        log.debug("local workers fork from the server that preloaded their modules")
+    return forked
 
 
 def _single_threaded(fn, task):

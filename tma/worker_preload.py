@@ -1,0 +1,22 @@
+"""What the workers' fork server (``tma.parallel.preload_workers``) imports, and so every worker
+forked from it has from its start; imported there only (its import does the work).
+
+The modules named in ``$TMA_PRELOAD`` (comma-separated), each on its own: one that fails to
+import (a broken plotting backend, say) is left to the worker that needs it, which then
+reports the real error, where multiprocessing's server would die of anything but an
+ImportError and leave the command only an EOFError.
+
+numba's compiler is not set up here, measured: it would spare each worker ~0.4 s at its first
+compiled call, but delay the server's first fork by as much, which every command pays and
+only those that estimate with compiled kernels win back."""
+
+import importlib
+import os
+
+from tma.parallel import PRELOAD
+
+for _name in filter(None, os.environ.get(PRELOAD, "").split(",")):
+    try:
+        importlib.import_module(_name)
+    except Exception:  # the worker that needs it imports it again and says why
+        continue
