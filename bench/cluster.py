@@ -17,9 +17,9 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from hydra import compose, initialize_config_dir  # noqa: E402
+from floors import compose  # noqa: E402 (bench/floors.py, beside this script)
 
-from pipeline._common import CONF_DIR, estimator_nodes, scenario_nodes  # noqa: E402
+from pipeline._common import estimator_nodes, scenario_nodes  # noqa: E402
 from tma.estimation import estimate_runs  # noqa: E402
 from tma.io.dataset import Dataset  # noqa: E402
 from tma.parallel import Engine, close_dask_clients, dask_client, run_tasks  # noqa: E402
@@ -31,9 +31,8 @@ def _nothing(task):
 
 
 def bench_cluster(n_tracks: int = 12_000, shard_size: int = 200, n_noop: int = 2000):
-    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
-        cfg = compose("config", [f"scenario.n_tracks={n_tracks}",
-                                 f"scenario.shard_size={shard_size}", "estimator=lm"])
+    cfg = compose([f"scenario.n_tracks={n_tracks}", f"scenario.shard_size={shard_size}",
+                   "estimator=lm"])
     with tempfile.TemporaryDirectory() as tmp:
         data = Path(tmp) / "data"
         t0 = time.perf_counter()
@@ -48,7 +47,7 @@ def bench_cluster(n_tracks: int = 12_000, shard_size: int = 200, n_noop: int = 2
                    "dask LocalCluster, 2 workers": Engine("dask", n_workers=2)}
         rates = {}
         for label, engine in engines.items():
-            if engine.kind == "dask":
+            if engine.engine == "dask":
                 close_dask_clients()
                 dask_client(None, engine.n_workers)  # cluster start-up is not shard time
                 estimate_runs(data, jobs, engine=engine, progress=False, force=True)  # warm

@@ -287,12 +287,11 @@ class Floor:
 
     @property
     def total(self) -> float:
-        if "all" in self.written:
-            write_bps, read_bps = self.speed
-            return (self.work("simulate") + self.work("estimate") + self.written["all"] / write_bps
-                    + sum(min(w.read[s] for w in self.works) for s in ("estimate", "aggregate"))
-                    / read_bps)
-        return sum(self.stage(s) for s in ("simulate", "estimate", "aggregate"))
+        """The stages' floors summed; a sweep's bytes are not split by stage (``all``)."""
+        write_bps, read_bps = self.speed
+        stages = ("simulate", "estimate", "aggregate")
+        return (sum(self.work(s) for s in stages) + sum(self.written.values()) / write_bps
+                + sum(min(w.read[s] for w in self.works) for s in stages) / read_bps)
 
 
 def measure(label: str, arguments, job_overrides, repeat: int, tmp: Path) -> Floor:

@@ -25,9 +25,12 @@ def compose_cfg(overrides=(), config_name="config", **kwargs):
         return compose(config_name=config_name, overrides=list(overrides), **kwargs)
 
 
-def run_cli(verb, *overrides, check=True, cwd=REPO):
-    """Run ``python -m pipeline.<verb>`` in a subprocess; returns the CompletedProcess."""
-    env = {**os.environ, "PYTHONWARNINGS": "ignore"}
+def run_cli(verb, *overrides, check=True, cwd=REPO, warnings=False):
+    """Run ``python -m pipeline.<verb>`` in a subprocess; returns the CompletedProcess.
+    ``warnings``: Python's default filters, as a user runs it (else silenced)."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONWARNINGS"}
+    if not warnings:
+        env["PYTHONWARNINGS"] = "ignore"
     proc = subprocess.run([sys.executable, "-m", f"pipeline.{verb}", *overrides], cwd=cwd,
                           capture_output=True, text=True, env=env, timeout=600)
     if check and proc.returncode != 0:
@@ -68,7 +71,12 @@ def run_stage_here(verb, *overrides, check=True):
 
 @pytest.fixture
 def paths(tmp_path):
-    return [f"paths.data_dir={tmp_path / 'data'}", f"paths.tables_dir={tmp_path / 'tables'}"]
+    return data_paths(tmp_path)
+
+
+def data_paths(root) -> list[str]:
+    """The overrides that put a command's data and tables under ``root``."""
+    return [f"paths.data_dir={root / 'data'}", f"paths.tables_dir={root / 'tables'}"]
 
 
 def plain_messages(path, topics=None) -> list:

@@ -188,13 +188,13 @@ def test_plot_and_map(workdir, tmp_path):
 
 
 def test_import_tma_is_light():
-    code = ("import sys, time; t = time.perf_counter(); import tma; "
-            "print(time.perf_counter() - t, 'numpy' in sys.modules, 'pandas' in sys.modules)")
-    seconds, numpy_loaded, pandas_loaded = subprocess.run(
+    """``import tma`` loads neither numpy nor pandas (what makes it fast; no timing here: a
+    shared machine's seconds say nothing)."""
+    code = "import sys, tma; print('numpy' in sys.modules, 'pandas' in sys.modules)"
+    numpy_loaded, pandas_loaded = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True,
         cwd=REPO).stdout.split()
     assert numpy_loaded == pandas_loaded == "False"
-    assert float(seconds) < 0.3
     assert set(tma.API) <= set(dir(tma))
     with pytest.raises(AttributeError):
         tma.nothing_here  # noqa: B018

@@ -55,7 +55,7 @@ def test_every_estimator_composes_from_its_dataclass_alone(name):
 @pytest.mark.parametrize("name", _options("parallel"))
 def test_every_parallel_option_composes(name):
     chosen = engine(compose_cfg([f"parallel={name}"]))
-    assert chosen.kind == ("dask" if name == "dask" else "joblib") and chosen.n_jobs >= 1
+    assert chosen.engine == ("dask" if name == "dask" else "joblib") and chosen.n_jobs >= 1
 
 
 @pytest.mark.parametrize("name", _options("experiment"))

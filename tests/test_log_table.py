@@ -9,7 +9,7 @@ import json
 import pandas as pd
 import pytest
 
-from tests.conftest import run_stage_here
+from tests.conftest import data_paths, run_stage_here
 from tests.test_pipeline import _files
 from tma.families.bearings2d.scenario import Config, simulate_shard
 
@@ -22,10 +22,6 @@ def _log(path, seed=5, n=3):
                    "bearing_deg": log.bearing_deg[i, k], "track_id": i}
                   for k, t in enumerate(log.t_s) for i in range(n)]).to_csv(path, index=False)
     return path
-
-
-def _paths(root):
-    return [f"paths.data_dir={root / 'data'}", f"paths.tables_dir={root / 'tables'}"]
 
 
 def _run_config(root, dataset="trial7"):
@@ -46,13 +42,13 @@ def _one_line(proc, *expected):
 def test_one_command_writes_what_the_three_commands_write(tmp_path):
     log = _log(tmp_path / "trial7.csv")
     one, three = tmp_path / "one", tmp_path / "three"
-    proc = run_stage_here("table", f"input={log}", *_paths(one), *QUIET)
+    proc = run_stage_here("table", f"input={log}", *data_paths(one), *QUIET)
     assert [line.split(" - ")[1].split(":")[0] for line in proc.stdout.splitlines()
             if " - stage " in line] == ["stage ingest", "stage estimate", "stage aggregate"]
-    run_stage_here("ingest", f"input={log}", *_paths(three), *QUIET)
+    run_stage_here("ingest", f"input={log}", *data_paths(three), *QUIET)
     for verb in ("estimate", "aggregate"):  # the README's commands, as before
         run_stage_here(verb, "dataset=trial7", "estimator=lm",
-                       "estimator.initial_bearing_deg=null", *_paths(three), *QUIET)
+                       "estimator.initial_bearing_deg=null", *data_paths(three), *QUIET)
     assert _files(one).keys() == _files(three).keys()
     assert [str(k) for k in _files(one) if _files(one)[k] != _files(three)[k]] == []
     assert (one / "tables" / "trial7-lm.csv").exists()
@@ -63,7 +59,7 @@ def test_one_command_writes_what_the_three_commands_write(tmp_path):
 def test_a_bare_log_and_any_ingest_or_estimator_option(tmp_path):
     log = _log(tmp_path / "rec.csv")
     run_stage_here("table", str(log), "name=trial7", "estimator=nbearings", "sigma_deg=0.3",
-                   "estimator.max_range_rel_sd=0.3", *_paths(tmp_path), *QUIET)
+                   "estimator.max_range_rel_sd=0.3", *data_paths(tmp_path), *QUIET)
     [config] = _run_config(tmp_path).values()
     assert config["name"] == "nbearings" and config["max_range_rel_sd"] == 0.3
     manifest = json.loads((tmp_path / "data/datasets/trial7/manifest.json").read_text())
@@ -73,21 +69,21 @@ def test_a_bare_log_and_any_ingest_or_estimator_option(tmp_path):
 
 def test_a_rerun_reuses_the_dataset_and_the_run_and_says_so(tmp_path):
     log = _log(tmp_path / "trial7.csv")
-    run_stage_here("table", f"input={log}", *_paths(tmp_path), *QUIET)
+    run_stage_here("table", f"input={log}", *data_paths(tmp_path), *QUIET)
     before = _files(tmp_path / "data")
-    proc = run_stage_here("table", f"input={log}", *_paths(tmp_path), *QUIET)
+    proc = run_stage_here("table", f"input={log}", *data_paths(tmp_path), *QUIET)
     assert "trial7 reused (ingesting the log again gives the same dataset)" in proc.stdout
     assert "reused (finished before and verified" in proc.stdout
     assert _files(tmp_path / "data") == before
     assert not list((tmp_path / "data").glob(".tma-log-check-*"))  # the scratch copy is gone
-    run_stage_here("table", f"input={log}", "estimator=last_leg", *_paths(tmp_path), *QUIET)
+    run_stage_here("table", f"input={log}", "estimator=last_leg", *data_paths(tmp_path), *QUIET)
     assert len(_run_config(tmp_path)) == 2
     # another log (or other reading options) under the same name: refused, nothing replaced
     (tmp_path / "other").mkdir()
     other = _log(tmp_path / "other" / "trial7.csv", seed=6)
-    proc = run_stage_here("table", f"input={other}", *_paths(tmp_path), *QUIET, check=False)
+    proc = run_stage_here("table", f"input={other}", *data_paths(tmp_path), *QUIET, check=False)
     _one_line(proc, "dataset", "trial7 exists", "force=true")
-    proc = run_stage_here("table", f"input={log}", "time.format=unix_s", *_paths(tmp_path),
+    proc = run_stage_here("table", f"input={log}", "time.format=unix_s", *data_paths(tmp_path),
                           *QUIET, check=False)
     _one_line(proc, "other reading options")
     assert {k: v for k, v in _files(tmp_path / "data").items() if k in before} == before
@@ -95,9 +91,9 @@ def test_a_rerun_reuses_the_dataset_and_the_run_and_says_so(tmp_path):
 
 def test_estimate_says_when_it_reuses_a_run(tmp_path):
     log = _log(tmp_path / "trial7.csv")
-    run_stage_here("ingest", f"input={log}", *_paths(tmp_path), *QUIET)
-    first = run_stage_here("estimate", "dataset=trial7", *_paths(tmp_path), *QUIET)
-    again = run_stage_here("estimate", "dataset=trial7", *_paths(tmp_path), *QUIET)
+    run_stage_here("ingest", f"input={log}", *data_paths(tmp_path), *QUIET)
+    first = run_stage_here("estimate", "dataset=trial7", *data_paths(tmp_path), *QUIET)
+    again = run_stage_here("estimate", "dataset=trial7", *data_paths(tmp_path), *QUIET)
     [run] = _run_config(tmp_path)
     assert f"{run}\n" in first.stdout and "reused" not in first.stdout
     assert f"{run} reused (finished before and verified; force=true recomputes it)" in (
@@ -105,9 +101,9 @@ def test_estimate_says_when_it_reuses_a_run(tmp_path):
 
 
 def test_a_stored_dataset_is_estimated_and_aggregated_in_one_command(tmp_path):
-    run_stage_here("ingest", f"input={_log(tmp_path / 'trial7.csv')}", *_paths(tmp_path),
+    run_stage_here("ingest", f"input={_log(tmp_path / 'trial7.csv')}", *data_paths(tmp_path),
                    *QUIET)
-    proc = run_stage_here("table", "dataset=trial7", *_paths(tmp_path), *QUIET)
+    proc = run_stage_here("table", "dataset=trial7", *data_paths(tmp_path), *QUIET)
     assert "stage simulate" not in proc.stdout
     assert (tmp_path / "tables" / "trial7-lm.csv").exists()
 
@@ -123,24 +119,24 @@ def test_a_stored_dataset_is_estimated_and_aggregated_in_one_command(tmp_path):
 ])
 def test_aggregate_without_the_exact_run_names_those_that_exist(tmp_path, made, asked,
                                                                 expected):
-    run_stage_here("ingest", f"input={_log(tmp_path / 'trial7.csv')}", *_paths(tmp_path),
+    run_stage_here("ingest", f"input={_log(tmp_path / 'trial7.csv')}", *data_paths(tmp_path),
                    *QUIET)
-    run_stage_here("estimate", "dataset=trial7", *made, *_paths(tmp_path), *QUIET)
+    run_stage_here("estimate", "dataset=trial7", *made, *data_paths(tmp_path), *QUIET)
     [run] = _run_config(tmp_path)
     proc = run_stage_here("aggregate", "dataset=trial7", "estimator=lm", *asked,
-                          *_paths(tmp_path), *QUIET, check=False)
+                          *data_paths(tmp_path), *QUIET, check=False)
     line = _one_line(proc, "no finished run of lm on dataset trial7 with these settings",
                      "python -m pipeline.estimate")
     assert expected.format(run=run.split("-", 1)[1]) in line
     selecting = line.rsplit("(", 1)[1].rstrip(")").split()  # select that run: aggregated
-    run_stage_here("aggregate", "dataset=trial7", *selecting, *_paths(tmp_path), *QUIET)
+    run_stage_here("aggregate", "dataset=trial7", *selecting, *data_paths(tmp_path), *QUIET)
     assert (tmp_path / "data" / "runs" / "trial7" / run / "report.parquet").exists()
 
 
 def test_a_simulated_dataset_keeps_the_simulated_start(tmp_path):
     """``recorded_defaults`` apply to recorded logs only: the simulated tables' runs, their
     keys and bytes, are those they were."""
-    common = [*_paths(tmp_path), *QUIET, "scenario.n_tracks=10"]
+    common = [*data_paths(tmp_path), *QUIET, "scenario.n_tracks=10"]
     run_stage_here("simulate", *common)
     run_stage_here("estimate", *common)
     [config] = [json.loads(p.read_text())["config"]

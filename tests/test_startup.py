@@ -177,36 +177,6 @@ def test_a_kernel_is_made_when_first_used(tmp_path, monkeypatch):
                                   "pickle.loads(pickle.dumps(kernels_probe.twice))")
 
 
-def test_save_figure_writes_the_bytes_savefig_writes(tmp_path):
-    """``save_figure`` drops the placeholder engine ``tight_layout`` leaves (one draw less):
-    the file is the same."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from tma.tables import save_figure
-
-    def figure():
-        fig, axes = plt.subplots(1, 2, figsize=(6, 3), sharey=True)
-        for i, ax in enumerate(axes):
-            ax.plot([0, 1, 2], [i, 2 * i, 1], marker="o", label=f"line {i}")
-            ax.set_title(f"panel {i}")
-            ax.set_xlabel("sigma (deg)")
-        axes[0].legend()
-        fig.suptitle("title")
-        fig.tight_layout()
-        return fig
-
-    fig = figure()
-    fig.savefig(tmp_path / "plain.png", format="png", dpi=120, metadata={"Software": None})
-    plt.close(fig)
-    fig = figure()
-    save_figure(fig, tmp_path / "saved.png")
-    plt.close(fig)
-    assert (tmp_path / "saved.png").read_bytes() == (tmp_path / "plain.png").read_bytes()
-
-
 def test_in_threads_keeps_item_order_and_raises_the_first_failure_in_item_order():
     """What every stage verifies (datasets, runs) is checked several files at a time: the
     results and the error must be those of the plain loop."""

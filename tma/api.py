@@ -292,8 +292,7 @@ class StoredDataset:
 
     @property
     def truth(self) -> pd.DataFrame | None:
-        table = self.dataset.read_truth()
-        return None if table is None else table
+        return self.dataset.read_truth()
 
     def __repr__(self) -> str:
         return f"<StoredDataset {self.name} ({self.family}, {len(self.logs)} shard(s))>"
@@ -352,13 +351,10 @@ def simulate(family: str = FAMILY, options: dict | None = None, **overrides
     ``sigma_deg=1.0``, ``target={"manoeuvres": {"prob": 1.0}}``, or dotted names in
     ``options``) in memory, shard by shard as ``pipeline.simulate`` does (the same random
     streams, so the same numbers as its dataset of that config)."""
-    from tma.config import validate
-    from tma.families import scenario_module
+    from tma.families import load_scenario
     from tma.sharding import n_shards
 
-    module = scenario_module(family)
-    config = validate(module.Config, {"family": family, **_nested(options, overrides)},
-                      f"scenario '{family}'")
+    module, config = load_scenario({"family": family, **_nested(options, overrides)})
     logs, truths = [], []
     for shard in range(n_shards(config)):
         lg, truth = module.simulate_shard(config, shard)

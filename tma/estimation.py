@@ -267,7 +267,6 @@ def check_datasets(datasets) -> None:
 def _estimate_locked(outputs, data_dir, planned, *, engine, progress, force):
     # finished runs are reused once their files verify, checked several at a time
     reuse = [False] * len(planned) if force else in_threads(_is_good, [p[0] for p in planned])
-    reused = dict(zip((p[0] for p in planned), reuse, strict=True))
     todo, tasks = [], []
     for (root, dataset, est_cfg), good in zip(planned, reuse, strict=True):
         if good or any(p[0] == root for p in todo):
@@ -303,7 +302,7 @@ def _estimate_locked(outputs, data_dir, planned, *, engine, progress, force):
             if not waiting[id(run)]:
                 finish_run(stage, dataset, est_cfg, ts, [done[u.out_path] for u in ts])
                 outputs.swap(root)
-    return [(p[0], reused[p[0]]) for p in planned]
+    return [(p[0], good) for p, good in zip(planned, reuse, strict=True)]
 
 
 def open_run(root) -> tuple[dict, "pa.Table"]:

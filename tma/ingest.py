@@ -27,7 +27,7 @@ from tma.families import family as family_named
 from tma.io.atomic import sha256_file
 from tma.io.dataset import MANIFEST, datasets_dir, file_record, shard_relpath, write_manifest
 from tma.io.owned import building, is_owned, plain_name
-from tma.sources import KINDS, read_source, source_kind
+from tma.sources import read_source, source_kind
 from tma.sources.align import align
 from tma.sources.base import groups, inapplicable, source_options, unknown_option
 from tma.sources.labels import name_room
@@ -81,18 +81,23 @@ def read_recordings(path: Path, fmt, navigation: Path | None, options):
     found = read_source(path, kind, options, navigation=False, contacts=True)
     nav = read_source(navigation, nav_kind, options, navigation=True, contacts=False,
                       date_hint_ns=_first_utc_ns(found))
+    return [_with_navigation(found, nav, path, navigation, options)], kind, nav_kind
+
+
+def _with_navigation(found, nav, where, nav_where, options):
+    """The input's one recording with its own-ship from the navigation file's."""
     if len(found) != 1 or found[0].contacts is None:
-        raise InputError(f"{path}: no {options.observation.plural} found in the input")
+        raise InputError(f"{where}: no {options.observation.plural} found in the input")
     if len(nav) != 1 or nav[0].navigation is None:
-        raise InputError(f"{navigation}: no own-ship fixes found in the navigation file")
+        raise InputError(f"{nav_where}: no own-ship fixes found in the navigation file")
     rec = found[0]
     notes = [*rec.notes, *nav[0].notes]
     rec.dropped.merge(nav[0].dropped)
     if rec.navigation is not None:
-        notes.append(f"own-ship from navigation={navigation}; the input's own-ship "
+        notes.append(f"own-ship from navigation={nav_where}; the input's own-ship "
                      f"({rec.navigation.source}) is not used")
     rec.navigation, rec.notes = nav[0].navigation, notes
-    return [rec], kind, nav_kind
+    return rec
 
 
 def _first_utc_ns(recordings) -> int | None:
@@ -143,8 +148,6 @@ def read_log(input_path, *, family: str, fmt="auto", navigation=None, options=No
                           ".csv, .tsv or .mcap>")
     settings = reader.Settings(**settings)
     options = source_options(options, reader.OBSERVATION)
-    if fmt not in ("auto", *KINDS):
-        raise ConfigError(f"format must be auto, csv, nmea or mcap, got '{fmt}'")
     path = _file(input_path, "input")
     nav_path = None if navigation is None else _file(navigation, "navigation")
     recordings, kind, nav_kind = read_recordings(path, fmt, nav_path, options)
@@ -176,10 +179,7 @@ def read_frames(bearings, navigation=None, *, family: str, options=None, **setti
         found = read_frame(bearings, name, options, navigation=False, contacts=True)
         nav = read_frame(navigation, "navigation frame", options, navigation=True,
                          contacts=False)
-        rec = found[0]
-        rec.navigation, rec.notes = nav[0].navigation, [*rec.notes, *nav[0].notes]
-        rec.dropped.merge(nav[0].dropped)
-        recordings = [rec]
+        recordings = [_with_navigation(found, nav, name, "navigation frame", options)]
     return _read(family, recordings, options, settings, {"format": "frame"},
                  {"input": {"path": name, "kind": "frame"}}, name)
 

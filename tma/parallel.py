@@ -75,13 +75,8 @@ class Engine(Params):
         return "parallel."
 
     @property
-    def kind(self) -> str:
-        """The engine: ``joblib`` or ``dask``."""
-        return self.engine
-
-    @property
     def in_process(self) -> bool:
-        return self.kind == "joblib" and self.n_jobs == 1
+        return self.engine == "joblib" and self.n_jobs == 1
 
 
 def engine_from(node, launcher: str = "") -> Engine:
@@ -98,7 +93,7 @@ def engine_from(node, launcher: str = "") -> Engine:
                           f"{', '.join(sorted(known))})")
     requested = Engine(**node)
     launcher = launcher.lower()
-    if ("joblib" in launcher or "submitit" in launcher) and requested.kind == "joblib" \
+    if ("joblib" in launcher or "submitit" in launcher) and requested.engine == "joblib" \
             and requested.n_jobs != 1:
         log.info("parallel launcher active: shards run serially inside each job")
         return replace(requested, n_jobs=1)
@@ -235,7 +230,7 @@ def iter_tasks(fn, tasks, *, engine=1, desc: str = "", progress: bool = True):
 
     bar = tqdm(total=len(tasks), desc=desc, unit="shard", disable=not progress)
     try:
-        if engine.kind == "dask":
+        if engine.engine == "dask":
             yield from _on_dask(engine, fn, tasks, bar)
             return
         if engine.in_process or len(tasks) == 1:

@@ -73,11 +73,5 @@ def fixed_layout(fig, *, left=0.8, right=0.25, bottom=0.6, top=0.45, wspace=0.75
 
 
 def save_figure(fig, path: Path):
-    from matplotlib.layout_engine import PlaceHolderLayoutEngine
-
-    # ``fig.tight_layout()`` leaves a placeholder layout engine, which does nothing but makes
-    # savefig draw the whole figure once more before it draws the file: drop it
-    if isinstance(fig.get_layout_engine(), PlaceHolderLayoutEngine):
-        fig.set_layout_engine(None)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=120, metadata={"Software": None})

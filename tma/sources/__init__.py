@@ -75,4 +75,4 @@ def read_source(path, kind: str, options, *, navigation: bool, contacts: bool,
     from tma.sources.mcap import read_mcap
 
     need = (("navigation",) if navigation else ()) + (("contacts",) if contacts else ())
-    return [read_mcap(path, options, need=need)]
+    return [read_mcap(path, options, need=need, navigation=navigation)]

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
-from tma.config import Form, Params, param, validate
+from tma.config import Form, Params, describe, param, validate
 from tma.errors import ConfigError, InputError
 from tma.utc import parse_utc
 
@@ -470,22 +470,10 @@ def _scalar(observation: Observation, key: str) -> bool:
     return f.default_factory is MISSING_FACTORY
 
 
-def option_keys(schema, prefix="") -> list[str]:
-    """Every dotted option key of ``schema`` (``columns.time``, ``nav.max_gap_s``, ...)."""
-    keys = []
-    for f in fields(schema):
-        default = f.default_factory() if callable(f.default_factory) else f.default
-        if is_dataclass(default):
-            keys += option_keys(type(default), f"{prefix}{f.name}.")
-        else:
-            keys.append(f"{prefix}{f.name}")
-    return keys
-
-
 def unknown_option(key: str, observation: Observation) -> str | None:
     """A one-line complaint if the dotted ``key`` (``columns.foo``) is under one of the
     reading groups but is not an option; None if it is one (or not under a group)."""
-    keys = option_keys(options_schema(observation))
+    keys = [row[0] for row in describe(options_schema(observation))]  # dotted keys
     group = key.split(".")[0]
     if group not in groups(observation) or key in keys or key == group:
         return None

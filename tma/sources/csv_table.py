@@ -377,8 +377,9 @@ class _Frame(_Table):
         self.units, self.delimiter, self.decimal = None, ",", "."
 
     def read(self, cols: dict[str, str]) -> pd.DataFrame:
-        """The chosen columns; datetime64 ones as ISO-8601 UTC text (nanoseconds kept), the
-        track column as text as written (numbers as Python prints them: ``7``, ``7.5``)."""
+        """The chosen columns; datetime64 ones in UTC (``_time_column`` takes their
+        nanoseconds as they are), the track column as text as written (numbers as Python
+        prints them: ``7``, ``7.5``)."""
         out = {}
         for role, name in cols.items():
             series = self.frame.iloc[:, self.header.index(name)]
@@ -386,12 +387,9 @@ class _Frame(_Table):
                 if getattr(series.dt, "tz", None) is None:
                     self.notes.append(f"{self.path}: {name} without time zone read as UTC")
                     series = series.dt.tz_localize("UTC")
-                text = series.dt.tz_convert("UTC").dt.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
-                nanos = (series.dt.nanosecond % 1000).astype(str).str.zfill(3)
-                series = text.str[:-1] + nanos + "Z"  # %f stops at microseconds
-                series = series.where(self.frame.iloc[:, self.header.index(name)].notna())
+                series = series.dt.tz_convert("UTC")
             elif role == "track":
-                series = series.map(lambda v: "" if pd.isna(v) else str(v)).astype(object)
+                series = series.astype(str).where(series.notna(), "").astype(object)
             out[name] = series
         return pd.DataFrame(out)
 
@@ -405,10 +403,6 @@ def _is_number(text: str, decimal: str = ".") -> bool:
     except ValueError:
         return False
     return True
-
-
-def _bad(values_ok: np.ndarray, line: np.ndarray) -> str:
-    return ", ".join(str(v) for v in line[np.flatnonzero(~values_ok)[:5]])
 
 
 def _number_column(df, col, path) -> np.ndarray:
@@ -434,12 +428,16 @@ def _time_column(df, col, fmt, path, line, notes):
     never a relative clock)."""
     series = df[col]
     numeric = pd.api.types.is_numeric_dtype(series)  # true/false too: refused as numbers
-    if fmt in ("iso", "iso_utc") or (fmt == "auto" and not numeric and _mostly_text(series)):
+    ns = None
+    if pd.api.types.is_datetime64_any_dtype(series) and fmt in ("auto", "iso", "iso_utc"):
+        ok = series.notna().to_numpy()  # a DataFrame's UTC times (``_Frame``), exact to the ns
+        ns = np.where(ok, series.dt.as_unit("ns").array.asi8, 0)
+    elif fmt in ("iso", "iso_utc") or (fmt == "auto" and not numeric and _mostly_text(series)):
         ns, ok = _iso_times(series, col, fmt, path, line, notes)
-        fmt = "iso" if fmt == "auto" else fmt
+    if ns is not None:
         early = ok & (ns < UTC_FROM_NS)
         absolute = ok.any() and np.median(ns[ok]) >= UTC_FROM_NS
-        return ns, fmt, ok, early if absolute else np.zeros_like(ok)
+        return ns, "iso" if fmt == "auto" else fmt, ok, early if absolute else np.zeros_like(ok)
     if pd.api.types.is_integer_dtype(series):
         values = series.to_numpy(dtype=np.int64)
         ok = np.ones(values.size, dtype=bool)

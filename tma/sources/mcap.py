@@ -382,12 +382,6 @@ def _select_contacts(file: RecordedLog, options) -> list[str]:
     return [found[0].name]
 
 
-def _drop_nonfinite(keep, values_desc: str, topic: str, notes: list):
-    if not keep.all():
-        notes.append(f"{topic}: {int((~keep).sum())} {values_desc} NaN or infinite: dropped")
-    return keep
-
-
 def _navigation_part(file: RecordedLog, msgs: Messages):
     """Own-ship fixes of a topic, sorted by time; fixes the receiver flags (NavSatFix
     NO_FIX), with a stamp not absolute among absolute ones or with NaN coordinates left out
@@ -400,8 +394,7 @@ def _navigation_part(file: RecordedLog, msgs: Messages):
                          file.places(msgs.topic, t_ns)(rows[:NAMED]))
         keep &= ~no_fix
     a, b = columns.values()
-    finite = _drop_nonfinite(np.isfinite(a) & np.isfinite(b) | ~keep, "fix(es)", msgs.topic,
-                             file.notes)
+    finite = np.isfinite(a) & np.isfinite(b) | ~keep
     keep &= file.dropped.drop(~finite, "own-ship position missing or not a number",
                               file.places(msgs.topic, t_ns),
                               f"{file.where}: {msgs.topic}: an own-ship fix with NaN or "
@@ -435,7 +428,7 @@ def _contacts_part(file: RecordedLog, msgs: Messages, options, several=False):
     if several and not (track.dtype == object and np.all(track == msgs.topic)):
         track = np.array([f"{msgs.topic}:{i}" for i in track], dtype=object)
     keep = file.not_absolute(msgs, t_ns, message)
-    finite = _drop_nonfinite(np.isfinite(values) | ~keep, f"{role}(s)", msgs.topic, file.notes)
+    finite = np.isfinite(values) | ~keep
     keep &= file.dropped.drop(~finite, f"{role} missing or not a number",
                               file.places(msgs.topic, t_ns),
                               f"{file.where}: {msgs.topic}: a {role} missing or not a number")
@@ -467,17 +460,24 @@ def _epoch(parts: dict[str, np.ndarray], where: str) -> int | None:
                      "2000 (a relative clock): the two cannot be put on one time base")
 
 
-def read_mcap(path, options, need: tuple[str, ...] = ()) -> Recording:
+def read_mcap(path, options, need: tuple[str, ...] = (), navigation: bool = True) -> Recording:
     """Own-ship fixes and contacts from an MCAP file of any source kind (module docstring),
     with a family's reading ``options``.
 
     ``need``: the parts the caller requires (``"navigation"``, ``"contacts"``): a missing one
     raises an InputError listing the file's topics and the option that selects one. A part
     not needed and not found is None (noted); a file with neither always raises.
+    ``navigation`` False: own-ship comes from elsewhere (``navigation=FILE``), so the file's
+    own-ship topic is neither decoded nor checked, and its rows count nowhere (noted).
     """
     file = RecordedLog(path, options.dropped())
     role = options.observation.role
     nav_topic = _select_navigation(file, options)
+    if not navigation:
+        if nav_topic is not None:
+            file.notes.append(f"{file.where}: own-ship from the navigation file; {nav_topic} "
+                              "is not read")
+        nav_topic = None
     contact_topics = _select_contacts(file, options)
     hint = {"navigation": ("no own-ship navigation: own-ship is read from a topic of schema "
                            f"{', '.join(NAVIGATION)}; set ownship.topic=<topic> or give "
@@ -485,7 +485,7 @@ def read_mcap(path, options, need: tuple[str, ...] = ()) -> Recording:
             "contacts": (f"no {options.observation.plural} selected: set {role}.topic=<topic> "
                          f"[{role}.field=data]")}
     absent = [p for p, t in (("navigation", nav_topic), ("contacts", contact_topics or None))
-              if t is None]
+              if t is None and (navigation or p == "contacts")]
     fatal = [p for p in absent if p in need] or (absent if len(absent) == 2 else [])
     if fatal:
         raise InputError(f"{file.where}: {'; '.join(hint[p] for p in fatal)}; "

@@ -47,10 +47,7 @@ def navsatfix(msgs, file):
                              len(msgs.decoded))
         lat = float_array([m.latitude for m in msgs.decoded])
         lon = float_array([m.longitude for m in msgs.decoded])
-    no_fix = status == STATUS_NO_FIX
-    if no_fix.any():
-        file.notes.append(f"{msgs.topic}: {int(no_fix.sum())} fix(es) with status "
-                          f"STATUS_NO_FIX ({STATUS_NO_FIX}) dropped")
+    no_fix = status == STATUS_NO_FIX  # counted where they are dropped
     return file.message_times(msgs), {"lat_deg": lat, "lon_deg": lon}, no_fix
 
 

@@ -32,7 +32,7 @@ from tests.families.bearings2d.test_bearings2d_sources_ros2 import (
     navsatfix_messages,
     write_ros2,
 )
-from tma.errors import InputError
+from tma.errors import ConfigError, InputError
 from tma.families.bearings2d.ingest import ingest
 from tma.families.bearings2d.log import channels
 from tma.sources.align import far_off
@@ -260,6 +260,24 @@ def test_ros2_zero_stamp_nan_bearing_and_no_fix(tmp_path):
                          r"stamps \(/gps/fix at log time 2025-06-01T08:01:40.04Z\)", options=opts)
 
 
+def test_an_mcap_own_ship_replaced_by_a_navigation_file_is_not_read(tmp_path):
+    """With navigation=FILE the MCAP's own-ship topic is not decoded: its bad fixes are
+    neither counted nor, under bad_rows=fail, a reason to refuse the file."""
+    rec = recorded(("T1",))
+    fixes = navsatfix_messages(rec.navigation, status=np.where(
+        np.arange(len(rec.navigation)) == 600, -1, 0))  # a NO_FIX the command must not see
+    path = write_ros2(tmp_path / "run.mcap", ("/gps/fix", "sensor_msgs/msg/NavSatFix", fixes),
+                      ("/bearing", "std_msgs/msg/Float64", float64_messages(rec.bearings)))
+    nav = rec.navigation
+    pd.DataFrame({"time": iso(nav.t_s), "lat": nav.lat, "lon": nav.lon}).to_csv(
+        tmp_path / "gps.csv", index=False)
+    opts = {"bearing": {"topic": "/bearing"}, "bad_rows": "fail"}
+    root = ingest(path, navigation=tmp_path / "gps.csv", data_dir=tmp_path / "data",
+                  options=opts)
+    assert not _manifest(root).get("bad_rows", {}).get("reasons")
+    check_against_truth(estimate(root), t_offset_s=0.5, labels={"/bearing": "T1"})
+
+
 def test_foxglove_null_bearing_and_zero_zero_fix(tmp_path):
     rec = recorded(("T1",))
     rec.navigation.loc[200, ["lat", "lon"]] = 0.0
@@ -289,9 +307,8 @@ def test_own_schema_null_bearing(tmp_path):
 
 
 def test_bad_rows_option_is_checked():
-    with pytest.raises(Exception, match="bad_rows must be one of drop, fail, got 'skip'"):
+    with pytest.raises(ConfigError, match="bad_rows must be one of drop, fail, got 'skip'"):
         ingest("x.csv", data_dir="d", options={"bad_rows": "skip"})
-
 
 
 def test_on_the_command_line(tmp_path):

@@ -24,8 +24,9 @@ ZIGZAG = ObserverConfig(legs=[
     *[LegConfig(course_deg=c, duration_s=150.0) for c in (60.0, 300.0) * 5]])
 
 
-def _manoeuvring(n=300, prob=1.0, seed=21, observer=ZIGZAG, sigma=0.5):
-    target = TargetConfig(manoeuvres=ManoeuvreConfig(
+def _manoeuvring(n=300, prob=1.0, seed=21, observer=ZIGZAG, sigma=0.5, accel_psd=0.0):
+    target = TargetConfig(accel_psd_m2_s3=accel_psd, declared=accel_psd == 0,
+                          manoeuvres=ManoeuvreConfig(
         prob=prob, start_frac=0.2, end_frac=0.45, course_change_min_deg=60.0,
         course_change_max_deg=120.0, turn_rate_min_deg_s=0.5, turn_rate_max_deg_s=1.0))
     cfg = Config(n_tracks=n, shard_size=n, sigma_deg=sigma, seed=seed, observer=observer,
@@ -50,7 +51,7 @@ def test_manoeuvres_are_flagged_and_named_in_the_note():
     assert notes.str.contains("trend test p = ").all() and notes.str.contains("last_leg").all()
 
 
-def test_the_last_leg_is_found_and_its_errors_are_honest():
+def test_the_last_leg_is_found():
     log, truth = _manoeuvring(n=150)
     est = _estimate(log, "last_leg")
     found = est.n_rounds > 0
@@ -60,11 +61,21 @@ def test_the_last_leg_is_found_and_its_errors_are_honest():
     began = truth.loc[found, "manoeuvre_start_s"].to_numpy()
     ended = truth.loc[found, "manoeuvre_end_s"].to_numpy()
     assert np.mean((start >= began) & (start <= ended + 300)) >= 0.9
+    assert (est.loc[found, "n_bearings"] < log.t_s.size).all()  # the leg's bearings only
+
+
+def test_the_last_legs_errors_are_honest():
+    """Ships that turn and wander (q = 1e-3, what ``last_leg`` assumes of a recording): its
+    ok tracks' errors cover the truth at 0.905 (548 ok of 600; 0.915 with another seed), a
+    little under the nominal 0.95 (the change time's own uncertainty is not in them) and
+    within issue 20's 90-97 %; errors twice too large would give ~1.0. (Targets that do
+    not wander are covered at 0.99: the assumed wander is then an overstatement.)"""
+    log, truth = _manoeuvring(n=300, accel_psd=1e-3)
+    est = _estimate(log, "last_leg")
     m = track_metrics(est, truth)
     ok = m.status == "ok"
     assert ok.mean() >= 0.85, est.status.value_counts()
-    assert np.mean(m.nees[ok] <= NEES_95) >= 0.9
-    assert (est.loc[found, "n_bearings"] < log.t_s.size).all()  # the leg's bearings only
+    assert 0.88 <= np.mean(m.nees[ok] <= NEES_95) <= 0.97
 
 
 def test_a_last_leg_without_own_ship_manoeuvre_is_unobservable():

@@ -251,13 +251,13 @@ def test_no_fix_and_nan_fixes_are_dropped_and_counted(tmp_path):
     got = read_mcap(path, options(bearing={"topic": "/bearing"}))
     kept = np.setdiff1d(np.arange(len(nav)), [10, 11, 12])
     np.testing.assert_allclose(got.navigation.t_s, nav.t_s.to_numpy()[kept], atol=1e-9)
-    assert "/gps/fix: 3 fix(es) with status STATUS_NO_FIX (-1) dropped" in got.notes
+    assert got.dropped.reasons["own-ship fix flagged no fix"]["count"] == 3
     path = write_ros2(tmp_path / "nan.mcap",
                       ("/gps/fix", "sensor_msgs/msg/NavSatFix", navsatfix_messages(nav)),
                       ("/bearing", "std_msgs/msg/Float64", float64_messages(rec.bearings)))
     got = read_mcap(path, options(bearing={"topic": "/bearing"}))
     assert got.navigation.t_s.size == len(nav) - 2
-    assert "/gps/fix: 2 fix(es) NaN or infinite: dropped" in got.notes
+    assert got.dropped.reasons["own-ship position missing or not a number"]["count"] == 2
     # every fix unusable: said, not an empty recording
     path = gps_and_float64(tmp_path, rec, "nofix.mcap", status=np.full(len(nav), -1))
     with pytest.raises(InputError, match="no usable own-ship fix on /gps/fix"):

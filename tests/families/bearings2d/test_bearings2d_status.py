@@ -200,7 +200,13 @@ def test_a_singular_direct_solve_says_so(estimator):
     for note in track_report(est).note:
         assert note.startswith("no finite estimate: the solve was singular") and \
             "max_iter" not in note and "lambda_max" not in note
-    assert NEES_95 == pytest.approx(9.4877, abs=1e-4)
+
+
+def test_nees_95_is_the_chi_square_4_point():
+    """The consistency bound every table uses: the 95 % point of chi-square(4) (scipy's)."""
+    from scipy.stats import chi2
+
+    assert NEES_95 == pytest.approx(chi2.ppf(0.95, 4), rel=1e-4)
 
 
 def test_poor_fit_notes_name_the_test_that_decided():

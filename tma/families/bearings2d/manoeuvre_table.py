@@ -29,7 +29,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from tma.families.bearings2d.benchmark import estimator_label  # noqa: E402
+from tma.families.bearings2d.benchmark import _pct, estimator_label  # noqa: E402
 from tma.families.bearings2d.metrics import (  # noqa: E402
     NEES_95,
     REGIONS,
@@ -145,10 +145,6 @@ def manoeuvre_tables(entries) -> tuple[pd.DataFrame, pd.DataFrame]:
     table = pd.DataFrame(rows, columns=COLUMNS).sort_values(
         ["estimator", "motion"], kind="stable").reset_index(drop=True)
     return table, pd.DataFrame(detections)
-
-
-def _pct(rate, lo, hi):
-    return "-" if pd.isna(rate) else f"{100 * rate:.1f} ({100 * lo:.1f}-{100 * hi:.1f})"
 
 
 def shown_table(table: pd.DataFrame) -> pd.DataFrame:

@@ -202,7 +202,6 @@ def write_track_plots(report: pd.DataFrame, estimates: pd.DataFrame, logs, table
                                   estimates["t_last_s"].to_numpy(float))
     where = {int(i): (lg, row) for lg in logs for row, i in enumerate(lg.track_id)}
     shown = shown_labels(report["label"])
-    time_origin = (report["t_now_s"] - estimates["t_last_s"]).to_numpy()  # the report's clock
     if len(report) > MAX_PLOTS:
         log.info("%s: plotting the first %d of %d contacts (MAX_PLOTS); the table and the map "
                  "MCAP hold them all", name, MAX_PLOTS, len(report))
@@ -222,7 +221,7 @@ def write_track_plots(report: pd.DataFrame, estimates: pd.DataFrame, logs, table
             used.add(part)
             path = Path(tables_dir) / fit_file_name(name, part, ".png")
             save_figure(plots.draw(plot_title(name, shown[n], r, epoch_utc_ns), lg, row,
-                                   theta[n], cov_now[n], r.leg_start_s - time_origin[n]), path)
+                                   theta[n], cov_now[n], r.leg_start_s), path)
             paths.append(path)
     finally:
         plots.close()
@@ -254,7 +253,7 @@ def contact_figure(report: pd.DataFrame, estimates: pd.DataFrame, logs, label: s
                    if int(i) == int(r.track_id))
     plots = _TrackPlots()
     return plots.draw(plot_title(name, shown_labels(report["label"])[n], r, epoch_utc_ns), lg,
-                      row, theta, cov_now, r.leg_start_s - (r.t_now_s - est["t_last_s"].iloc[0]))
+                      row, theta, cov_now, r.leg_start_s)
 
 
 # -- the estimated tracks as an MCAP ---------------------------------------------------------
@@ -280,7 +279,7 @@ def write_map_mcap(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, ep
     for n, r in enumerate(report.itertuples(index=False)):
         k, row = where[int(r.track_id)]
         t = logs[k].t_s[np.isfinite(logs[k].bearing_deg[row])]
-        held = t >= r.leg_start_s - (r.t_now_s - estimates["t_last_s"].iloc[n])
+        held = t >= r.leg_start_s
         t = t[held] if held.any() else t  # where the solution holds (its leg)
         x, y = (theta[n, :2, None] + theta[n, 2:, None] * t)
         lat, lon = local_to_geodetic(x, y, origin_deg)

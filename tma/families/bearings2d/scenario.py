@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tma.angles import bearing_from_north, wrap_to_pi
+from tma.angles import bearing_from_north, course_from_velocity, wrap_to_pi
 from tma.config import param, require
 from tma.families.bearings2d import target_motion
 from tma.families.bearings2d.log import BearingsLog, read_bearings_log, write_bearings_log
@@ -173,8 +173,8 @@ def simulate_shard(cfg: Config, shard_index: int):
     moving = cfg.target.moving
     if moving:
         x, y, v_end, last = target_motion.target_paths(
-            cfg.target, x0, y0, course, speed, t, motion_rng(cfg, shard_index, MANOEUVRE),
-            motion_rng(cfg, shard_index, WANDER))
+            cfg.target, x0, y0, course, speed, t, shard_rng(cfg, shard_index, MANOEUVRE),
+            shard_rng(cfg, shard_index, WANDER))
         true_bearing = bearing_from_north(x - own_x, y - own_y)
     else:
         true_bearing = bearing_from_north(
@@ -197,7 +197,7 @@ def simulate_shard(cfg: Config, shard_index: int):
         vx, vy = v_end[:, 0], v_end[:, 1]
         columns = {"track_id": track_id, "x0_m": x[:, -1] - vx * t[-1],
                    "y0_m": y[:, -1] - vy * t[-1], "vx_m_s": vx, "vy_m_s": vy}
-        course, speed = np.arctan2(vx, vy) % (2 * np.pi), np.hypot(vx, vy)
+        course, speed = course_from_velocity(vx, vy), np.hypot(vx, vy)
     truth = arrow.table({
         **columns,
         "distance0_m": distance,
@@ -207,21 +207,10 @@ def simulate_shard(cfg: Config, shard_index: int):
     return log, truth
 
 
-def motion_rng(cfg: Config, shard_index: int, stream: int) -> np.random.Generator:
-    """The shard's manoeuvre or wander stream (``target_motion``)."""
-    return np.random.default_rng(np.random.SeedSequence(cfg.seed, spawn_key=(shard_index, stream)))
-
-
-def outlier_rng(cfg: Config, shard_index: int) -> np.random.Generator:
-    """The shard's outlier stream, apart from its target and noise stream ``shard_rng``."""
-    return np.random.default_rng(
-        np.random.SeedSequence(cfg.seed, spawn_key=(shard_index, OUTLIER_STREAM)))
-
-
 def with_outliers(measured_rad, cfg: Config, shard_index: int) -> np.ndarray:
     """``measured_rad`` (n_tracks, n_epochs) with each bearing replaced, with probability
     ``cfg.outliers.prob``, by a draw uniform on [-pi, pi)."""
-    rng = outlier_rng(cfg, shard_index)
+    rng = shard_rng(cfg, shard_index, OUTLIER_STREAM)
     replaced = rng.random(measured_rad.shape) < cfg.outliers.prob
     wild = rng.uniform(-np.pi, np.pi, measured_rad.shape)
     return np.where(replaced, wild, measured_rad)

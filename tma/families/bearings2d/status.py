@@ -204,8 +204,6 @@ def robust_fit_p(residuals, valid, sigma_rad, c):
     chi-square a chi2(nu) with those moments (nu reduced by the 4 fitted parameters). So
     outliers do not fail the test, while a misfit of the kept bearings (a manoeuvre, a wrong
     sigma) still does. A fit keeping fewer than half the bearings has p = 0."""
-    from scipy.special import chdtrc
-
     u = residuals / sigma_rad
     inlier = np.abs(u) <= c
     if valid is not None:
@@ -216,9 +214,16 @@ def robust_fit_p(residuals, valid, sigma_rad, c):
     m1, v, _ = truncated_moments(c)
     a = v / (2 * m1)
     nu = np.maximum(2 * m1 * m1 / v * (m - 4), 1.0)
-    upper = chdtrc(nu, T / a)
-    p = np.minimum(1.0, 2 * np.minimum(upper, 1 - upper))
-    return np.where(2 * m >= n, p, 0.0)
+    return np.where(2 * m >= n, two_sided_chi2_p(nu, T / a), 0.0)
+
+
+def two_sided_chi2_p(dof, statistic):
+    """p-value of the two-sided chi-square(``dof``) test of ``statistic``: too small a sum of
+    squares fails it as too large a one does (an overstated sigma, as an understated)."""
+    from scipy.special import chdtrc
+
+    upper = chdtrc(dof, statistic)
+    return np.minimum(1.0, 2 * np.minimum(upper, 1 - upper))
 
 
 def noiseless_fit_p(cost_rad2, n_bearings):
@@ -244,16 +249,13 @@ def noise_fit(cost_rad2, dof, sigma_deg):
     the fit ``cost_rad2`` (sum of squared residuals, rad^2) against the nominal noise
     ``sigma_deg``; sigma unknown (None): F / dof and no test (NaN); sigma 0 (noiseless):
     ``noiseless_fit_p``."""
-    from scipy.special import chdtrc
-
     n = cost_rad2.shape[0]
     if sigma_deg is None:
         return cost_rad2 / np.maximum(dof, 1), np.full(n, np.nan)
     sigma2 = np.full(n, np.deg2rad(sigma_deg) ** 2)
     if sigma_deg == 0:
         return sigma2, noiseless_fit_p(cost_rad2, dof + 4)
-    upper = chdtrc(np.maximum(dof, 1), cost_rad2 / sigma2)
-    return sigma2, np.minimum(1.0, 2 * np.minimum(upper, 1 - upper))
+    return sigma2, two_sided_chi2_p(np.maximum(dof, 1), cost_rad2 / sigma2)
 
 
 def assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t_now_s, own_x_now_m,

@@ -12,7 +12,13 @@ from tma.families.bearings2d import ncv
 from tma.families.bearings2d.log import BearingsLog
 from tma.families.bearings2d.model import BearingTerms
 from tma.families.bearings2d.ncv import RECORDED_ACCEL_PSD
-from tma.families.bearings2d.status import assess, noise_fit, range_rel_sd, trend_test_p
+from tma.families.bearings2d.status import (
+    assess,
+    noise_fit,
+    range_rel_sd,
+    trend_test_p,
+    two_sided_chi2_p,
+)
 from tma.linalg import scaled_inverse
 
 BLOCK_TRACKS = 64
@@ -20,13 +26,14 @@ GROSS_SIGMAS = 5.0  # a robust fit's outliers: bearings this many sigma off (Gau
 
 
 def evaluate_in_blocks(terms: BearingTerms, theta, block=BLOCK_TRACKS):
-    """F(theta) (rad^2) and J^T J per track, evaluated in cache-sized blocks of tracks."""
+    """F(theta) (rad^2), J^T J and the gradient J^T r per track, evaluated in cache-sized
+    blocks of tracks."""
     n = theta.shape[0]
-    cost, jtj = np.empty(n), np.empty((n, 4, 4))
+    cost, jtj, g = np.empty(n), np.empty((n, 4, 4)), np.empty((n, 4))
     for start in range(0, n, block):
         rows = np.arange(start, min(start + block, n))
-        cost[rows], jtj[rows], _ = terms(theta[rows], rows)
-    return cost, jtj
+        cost[rows], jtj[rows], g[rows] = terms(theta[rows], rows)
+    return cost, jtj, g
 
 
 MOTION_TESTS = ("auto", "on", "off")
@@ -112,7 +119,7 @@ class BearingsEstimator(Estimator):
         if "cost_rad2" in out:  # iterative estimators know F and J^T J at their solution
             cost, jtj = out.pop("cost_rad2"), out.pop("jtj")
         else:
-            cost, jtj = evaluate_in_blocks(BearingTerms(t, ox, oy, measured, valid), theta)
+            cost, jtj, _ = evaluate_in_blocks(BearingTerms(t, ox, oy, measured, valid), theta)
         # a fit with its own noise scale and fit test (robust lm) passes both on, and the
         # bearings it kept
         sigma2, fit_p = out.pop("sigma2_rad2", None), out.pop("fit_p", None)
@@ -211,16 +218,14 @@ class BearingsEstimator(Estimator):
         two-sided chi-square of its normalised innovations when sigma is known (none when
         unknown: a robust fit's own test judged the constant-velocity fit, which a wandering
         target fails; below ``ncv.MIN_SIGMA_RAD``, the constant-velocity fit's)."""
-        from scipy.special import chdtrc
-
         sigma2 = fit["sigma2"]
         info, _ = scaled_inverse(fit["cov_theta"], 1e-14)
         info *= sigma2[:, None, None]
         if sigma_deg is not None and np.deg2rad(sigma_deg) >= ncv.MIN_SIGMA_RAD:
             e2 = fit["innovations"] ** 2
             count = np.sum(np.isfinite(e2), axis=1)
-            upper = chdtrc(np.maximum(count, 1), np.nansum(e2, axis=1))
-            fit_p = np.where(count > 0, np.minimum(1.0, 2 * np.minimum(upper, 1 - upper)),
+            fit_p = np.where(count > 0,
+                             two_sided_chi2_p(np.maximum(count, 1), np.nansum(e2, axis=1)),
                              np.nan)
         elif sigma_deg is None:
             fit_p = np.full(sigma2.size, np.nan)

@@ -84,6 +84,7 @@ class LastLeg(LevenbergMarquardt):
             leg = self._settle(t, own_x, own_y, measured_rad[todo], used[todo],
                                out["theta"][todo])
             used[todo] = leg.pop("used")
+            out["n_f_evals"][todo] += leg.pop("n_f_evals")  # the work of every round, summed
             for key, value in leg.items():
                 out[key][todo] = value
             drifting = self._drifting(t, own_x, own_y, measured_rad[todo], used[todo],
@@ -142,6 +143,7 @@ class LastLeg(LevenbergMarquardt):
                 break
             used[todo] &= t >= start[:, None]
             again = self._fit(t, own_x, own_y, measured[todo], used[todo], fit["theta"][todo])
+            fit["n_f_evals"][todo] += again.pop("n_f_evals")
             for key, value in again.items():
                 fit[key][todo] = value
         fit["used"] = used

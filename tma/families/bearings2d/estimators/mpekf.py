@@ -55,9 +55,9 @@ import numpy as np
 from tma.config import param
 from tma.errors import InputError
 from tma.families.bearings2d.estimators.base import (
-    BLOCK_TRACKS,
     BearingsConfig,
     BearingsEstimator,
+    evaluate_in_blocks,
 )
 from tma.families.bearings2d.model import BearingTerms, wrap_residual
 from tma.linalg import scaled_inverse
@@ -246,14 +246,9 @@ def consistent_information(t, own_x, own_y, measured_rad, valid, theta, sigma_ra
     filter's own covariance). By Sherman-Morrison,
     sigma^2 C^-1 = H - (H u)(H u)^T / (1 + u^T H u), H = J^T J, u = d / sigma. NaN where
     J^T J is singular or theta is not finite."""
-    terms = BearingTerms(t, own_x, own_y, measured_rad, valid)
-    n = theta.shape[0]
     finite = np.isfinite(theta).all(axis=1)
-    cost, H, g = np.full(n, np.nan), np.empty((n, 4, 4)), np.empty((n, 4))
-    for start in range(0, n, BLOCK_TRACKS):
-        rows = np.arange(start, min(start + BLOCK_TRACKS, n))
-        cost[rows], H[rows], g[rows] = terms(np.where(finite[rows, None], theta[rows], 0.0),
-                                             rows)
+    cost, H, g = evaluate_in_blocks(BearingTerms(t, own_x, own_y, measured_rad, valid),
+                                    np.where(finite[:, None], theta, 0.0))
     inverse, singular = scaled_inverse(np.where(finite[:, None, None], H, np.nan),
                                        SINGULAR_RCOND)
     u = np.einsum("nij,nj->ni", inverse, g) / sigma_rad
