@@ -191,6 +191,7 @@ def simulate_shard(cfg: Config, shard_index: int):
         epoch_utc_ns=cfg.epoch_ns,
         origin_deg=None if origin.lat is None else (origin.lat, origin.lon),
         accel_psd_m2_s3=cfg.target.declared_psd(),
+        manoeuvres=cfg.target.declared_manoeuvres(rms_speed(pop)),
     )
     columns = {"track_id": track_id, "x0_m": x0, "y0_m": y0, "vx_m_s": vx, "vy_m_s": vy}
     if moving:  # the state at the last bearing, as the straight line through it
@@ -205,6 +206,12 @@ def simulate_shard(cfg: Config, shard_index: int):
         **({"manoeuvring": ~np.isnan(last["manoeuvre_start_s"]), **last} if moving else {}),
     })
     return log, truth
+
+
+def rms_speed(pop: PopulationConfig) -> float:
+    """The root mean square of the targets' speed, uniform in [min, max] (m/s)."""
+    a, b = pop.speed_min_m_s, pop.speed_max_m_s
+    return float(np.sqrt((a * a + a * b + b * b) / 3.0))
 
 
 def with_outliers(measured_rad, cfg: Config, shard_index: int) -> np.ndarray:
