@@ -165,6 +165,32 @@ CASES: tuple[CaseSpec, ...] = (
 
 
 @dataclass(frozen=True)
+class Recording:
+    """One AIS recording: its position reports (``positions.csv.gz`` format), the cases chosen
+    from it and the seed of their bearing noise."""
+
+    name: str
+    positions_path: Path
+    cases: tuple[CaseSpec, ...]
+    seed: int
+
+
+# every recording the cases are built from, by name (SOURCE.md beside each positions file)
+RECORDINGS: dict[str, Recording] = {
+    "solent": Recording("solent", POSITIONS_PATH, CASES, SEED),
+}
+
+
+def get_recording(name: str) -> Recording:
+    """The recording called ``name`` (a key of ``RECORDINGS``)."""
+    try:
+        return RECORDINGS[name]
+    except KeyError:
+        raise ValueError(f"unknown AIS recording {name!r}: one of {', '.join(RECORDINGS)}"
+                         ) from None
+
+
+@dataclass(frozen=True)
 class Track:
     """Position reports of one vessel: times (s since the Unix epoch), latitude, longitude (deg)."""
 
@@ -426,31 +452,37 @@ def make_case(index: int, spec: CaseSpec, tracks: dict[int, Track], sigma_deg: f
     return df, truth
 
 
-def build_cases(positions_path=POSITIONS_PATH, sigma_deg: float = SIGMA_DEG,
-                seed: int = SEED, cases=None) -> tuple[dict[str, pd.DataFrame], pd.DataFrame]:
-    """All cases: ``({"case_01": navigation export, ...}, truth)``.
+def build_cases(positions_path=None, sigma_deg: float = SIGMA_DEG, seed: int | None = None,
+                cases=None, recording: str = "solent"
+                ) -> tuple[dict[str, pd.DataFrame], pd.DataFrame]:
+    """All cases of ``recording`` (a key of ``RECORDINGS``): ``({"case_01": navigation
+    export, ...}, truth)``.
 
     Each export has the columns ``EXPORT_COLUMNS`` (own-ship's interpolated position, the
     noisy bearing in [0, 360) deg, the target MMSI as track label) plus ``true_bearing_deg``
     and ``range_m`` (noise-free geometry; not written by ``write_cases``). ``truth`` has one
-    row per case (columns in the module docstring). ``cases`` defaults to ``CASES``.
+    row per case (columns in the module docstring). ``positions_path``, ``seed`` and
+    ``cases`` default to the recording's.
     """
-    tracks = tracks_from(load_positions(positions_path))
+    rec = get_recording(recording)
+    tracks = tracks_from(load_positions(rec.positions_path if positions_path is None
+                                        else positions_path))
+    seed = rec.seed if seed is None else seed
     exports, rows = {}, []
-    for i, spec in enumerate(CASES if cases is None else cases, start=1):
+    for i, spec in enumerate(rec.cases if cases is None else cases, start=1):
         df, row = make_case(i, spec, tracks, sigma_deg, seed)
         exports[row["case"]] = df
         rows.append(row)
     return exports, pd.DataFrame(rows)
 
 
-def write_cases(outdir, positions_path=POSITIONS_PATH, sigma_deg: float = SIGMA_DEG,
-                seed: int = SEED) -> pd.DataFrame:
-    """Write ``case_XX.csv`` (navigation exports) and ``truth.csv`` into ``outdir``; returns
-    the truth table."""
+def write_cases(outdir, positions_path=None, sigma_deg: float = SIGMA_DEG,
+                seed: int | None = None, recording: str = "solent") -> pd.DataFrame:
+    """Write the cases of ``recording`` (a key of ``RECORDINGS``) into ``outdir`` as
+    ``case_XX.csv`` (navigation exports) and ``truth.csv``; returns the truth table."""
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
-    exports, truth = build_cases(positions_path, sigma_deg, seed)
+    exports, truth = build_cases(positions_path, sigma_deg, seed, recording=recording)
     for name, df in exports.items():
         df.loc[:, list(EXPORT_COLUMNS)].to_csv(
             outdir / f"{name}.csv", index=False, float_format="%.7f", lineterminator="\n")
@@ -458,9 +490,11 @@ def write_cases(outdir, positions_path=POSITIONS_PATH, sigma_deg: float = SIGMA_
     return truth
 
 
-def summary(positions_path=POSITIONS_PATH) -> str:
+def summary(positions_path=None, recording: str = "solent") -> str:
     """A table of the cases and an independent check of the bearings against the reports."""
-    exports, truth = build_cases(positions_path)
+    positions_path = (get_recording(recording).positions_path if positions_path is None
+                      else positions_path)
+    exports, truth = build_cases(positions_path, recording=recording)
     cols = ["case", "kind", "own_mmsi", "target_mmsi", "start_utc", "n_bearings", "range_m",
             "own_turn_deg", "target_course_change_deg", "target_speed_change_frac",
             "course_deg", "speed_m_s"]
@@ -500,17 +534,20 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("outdir", nargs="?", help="folder for case_XX.csv and truth.csv")
     parser.add_argument("--summary", action="store_true", help="print the cases and a check")
-    parser.add_argument("--positions", default=str(POSITIONS_PATH), help="position reports")
+    parser.add_argument("--recording", default="solent", choices=sorted(RECORDINGS),
+                        help="which AIS recording (default: solent)")
+    parser.add_argument("--positions", help="position reports (default: the recording's)")
     parser.add_argument("--sigma-deg", type=float, default=SIGMA_DEG)
-    parser.add_argument("--seed", type=int, default=SEED)
+    parser.add_argument("--seed", type=int, help="noise seed (default: the recording's)")
     args = parser.parse_args(argv)
     if not args.outdir and not args.summary:
         parser.error("give OUTDIR and/or --summary")
     if args.outdir:
-        truth = write_cases(args.outdir, args.positions, args.sigma_deg, args.seed)
+        truth = write_cases(args.outdir, args.positions, args.sigma_deg, args.seed,
+                            recording=args.recording)
         print(f"wrote {len(truth)} cases to {args.outdir}")
     if args.summary:
-        print(summary(args.positions))
+        print(summary(args.positions, args.recording))
     return 0
 
 
