@@ -267,6 +267,7 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str,
     """``<name>.csv`` (every column of ``report``) and ``<name>.md`` (its formatted cells; a
     blank estimate as ``-``); ``geographic``: the log has a geographic origin (a column of
     latitude and longitude; None: where the report has any)."""
+
     def pm(value, sd, fmt):  # blank ("-") where the estimate is no answer (its note says)
         return [f"{v:{fmt}} ± {e:{fmt}}" if np.isfinite(v) and np.isfinite(e) else "-"
                 for v, e in report[[value, sd]].to_numpy(float)]
@@ -300,7 +301,9 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str,
              "includes the "
              "target's own motion (accel_psd_m2_s3: a nearly-constant-velocity target) for "
              "`lm`; 'holds from' is the first bearing the solution rests on. "
-             "Trust only `ok` tracks; 'why' says what is wrong with the others. The CSV also "
+             "Trust only `ok` tracks; 'why' says what is wrong with the others, and why an "
+             "estimate that is no answer (diverged, collapsed onto own-ship, or without a "
+             "one-sigma error) is not shown ('-'). The CSV also "
              "holds the position now in local metres (x east, y north) with its one-sigma "
              f"errors; `{name}-<track>.png` shows each contact on a plan (the first "
              f"{MAX_PLOTS}).")
