@@ -7,9 +7,10 @@ and the errors a truth file causes.
 """
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
-from tma.config import Form, Params, param, validate
+from tma.config import Form, Params, param
 from tma.errors import ConfigError, InputError
 
 FIT_SIGMAS = 3.0  # a ship fits when its RMS bearing difference is within this many sigma
@@ -112,9 +113,9 @@ def truth_options(node) -> TruthOptions:
     if unknown:
         raise ConfigError(f"unknown option truth.{unknown[0]} (the truth options: "
                           f"{', '.join(f'truth.{k}' for k in known)})")
-    if node.get("file") is not None:
+    if isinstance(node.get("file"), Path):
         node = {**node, "file": str(node["file"])}
-    return validate(TruthOptions, node, "")
+    return TruthOptions(**node)
 
 
 def shorthand(arguments: list[str]) -> list[str]:
