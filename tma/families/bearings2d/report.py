@@ -16,7 +16,12 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 import pyarrow as pa  # noqa: E402
 
-from tma.families.bearings2d import benchmark, manoeuvre_table, paper  # noqa: E402
+from tma.families.bearings2d import (  # noqa: E402
+    benchmark,
+    manoeuvre_table,
+    paper,
+    real_motion_table,
+)
 from tma.families.bearings2d.map_outputs import (  # noqa: E402
     MAX_PLOTS,
     position_covariance,
@@ -360,7 +365,8 @@ def _report_without_truth(entry, tables_dir, name: str, progress=None) -> list[P
 # the other kinds of table of simulated runs an experiment may ask for (``report=``): each
 # estimator against the Cramer-Rao bound, and targets that manoeuvre
 REPORTS = {"benchmark": benchmark.write_benchmark,
-           "manoeuvre": manoeuvre_table.write_manoeuvre_table}
+           "manoeuvre": manoeuvre_table.write_manoeuvre_table,
+           "real_motion": real_motion_table.write_real_motion_table}  # AIS own-ship, targets
 
 
 def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) -> list[Path]:
