@@ -1,4 +1,5 @@
-"""The ingest stage: a recorded log -> a dataset of a family (no truth).
+"""The ingest stage: a recorded log -> a dataset of a family (no truth; with ``truth=FILE``
+the truth of its contacts from the AIS of its trial, ``tma.ais.truth``).
 
 ``input=`` holds the contacts (and usually the own-ship): a CSV/TSV table, or an MCAP log
 (ROS 2, Foxglove or tma's own schema); ``navigation=`` may give the own-ship from a separate

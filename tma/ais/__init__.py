@@ -17,6 +17,7 @@ One small file per job:
   ``ingest truth=FILE`` stores as ``truth.parquet`` and ``truth_track.parquet``;
 - ``pairs.py``: motion samples of a vessel over a window and the automatic pair finder of the
   real-motion scenarios (own-ship windows with a turn, targets within reach);
-- ``recording.py``: a recording read once per process for the scenarios (``RealMotion``,
-  the scenario option group ``real``).
+- ``recording.py``: a recording read once per process for the scenarios, and their option
+  group ``real`` (``RealPairs``: own-ship and target, ``bearings2d``; ``RealWindows``: a
+  vessel before a fixed sensor, ``radar2d``).
 """
