@@ -120,10 +120,10 @@ def _subset(reports, mask):
 def _check_place(ships, contacts, options, path, where):
     """``TruthError`` when no ship comes within reach of own-ship during the log."""
     own = np.concatenate([np.column_stack([c.own_x_m, c.own_y_m]) for c in contacts])
-    own = own[:: max(1, own.shape[0] // 2000)]  # the nearest ship, not every bearing
+    own = own[:: max(1, own.shape[0] // 200)]  # how near, within kilometres: a sample
     nearest, who = np.inf, None
     for mmsi, ship in ships.items():
-        pts = np.column_stack([ship.x_m, ship.y_m])[:: max(1, ship.t_s.size // 500)]
+        pts = np.column_stack([ship.x_m, ship.y_m])[:: max(1, ship.t_s.size // 100)]
         d = np.sqrt(((pts[:, None, :] - own[None, :, :]) ** 2).sum(-1)).min()
         if d < nearest:
             nearest, who = d, mmsi
