@@ -152,6 +152,25 @@ class Recording:
         return pd.concat(frames, ignore_index=True).sort_values(
             ["log", "t_s", "track_id"], kind="stable").reset_index(drop=True)
 
+    @property
+    def truth(self) -> pd.DataFrame | None:
+        """The truth of its contacts from the AIS of its trial (``read_log(..., truth=FILE)``:
+        one row per contact with a truth, ``tma.ais.truth``), or None."""
+        return None if self._read.truth is None else self._read.truth.truth
+
+    @property
+    def truth_track(self) -> pd.DataFrame | None:
+        """Each contact's ship from its AIS at its bearing times, or None."""
+        return None if self._read.truth is None else self._read.truth.track
+
+    @property
+    def matches(self) -> pd.DataFrame | None:
+        """Per contact which ship it was matched to, how well it fits and why (or why not)."""
+        if self._read.truth is None:
+            return None
+        return pd.DataFrame([m.record() for m in self._read.truth.matches]).astype(
+            {"mmsi": "Int64"})
+
     def __repr__(self) -> str:
         n = sum(lg.n_tracks for lg in self.logs)
         span = max(lg.t_s[-1] for lg in self.logs)
@@ -161,17 +180,32 @@ class Recording:
 
 
 def read_log(path, *, navigation=None, format: str = "auto", sigma_deg: float | None = None,
-             min_bearings: int = 5, options: dict | None = None, **groups) -> Recording:
+             min_bearings: int = 5, truth=None, options: dict | None = None,
+             **groups) -> Recording:
     """Read a recorded bearing log (CSV/TSV, NMEA navigation, ROS 2, Foxglove or tma's own
     MCAP) as ``python -m pipeline.ingest input=<path>`` does, without storing it. Reading
     options by group (``columns={"time": "tid"}``, ``bearing={"topic": "/sonar/*"}``,
     ``time={"start_utc": "2025-06-01T08:00:00Z"}``, ``bad_rows="fail"``) or dotted in
-    ``options``; ``sigma_deg``: the sensor's nominal bearing noise, when known."""
+    ``options``; ``sigma_deg``: the sensor's nominal bearing noise, when known; ``truth``: the
+    AIS of the trial, a path or the ``truth.*`` options (``{"file": ..., "match": {"T1":
+    235031617}}``): ``estimate`` then scores each contact against it."""
     from tma.ingest import read_log as read
 
     return Recording(read(path, family=FAMILY, fmt=format, navigation=navigation,
                           options=_nested(options, groups), sigma_deg=sigma_deg,
-                          min_bearings=min_bearings))
+                          min_bearings=min_bearings, truth=truth))
+
+
+def _truth_of(data):
+    """``(truth, truth track)`` of a Recording or stored dataset scored against AIS, else
+    ``(None, None)``."""
+    if isinstance(data, Recording):
+        return data.truth, data.truth_track
+    if isinstance(data, StoredDataset) and data.recorded:
+        from tma.families.bearings2d.truth_report import dataset_truth
+
+        return dataset_truth(data.dataset)
+    return None, None
 
 
 def _logs_of(data, sigma_deg, what="estimate"):
@@ -206,11 +240,12 @@ def estimate(data, estimator: str = "lm", sigma_deg: float | None = None,
     (default: the log's, else estimated). Returns one row per contact: the per-track report
     ``pipeline.aggregate`` writes (label, time_now_utc, range/bearing/course/speed now with
     their one-sigma errors, x/y and lat/lon now, status and note, sqrt_ka_deg, fit and
-    trend-test p-values, leg_start_s/_utc...) followed by the estimate's own columns
-    (``x0_m``.., ``jtj_ij``: what ``plot_contact`` and ``write_map`` draw from). An estimate
-    that is no answer (diverged, collapsed, or without a one-sigma error:
-    ``bearings2d.status.not_an_answer``) is blank there, ``x0_m``.. included, with its status
-    and a note that says so."""
+    trend-test p-values, leg_start_s/_utc...), for a log read with its AIS (``truth=``) the
+    truth, errors, z-scores and ``covered`` (``bearings2d.truth_report``), followed by the
+    estimate's own columns (``x0_m``.., ``jtj_ij``: what ``plot_contact`` and ``write_map``
+    draw from). An estimate that is no answer (diverged, collapsed, or without a one-sigma
+    error: ``bearings2d.status.not_an_answer``) is blank there, ``x0_m``.. included, with its
+    status and a note that says so."""
     from tma.estimation import estimate_log
     from tma.families import build_estimator, estimator_class
     from tma.families.bearings2d.report import contact_report
@@ -227,6 +262,11 @@ def estimate(data, estimator: str = "lm", sigma_deg: float | None = None,
                           ignore_index=True)
     report = contact_report(estimates, logs, "estimate",
                             getattr(est.config, "max_range_rel_sd", None), recorded)
+    truth, _ = _truth_of(data)
+    if truth is not None:  # the columns against the AIS truth, as aggregate writes them
+        from tma.families.bearings2d.truth_report import with_truth
+
+        report = with_truth(report, estimates, truth)
     extra = [c for c in estimates.columns if c not in report.columns]
     results = pd.concat([report, estimates[extra]], axis=1)
     results.loc[~np.isfinite(report["range_now_m"].to_numpy(float)), list(THETA)] = np.nan
@@ -318,7 +358,8 @@ def write_map(results: pd.DataFrame, recording, path) -> Path:
                                 f"directory {path.parent}; create it or choose another path")
     try:
         return write_map_mcap(path, results, results, logs, epoch, origin,
-                              {"estimator": "tma.estimate"})
+                              {"estimator": "tma.estimate"},
+                              truth_track=_truth_of(recording)[1])
     except OSError as exc:  # named by the temporary file it was writing: name the user's
         message = (f"cannot write the map to {path}: {exc.strerror or exc}; choose a path "
                    "you can write to")

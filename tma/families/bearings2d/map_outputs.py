@@ -60,6 +60,7 @@ BEARING_LINES = 40  # at most about this many bearing lines per plot (every k-th
 ESTIMATE_TOPIC = "/tma/estimate/{label}"
 THETA = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")  # position at t = 0 and velocity (m, m/s)
 NOMINAL_REACH_M = 20_000.0  # bearing lines of a contact without an estimate to reach
+TRUTH_TOPIC = "/tma/truth/{label}"  # the contact's ship, from its AIS (ingest truth=FILE)
 
 
 # -- covariance ------------------------------------------------------------------------------
@@ -284,11 +285,12 @@ def contact_figure(report: pd.DataFrame, estimates: pd.DataFrame, logs, label,
 # -- the estimated tracks as an MCAP ---------------------------------------------------------
 
 def write_map_mcap(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, epoch_utc_ns,
-                   origin_deg, run: dict) -> Path:
+                   origin_deg, run: dict, truth_track: pd.DataFrame | None = None) -> Path:
     """Write the estimated tracks and own-ship as ``foxglove.LocationFix`` (see the module
     docstring), in time order; returns ``path``. Tracks whose estimate the report does not
     show (blank: ``shown_estimates``) or that lie beyond ``MAX_MAPPED_M`` of the origin are
-    left out (logged)."""
+    left out (logged). ``truth_track``: the contacts' ships from their AIS
+    (``tma.ais.truth``), beside the estimates (``truth_parts``)."""
     theta, theta_cov = shown_estimates(report, estimates)
     where = {int(i): (k, row) for k, lg in enumerate(logs) for row, i in enumerate(lg.track_id)}
     own_topics = ([OWNSHIP_FIX_TOPIC] if len(logs) == 1
@@ -322,6 +324,10 @@ def write_map_mcap(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, ep
             "estimate": "the estimator's track over the bearings its solution rests on (from "
                         "leg_start_s); covariance as in the report"}))
         parts.append((t, lat.tolist(), lon.tolist(), cov, f"contact {shown[n]}"))
+    if truth_track is not None:
+        for channel, part in truth_parts(report, truth_track):
+            channels.append(channel)
+            parts.append(part)
     if skipped:
         log.warning("%s: no estimate shown (the table's note says why) or none within %g km "
                     "of the origin for %s: not in the map", path, MAX_MAPPED_M / 1e3,
@@ -350,4 +356,25 @@ def _fixes(t_ns, frame: str, lat, lon, cov) -> list[bytes]:
         if cov is not None:
             fix.position_covariance[:] = cov[k]
         out.append(fix.SerializeToString(deterministic=True))
+    return out
+
+
+def truth_parts(report: pd.DataFrame, truth_track: pd.DataFrame) -> list:
+    """``(channel, part)`` per contact with an AIS truth: its ship's position at each of its
+    bearing times on ``/tma/truth/<label>`` (``foxglove.LocationFix``, no covariance), as
+    ``write_map_mcap`` writes the estimates beside it."""
+    shown = dict(zip(report["track_id"].tolist(), shown_labels(report["label"]), strict=True))
+    mmsi = (dict(zip(report["track_id"].tolist(), report["truth_mmsi"].tolist(), strict=True))
+            if "truth_mmsi" in report else {})
+    out = []
+    for track_id, rows in truth_track.groupby("track_id", sort=True):
+        if track_id not in shown:
+            continue
+        label = shown[track_id]
+        channel = Channel.protobuf(TRUTH_TOPIC.format(label=label), LocationFix, {
+            "track_id": str(track_id), "mmsi": str(mmsi.get(track_id, "")),
+            "truth": "the contact's ship from its AIS, interpolated at its bearing times"})
+        out.append((channel, (rows["t_s"].to_numpy(float), rows["lat_deg"].tolist(),
+                              rows["lon_deg"].tolist(), None, f"AIS {mmsi.get(track_id, '')}"
+                              f" (contact {label})")))
     return out

@@ -16,7 +16,12 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 import pyarrow as pa  # noqa: E402
 
-from tma.families.bearings2d import benchmark, manoeuvre_table, paper  # noqa: E402
+from tma.families.bearings2d import (  # noqa: E402
+    benchmark,
+    manoeuvre_table,
+    paper,
+    real_motion_table,
+)
 from tma.families.bearings2d.map_outputs import (  # noqa: E402
     MAX_PLOTS,
     position_covariance,
@@ -33,6 +38,12 @@ from tma.families.bearings2d.metrics import (  # noqa: E402
     track_metrics,
 )
 from tma.families.bearings2d.status import STATUSES, not_an_answer  # noqa: E402
+from tma.families.bearings2d.truth_report import (  # noqa: E402
+    coverage_text,
+    dataset_truth,
+    shown_columns,
+    with_truth,
+)
 from tma.geo import local_to_geodetic  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
 from tma.sources.labels import shown_labels  # noqa: E402
@@ -288,13 +299,17 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str,
         "bearing now (deg)": pm("bearing_now_deg", "bearing_sd_deg", ".2f"),
         "course (deg)": pm("course_deg", "course_sd_deg", ".1f"),
         "speed (m/s)": pm("speed_m_s", "speed_sd_m_s", ".2f"),
+        **shown_columns(report),  # against the AIS truth, when the log has one
         "sqrt(Ka) (deg)": report["sqrt_ka_deg"].map("{:.3g}".format),
         "holds from": (report["leg_start_s"].map("t = {:.1f} s".format)
                        if report["leg_start_utc"].isna().all() else report["leg_start_utc"]),
         "status": report["status"],
         "why": report["note"],
     })
-    intro = (f"Estimates per track of `{source}` (no ground truth). 'now' is each track's last "
+    scored = "covered" in report  # against the AIS of its trial (truth_report)
+    intro = (f"Estimates per track of `{source}` "
+             f"({'against the AIS of its trial' if scored else 'no ground truth'}). 'now' is "
+             "each track's last "
              "bearing epoch, in seconds from the log's start (its first bearing) and in UTC "
              "when the log is dated; ± is one standard deviation (sigma as in column "
              "sigma_used_deg of the CSV: nominal, or estimated from the residuals), which "
@@ -307,8 +322,12 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str,
              "holds the position now in local metres (x east, y north) with its one-sigma "
              f"errors; `{name}-<track>.png` shows each contact on a plan (the first "
              f"{MAX_PLOTS}).")
+    if scored:
+        intro += (" AIS ship: the contact's ship and how well its AIS fits the bearings; z: "
+                  "(estimate - truth) / one sigma; covered: the truth within the estimate's 95 % "
+                  "region of position and velocity (the CSV has the errors and the truth).")
     return write_table(tables_dir, name, f"Bearings-only TMA estimates: {name}", intro, report,
-                       shown)
+                       shown, notes=coverage_text(report) if scored else "")
 
 
 STATUS_WHY = {  # a verdict in a few words, for the one warning line of its tracks
@@ -357,6 +376,10 @@ def _report_without_truth(entry, tables_dir, name: str, progress=None) -> list[P
     epoch, origin, _ = reference(logs, str(dataset.root))
     report = contact_report(entry.estimates, logs, str(dataset.root),
                             entry.manifest["config"].get("max_range_rel_sd"))
+    truth, truth_track = dataset_truth(dataset)
+    if truth is not None:  # scored against the AIS of its trial (ingest truth=FILE)
+        report = with_truth(report, entry.estimates, truth)
+        log.info("%s: %s", dataset.name, coverage_text(report))
     warn_not_ok(report, dataset.name)
     write_parquet_atomic(entry.run_root / "report.parquet",
                          pa.Table.from_pandas(report, preserve_index=False))
@@ -375,14 +398,16 @@ def _report_without_truth(entry, tables_dir, name: str, progress=None) -> list[P
     else:
         written.append(write_map_mcap(Path(tables_dir) / f"{name}.mcap", report,
                                       entry.estimates, logs, epoch, origin,
-                                      {"dataset": dataset.name, "estimator": entry.estimator}))
+                                      {"dataset": dataset.name, "estimator": entry.estimator},
+                                      truth_track=truth_track))
     return written
 
 
 # the other kinds of table of simulated runs an experiment may ask for (``report=``): each
 # estimator against the Cramer-Rao bound, and targets that manoeuvre
 REPORTS = {"benchmark": benchmark.write_benchmark,
-           "manoeuvre": manoeuvre_table.write_manoeuvre_table}
+           "manoeuvre": manoeuvre_table.write_manoeuvre_table,
+           "real_motion": real_motion_table.write_real_motion_table}  # AIS own-ship, targets
 
 
 def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) -> list[Path]:
@@ -395,7 +420,7 @@ def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) 
         if id(entry.dataset) not in truths:  # read (and checked) once per dataset
             truths[id(entry.dataset)] = entry.dataset.read_truth()
         truth = truths[id(entry.dataset)]
-        if truth is None:
+        if truth is None or entry.dataset.manifest["source"] != "simulate":  # a recorded log
             name = table_name if len(entries) == 1 else f"{entry.dataset.name}-{entry.estimator}"
             written += _report_without_truth(entry, tables_dir, name, progress)
             continue
