@@ -100,8 +100,10 @@ def estimate(root) -> pd.DataFrame:
     bearing), one row per track with its label (or id) as ``label``."""
     dataset = Dataset.open(root)
     # the contacts hold course and speed exactly: assume so (a recording's default assumes
-    # real-ship wander, whose wider errors would blur what these tests check, the geometry)
-    estimator = LevenbergMarquardt(LmConfig(initial_bearing_deg=None, accel_psd_m2_s3=0.0))
+    # real-ship wander and manoeuvres, whose wider errors would blur what these tests check,
+    # the geometry)
+    estimator = LevenbergMarquardt(LmConfig(initial_bearing_deg=None, accel_psd_m2_s3=0.0,
+                                            manoeuvre_rate_per_h=0.0))
     frames = []
     for rel in dataset.shard_paths:
         log = read_bearings_log(dataset.verified_path(rel))

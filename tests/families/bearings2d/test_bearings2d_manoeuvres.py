@@ -42,9 +42,18 @@ def _estimate(log, name, **params):
                          **{k: v for k, v in out.items() if np.ndim(v) == 1}})
 
 
-def test_manoeuvres_are_flagged_and_named_in_the_note():
+def test_manoeuvres_are_found_and_without_them_in_the_prior_flagged():
+    """Plain turns on a recording: lm's prior holds manoeuvres, so it finds them (its
+    posterior probability of a manoeuvre > 0.5) and its answer follows the last leg; assuming
+    none (``manoeuvre_rate_per_h=0``), the trend test flags them, and the note says so."""
     log, truth = _manoeuvring()
     est = _estimate(log, "lm")
+    assert np.mean(est.p_manoeuvre > 0.5) >= 0.9, est.p_manoeuvre.describe()
+    # (the trend test still flags a fifth: a turn is an arc, the manoeuvre model's burst of
+    # white noise bends less sharply, and at 5-12 km and 0.5 deg the residuals show it)
+    assert np.mean(est.status == "manoeuvring") <= 0.3, est.status.value_counts()
+    est = _estimate(log, "lm", manoeuvre_rate_per_h=0.0)
+    assert "p_manoeuvre" not in est
     assert np.mean(est.status == "manoeuvring") >= 0.9, est.status.value_counts()
     assert (est.loc[est.status == "manoeuvring", "motion_p_value"] < 1e-3).all()
     notes = track_report(est).query("status == 'manoeuvring'")["note"]
@@ -65,17 +74,20 @@ def test_the_last_leg_is_found():
 
 
 def test_the_last_legs_errors_are_honest():
-    """Ships that turn and wander (q = 1e-3, what ``last_leg`` assumes of a recording): its
-    ok tracks' errors cover the truth at 0.905 (548 ok of 600; 0.915 with another seed), a
-    little under the nominal 0.95 (the change time's own uncertainty is not in them) and
-    within issue 20's 90-97 %; errors twice too large would give ~1.0. (Targets that do
-    not wander are covered at 0.99: the assumed wander is then an overstatement.)"""
+    """Ships that turn and wander (q = 1e-3, the wander ``last_leg`` assumes of a recording),
+    ``last_leg`` assuming that wander and no manoeuvres: its ok tracks' errors cover the
+    truth at 0.905 (548 ok of 600; 0.915 with another seed), a little under the nominal 0.95
+    (the change time's own uncertainty is not in them) and within issue 20's 90-97 %; errors
+    twice too large would give ~1.0. With a recording's manoeuvres in its prior (the
+    default, ten an hour: far more than these targets make) they are wider, and cover it
+    more often."""
     log, truth = _manoeuvring(n=300, accel_psd=1e-3)
-    est = _estimate(log, "last_leg")
-    m = track_metrics(est, truth)
-    ok = m.status == "ok"
-    assert ok.mean() >= 0.85, est.status.value_counts()
-    assert 0.88 <= np.mean(m.nees[ok] <= NEES_95) <= 0.97
+    for params, low, high in (({"manoeuvre_rate_per_h": 0.0}, 0.88, 0.97), ({}, 0.95, 1.0)):
+        est = _estimate(log, "last_leg", **params)
+        m = track_metrics(est, truth)
+        ok = m.status == "ok"
+        assert ok.mean() >= 0.75, (params, est.status.value_counts())
+        assert low <= np.mean(m.nees[ok] <= NEES_95) <= high, params
 
 
 def test_a_last_leg_without_own_ship_manoeuvre_is_unobservable():

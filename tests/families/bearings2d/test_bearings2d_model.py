@@ -123,8 +123,10 @@ def test_estimates_with_missing_bearings_equal_those_without_them(name):
         for column, sd in (("x0_m", "range_sd_m"), ("y0_m", "range_sd_m"),
                            ("vx_m_s", "speed_sd_m_s"), ("vy_m_s", "speed_sd_m_s")):
             assert abs(together[column][i] - alone[column][0]) < 1e-3 * alone[sd][0], column
+        # (a recording: lm averages over manoeuvres, each refined until no position moves by
+        # more than manoeuvres.REFINE_TOL_M, which the sds follow to about 1e-4)
         for column in ("cost_rad2", "range_sd_m", "course_sd_deg"):
-            np.testing.assert_allclose(together[column][i], alone[column][0], rtol=1e-6)
+            np.testing.assert_allclose(together[column][i], alone[column][0], rtol=1e-3)
         # nbearings is biased by design: its errors are never honest, so never ok
         assert together["status"][i] == alone["status"][0] == (
             "ok" if estimator.honest_errors else "approximate")

@@ -1,15 +1,17 @@
 """The ``bearings2d`` manoeuvre table: how each estimator fares on targets that move like
 ships (experiment ``bearings2d_manoeuvre``): constant velocity, nearly-constant velocity
 (``target.accel_psd_m2_s3``) and manoeuvres (``target.manoeuvres``), from logs that declare
-no motion model, as recordings do.
+the motion they were made with (or, ``target.declared`` false, none, as recordings).
 
 One row per (estimator, motion) over the simulated targets of one dataset:
 
-- ``flagged``: share of tracks found manoeuvring: status ``manoeuvring``, or a last leg
-  found (``last_leg``: ``n_rounds`` > 0). On constant-velocity targets it is the false-alarm
-  rate, on manoeuvring ones the detection rate;
+- ``flagged``: share of tracks found manoeuvring: status ``manoeuvring``, a last leg found
+  (``last_leg``: ``n_rounds`` > 0), or a manoeuvre more probable than not after the bearings
+  (``lm`` with manoeuvres in its prior: ``p_manoeuvre`` > 0.5). On constant-velocity targets
+  it is the false-alarm rate, on manoeuvring ones the detection rate;
 - ``ok`` and ``consistent``: the share of ``ok`` tracks, and of those whose normalised error
   against the truth lies below the chi-square(4) 95 % point (about 95 % when honest);
+- ``steady ok``: the share ``ok`` of the targets that made no manoeuvre;
 - Ref1..Ref4, the median |range error| over range (the tracks with an estimate) and the
   range RMSE of the ok tracks, at the last bearing, against the target's state then (on its
   last leg);
@@ -52,30 +54,35 @@ SIZE_BINS_DEG = (0, 30, 45, 60, 75, 90, 120)
 COLUMNS = [
     "estimator", "motion", "sigma_deg", "n_tracks",
     "flagged", "flagged_lo", "flagged_hi", "ok", "ok_lo", "ok_hi",
-    "consistent", "consistent_lo", "consistent_hi",
+    "consistent", "consistent_lo", "consistent_hi", "steady_ok", "steady_ok_lo", "steady_ok_hi",
     *[f"{r}{s}" for r in REGIONS for s in ("", "_lo", "_hi")],
     "median_range_error", "rmse_range_ok_m", "n_failed",
 ]
 
-INTRO = """Bearings-only TMA of targets that move like ships, from logs that declare no motion
-model (as a recording): the estimators test every track for manoeuvres (the trend test,
-status `manoeuvring`) and assume real-ship wander (random acceleration of spectral density
-accel_psd_m2_s3 per axis). One row per estimator and target motion over N simulated targets:
-flagged: share found manoeuvring (the false-alarm rate on constant-velocity targets, the
-detection rate on manoeuvring ones; for `last_leg`, a last leg found); ok: share with status
+INTRO = """Bearings-only TMA of targets that move like ships: wander (random acceleration of
+spectral density q per axis) and manoeuvres (turns and speed changes at the times of a
+Poisson process), from logs that declare the motion they were made with. `lm` assumes the
+declared motion: its answer averages over the manoeuvres the target may have made
+(docs/manoeuvres.md); `motion_prior_scale` 10 and 0.1 assume ten times more and less wander
+and manoeuvres than there are. One row per estimator and target motion over N simulated
+targets: flagged: share found manoeuvring (status `manoeuvring`, a last leg found, or
+p_manoeuvre > 0.5; the false-alarm rate on constant-velocity targets); ok: share with status
 `ok`; consistent: share of the ok tracks whose normalised error lies below the chi-square(4)
-95 % point (about 95 % when the one-sigma errors are honest); Ref1..Ref4, the median
-|range error| / range (the tracks with an estimate) and the range RMSE of the ok tracks, at
-the last bearing against the target's state then (on its last leg). 95 % Wilson intervals.
-Every number is read from the run and dataset files under `data/`."""
+95 % point (about 95 % when the one-sigma errors are honest); steady ok: share `ok` of the
+targets that did not manoeuvre; Ref1..Ref4, the median |range error| / range (the tracks
+with an estimate) and the range RMSE of the ok tracks, at the last bearing against the
+target's state then. 95 % Wilson intervals. Every number is read from the run and dataset
+files under `data/`."""
 
 
 def motion_label(scenario: dict) -> str:
     """The target motion of a dataset's scenario config, in words."""
     target = scenario.get("target") or {}
     q = float(target.get("accel_psd_m2_s3", 0.0))
-    prob = float((target.get("manoeuvres") or {}).get("prob", 0.0))
-    parts = [f"wander q={q:g}" if q > 0 else "", f"manoeuvres {prob:g}" if prob > 0 else ""]
+    manoeuvres = target.get("manoeuvres") or {}
+    prob, rate = float(manoeuvres.get("prob", 0.0)), float(manoeuvres.get("rate_per_h", 0.0))
+    parts = [f"wander q={q:g}" if q > 0 else "", f"manoeuvres {prob:g}" if prob > 0 else "",
+             f"manoeuvres {rate:g}/h" if rate > 0 else ""]
     return " + ".join(p for p in parts if p) or "constant velocity"
 
 
@@ -84,6 +91,8 @@ def flagged(estimates: pd.DataFrame) -> np.ndarray:
     found = (estimates["status"] == "manoeuvring").to_numpy()
     if "n_rounds" in estimates:
         found = found | (estimates["n_rounds"].to_numpy() > 0)
+    if "p_manoeuvre" in estimates:
+        found = found | (estimates["p_manoeuvre"].to_numpy() > 0.5)
     return found
 
 
@@ -98,10 +107,13 @@ def manoeuvre_row(label, motion, sigma, estimates, truth) -> dict:
     n = len(metrics)
     ok = (metrics["status"] == "ok").to_numpy()
     consistent = int((metrics.loc[ok, "nees"] <= NEES_95).sum())
+    moved = (metrics["track_id"].map(truth.set_index("track_id")["manoeuvring"])
+             .to_numpy(dtype=bool) if "manoeuvring" in truth else np.zeros(n, dtype=bool))
     row = {"estimator": label, "motion": motion, "sigma_deg": sigma, "n_tracks": n,
            **_rate(int(flagged(estimates).sum()), n, "flagged"),
            **_rate(int(ok.sum()), n, "ok"),
-           **_rate(consistent, int(metrics.loc[ok, "nees"].notna().sum()), "consistent")}
+           **_rate(consistent, int(metrics.loc[ok, "nees"].notna().sum()), "consistent"),
+           **_rate(int((ok & ~moved).sum()), int((~moved).sum()), "steady_ok")}
     for region in REGIONS:
         row.update(_rate(int(metrics[region].sum()), n, region))
     err = errors_now(estimates, truth)["range_err_m"].to_numpy()
@@ -151,7 +163,7 @@ def shown_table(table: pd.DataFrame) -> pd.DataFrame:
     shown = {"estimator": table["estimator"], "motion": table["motion"],
              "sigma (deg)": table["sigma_deg"].map("{:g}".format), "N": table["n_tracks"]}
     for name, title in (("flagged", "flagged %"), ("ok", "ok %"),
-                        ("consistent", "consistent (ok) %")):
+                        ("consistent", "consistent (ok) %"), ("steady_ok", "steady ok %")):
         shown[title] = [_pct(*v) for v in table[[name, f"{name}_lo", f"{name}_hi"]].to_numpy()]
     for r in REGIONS:
         shown[f"{r.capitalize()} %"] = [_pct(*v) for v in

@@ -180,6 +180,11 @@ def status_note(report: pd.DataFrame, stop_reason=None, sigma_known=True) -> lis
         elif status == "not_converged":
             note = (NOT_CONVERGED.get(stop, SINGULAR) if stop is not None else
                     "the estimator stopped before converging")
+        elif status == "unobservable" and row.speed_sd_m_s >= row.speed_m_s and not (
+                row.range_sd_m > row.range_now_m):
+            note = (f"speed sd {row.speed_sd_m_s:.3g} m/s at {row.speed_m_s:.3g} m/s: the "
+                    "velocity, and so the course, is not determined (a manoeuvre too recent "
+                    "for the bearings to show where it led?)")
         elif status == "unobservable":
             note = ((f"range sd {row.range_sd_m / row.range_now_m:.0%} of the range: "
                      if np.isfinite(row.range_sd_m) else "range ") +

@@ -49,6 +49,8 @@ class BearingsConfig(EstimatorConfig):
     min_bearings: int = param(5, "bearings a track needs (4 unknowns)", "[4, inf)")
     max_range_rel_sd: float = param(0.2, "unobservable above this range sd / range",
                                     "(0, inf)")
+    max_speed_rel_sd: float = param(1.0, "unobservable above this speed sd / speed (the "
+                                    "course is then not determined)", "(0, inf)")
     fit_alpha: float = param(1e-3, "poor_fit below this p-value of the noise test (chi-square)",
                              "(0, 1)")
     singular_rcond: float = param(1e-12, "J^T J is singular at or below this scaled "
@@ -143,6 +145,7 @@ class BearingsEstimator(Estimator):
         approximate = np.full(n, not self.honest_errors)
         follows = (q > 0 or prior is not None) and self.models_motion
         p_manoeuvre = np.full(n, np.nan)
+        undetermined = np.zeros(n, dtype=bool)
         # residuals below any sensor's noise (a noiseless log, declared or not) have no
         # pattern to test: round-off has one
         tested = np.full(n, test) & (np.sqrt(sigma2) >= ncv.MIN_SIGMA_RAD)
@@ -151,7 +154,11 @@ class BearingsEstimator(Estimator):
             # the motion fit could only widen it (and its MAP would shrink range to fit
             # noise); its innovations for the trend test are those about the fit's line
             follow = np.zeros(n, dtype=bool)
-            if follows:
+            if follows and prior is not None:  # a manoeuvre can explain what a constant
+                # velocity fit leaves undetermined: every track with an estimate (and then
+                # whether own-ship's motion determines the range of the answer, below)
+                follow = np.isfinite(theta).all(axis=1)
+            elif follows:
                 follow = range_rel_sd(theta, jtj, sigma2, t[last], ox[last], oy[last],
                                       cfg.singular_rcond) <= cfg.max_range_rel_sd
             innovations = np.full(measured.shape, np.nan)
@@ -176,9 +183,17 @@ class BearingsEstimator(Estimator):
             if test:
                 motion_p = np.where(tested, trend_test_p(innovations, t, cfg.motion_terms),
                                     np.nan)
+            if follows and prior is not None:
+                # no target manoeuvre makes range observable, only own-ship's: the bearings'
+                # information on a constant-velocity target at the answer must determine it
+                _, jtj_cv, _ = evaluate_in_blocks(BearingTerms(t, ox, oy, measured, use), theta)
+                undetermined = ~(range_rel_sd(theta, jtj_cv, sigma2, t[last], ox[last],
+                                              oy[last], cfg.singular_rcond)
+                                 <= cfg.max_range_rel_sd)
         approximate |= (q > 0 or prior is not None) and not self.models_motion
         trust = assess(theta, jtj, sigma2, fit_p, motion_p, out["converged"], approximate,
-                       t[last], ox[last], oy[last], cfg, motion_tested=tested)
+                       t[last], ox[last], oy[last], cfg, motion_tested=tested,
+                       undetermined=undetermined)
         leg_start = out.pop("leg_start_s", t[first])
         columns = {
             "x0_m": theta[:, 0], "y0_m": theta[:, 1], "vx_m_s": theta[:, 2], "vy_m_s": theta[:, 3],
