@@ -45,7 +45,8 @@ def stage_main(task, config_name="config", bare=None, check=None):
     ``check(arguments)`` runs before Hydra starts."""
     def main():
         os.environ["HYDRA_FULL_ERROR"] = "1"  # this process's Hydra: raise, we say it
-        sys.argv[1:] = guarded(experiment.bare_as, bare, sys.argv[1:], _overrides(sys.argv[1:]))
+        sys.argv[1:] = guarded(experiment.bare_as, bare, _readable(sys.argv[1:]),
+                               _overrides(sys.argv[1:]))
         if check is not None:
             check(sys.argv[1:])
         name = config_name(sys.argv[1:]) if callable(config_name) else config_name
@@ -71,8 +72,48 @@ def _overrides(arguments: list[str]) -> list[str]:
     return parser.parse_args(arguments).overrides
 
 
+_SYNTAX = re.compile(r"""['"\[\](){},=\s]|\$\{""")  # what makes a value more than one text
+
+
+def _readable(arguments: list[str]) -> list[str]:
+    """The arguments with each ``key=value`` whose value is one text Hydra cannot read
+    unquoted (``columns.lon=Länge``, ``input=über/journal_é.csv``, ``name=a~b``: its grammar
+    takes ASCII letters, digits and a few signs only) quoted as Hydra reads text
+    (``tma.experiment.override_text``); a value with Hydra's own syntax (a list, a sweep,
+    quotes, an interpolation) is left as written, for Hydra to read or refuse."""
+    parser = OverridesParser.create()
+    out = []
+    for argument in arguments:
+        key, eq, value = argument.partition("=")
+        if eq and value and not key.startswith("-") and not _SYNTAX.search(value):
+            try:
+                parser.parse_override(argument)
+            except hydra_errors.HydraException:  # OverrideParseException, a lexer's error
+                quoted = experiment.override_text(key, value)
+                try:
+                    parser.parse_override(quoted)
+                    argument = quoted
+                except hydra_errors.HydraException:
+                    pass  # not a value's fault (e.g. the key): Hydra says what is wrong
+        out.append(argument)
+    return out
+
+
 NOTES = {"hydra.launcher.partition": "this launcher runs the jobs on this machine, which has "
                                      "no partitions: drop it; hydra/launcher=slurm takes it"}
+
+
+def _unreadable_sign(exc) -> str | None:
+    """The character Hydra's lexer stopped at in the override of ``exc`` (its report: the
+    override, then a caret under the character), when it is no quote or bracket: one Hydra
+    reads only inside quotes (``ü``, ``~``, ``#``)."""
+    lines = str(exc).splitlines()
+    head = "LexerNoViableAltException: "
+    if len(lines) < 2 or not lines[0].startswith(head) or "^" not in lines[1]:
+        return None
+    at = lines[1].index("^") - len(head)
+    sign = exc.override[at] if 0 <= at < len(exc.override) else ""
+    return sign if sign and sign not in "'\"[]{}(),=" and not sign.isspace() else None
 
 
 def hydra_error_line(exc: Exception, arguments: list[str]) -> str | None:
@@ -84,6 +125,11 @@ def hydra_error_line(exc: Exception, arguments: list[str]) -> str | None:
         return experiment.unknown_choice_line(group, value, exc.options)
     if isinstance(exc, hydra_errors.OverrideParseException):
         why = "" if exc.override in first else f" ({first})"
+        sign = _unreadable_sign(exc)
+        if sign:
+            return (f"{exc.override}: cannot parse this override: Hydra reads '{sign}' "
+                    "only inside quotes; quote each value holding it: key='a value' (for the "
+                    "shell: \"key='a value'\")")
         return (f"{exc.override}: cannot parse this override{why}; quote a value holding "
                 "quotes, brackets, commas or spaces: key='a value' (for the shell: "
                 "\"key='a value'\")")

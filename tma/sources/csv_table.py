@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from tma.errors import InputError
+from tma.errors import InputError, MissingFileError
 from tma.sources.base import Contacts, Navigation, Recording, line_places
 from tma.utc import MAX_SPAN_S, UNIX_FROM_S, UNIX_MAGNITUDE, UNIX_SCALE_NS, UTC_FROM_NS, ZONED
 
@@ -182,7 +182,7 @@ class _Table:
             with open(path, "rb") as f:
                 raw = f.read(SAMPLE_BYTES)
         except FileNotFoundError:
-            raise InputError(f"{path}: no such file") from None
+            raise MissingFileError(f"{path}: no such file") from None
         except IsADirectoryError:
             raise InputError(f"{path}: a directory, not a CSV file") from None
         try:
