@@ -36,6 +36,7 @@ from pathlib import Path
 from tma.config import to_plain
 from tma.errors import ConfigError, InputError
 from tma.estimation import dataset_config
+from tma.estimator import name_set_error
 from tma.families import build_estimator, dataset_name, load_scenario, scenario_module
 from tma.io.dataset import MANIFEST, Dataset, datasets_dir
 from tma.io.owned import plain_name
@@ -140,6 +141,9 @@ def estimator_configs(estimator: dict, grid: dict | None,
     read there."""
     grid = (grid or {}).get("estimators")
     if not grid:
+        named = [o for o in overrides if o.key == "estimator.name" and o.package is None]
+        if named:  # as tma.estimate's name=
+            raise name_set_error(named[-1].text, named[-1].text.partition("=")[2] or "NAME")
         return [estimator]
     nodes = copy.deepcopy(grid)
     chosen = [o.value for o in overrides if o.key == "estimator"

@@ -429,6 +429,15 @@ def _time_column(df, col, fmt, path, line, notes):
     series = df[col]
     numeric = pd.api.types.is_numeric_dtype(series)  # true/false too: refused as numbers
     ns = None
+    if pd.api.types.is_timedelta64_dtype(series):  # a DataFrame's durations: relative times
+        if fmt not in ("auto", "s"):
+            raise InputError(f"{path}: {col} holds durations (timedelta64: times relative to "
+                             f"a start), not time.format={fmt} times; leave time.format=auto "
+                             "(time.start_utc=... dates them)")
+        ok = series.notna().to_numpy()
+        notes.append(f"{path.name}: {col} read as relative times (durations)")
+        return (np.where(ok, series.dt.as_unit("ns").array.asi8, 0), "rel_ns", ok,
+                np.zeros_like(ok))
     if pd.api.types.is_datetime64_any_dtype(series) and fmt in ("auto", "iso", "iso_utc"):
         ok = series.notna().to_numpy()  # a DataFrame's UTC times (``_Frame``), exact to the ns
         ns = np.where(ok, series.dt.as_unit("ns").array.asi8, 0)
