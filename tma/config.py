@@ -30,7 +30,7 @@ from dataclasses import MISSING, Field, asdict, dataclass, field, fields, is_dat
 from omegaconf import DictConfig, ListConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException, ValidationError
 
-from tma.errors import ConfigError, ConfigTypeError
+from tma.errors import ConfigError, ConfigTypeError, TmaError
 
 
 @functools.cache
@@ -111,6 +111,8 @@ def _validate(schema, node, where: str):
             raise ConfigTypeError(_at(where, _wrong_type(key, declared, value))) from None
         msg = (getattr(exc, "msg", None) or str(exc)).splitlines()[0]
         raise ConfigError(_at(where, msg + (f" (key '{key}')" if key else ""))) from None
+    except TmaError:  # a check's own line (``check_params``, ``__post_init__``)
+        raise
     except (TypeError, ValueError) as exc:
         raise ConfigError(_at(where, str(exc))) from None
 

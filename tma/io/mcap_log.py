@@ -83,6 +83,8 @@ def schema_errors(where: str, what: str = "a message"):
     integer out of range) into one InputError naming the file, not a traceback."""
     try:
         yield
+    except TmaError:  # already one line naming its cause (a ValueError too)
+        raise
     except KeyError as exc:
         raise InputError(f"{where}: {what} lacks the field {exc}") from None
     except (TypeError, ValueError, IndexError, AttributeError, OverflowError) as exc:

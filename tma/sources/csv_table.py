@@ -563,7 +563,7 @@ def _values(values, col, options, table, path, line, notes):
     column's name. A name or units row saying the first unit is what a column in another unit
     mislabelled would say too, so the family's guard still checks it."""
     observation = options.observation
-    role, plural = observation.role, observation.plural
+    plural = observation.plural
     units, stated = options.contact.units, options.contact.units is not None
     if units is None:
         in_row = table.unit_of(col)
@@ -576,16 +576,7 @@ def _values(values, col, options, table, path, line, notes):
             units, stated = by_name.name, True
             notes.append(f"{path.name}: {plural} in {by_name.words} (column name {col})")
     unit = observation.unit(units or observation.units[0].name)
-    outside = np.abs(values) > unit.limit
-    if outside.any():
-        k = int(np.argmax(outside))
-        if unit is observation.units[0]:
-            others = ", ".join(f"{role}.units={u.name}" for u in observation.units[1:])
-            why = f"{plural} must be in {unit.words} (or set {others})"
-        else:
-            why = f"{plural} in {unit.words} were stated ({role}.units)"
-        raise InputError(f"{path}: {col} {values[k]:g} on line {line[k]} is outside "
-                         f"{unit.range_text}; {why}")
+    observation.check_range(values, unit, f"{path}: {col}", lambda k: f" on line {line[k]}")
     return unit.to_first(values), stated
 
 
