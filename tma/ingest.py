@@ -30,7 +30,7 @@ from tma.io.dataset import MANIFEST, datasets_dir, file_record, shard_relpath, w
 from tma.io.owned import building, is_owned, plain_name
 from tma.sources import read_source, source_kind
 from tma.sources.align import align
-from tma.sources.base import groups, inapplicable, source_options, unknown_option
+from tma.sources.base import Caution, groups, inapplicable, source_options, unknown_option
 from tma.sources.labels import name_room
 
 log = logging.getLogger(__name__)
@@ -208,7 +208,7 @@ def _read(family, recordings, options, settings, config, sources, where) -> Read
     aligned = align(recordings, options, where)
     summary = aligned.summary
     for note in summary["notes"]:
-        log.info("%s", note)
+        log.log(logging.WARNING if isinstance(note, Caution) else logging.INFO, "%s", note)
     dropped = summary[f"dropped_{options.observation.plural}"]
     if dropped["count"]:
         log.warning("%s: dropped %d %s(s) (%d before, %d after the own-ship fixes): %s",

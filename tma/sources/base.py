@@ -105,6 +105,11 @@ class Observation:
         return next((u for u in self.units[1:] if name.lower().endswith(f"_{u.name}")), None)
 
 
+class Caution(str):
+    """A note that may be a mistake in the log (ids alike but written differently): the log
+    shows it as a warning; the manifest keeps it with the other notes."""
+
+
 BAD_ROWS = ("drop", "fail")
 NAMED = 5  # places named per reason: the first few
 
