@@ -4,6 +4,7 @@ callbacks, and the hand-over of the composed config to the core (``tma.experimen
 import logging
 import os
 import re
+import signal
 import sys
 import traceback
 import uuid
@@ -20,7 +21,7 @@ from omegaconf.errors import ConfigAttributeError, ConfigKeyError, OmegaConfBase
 
 from pipeline import SWEEP_ENV  # set while a multirun runs
 from tma import experiment
-from tma.errors import TmaError
+from tma.errors import Interrupted, TmaError
 from tma.io.atomic import write_json_atomic
 from tma.parallel import Engine, engine_from, keep_freed_memory, quick_exit
 
@@ -45,16 +46,43 @@ def stage_main(task, config_name="config", bare=None, check=None):
     ``check(arguments)`` runs before Hydra starts."""
     def main():
         os.environ["HYDRA_FULL_ERROR"] = "1"  # this process's Hydra: raise, we say it
-        sys.argv[1:] = guarded(experiment.bare_as, bare, _readable(sys.argv[1:]),
-                               _overrides(sys.argv[1:]))
-        if check is not None:
-            check(sys.argv[1:])
-        name = config_name(sys.argv[1:]) if callable(config_name) else config_name
+        saved = {sig: signal.signal(sig, _stop) for sig in STOP_SIGNALS}
         try:
-            hydra.main(config_path=CONF_DIR, config_name=name, version_base="1.3")(task)()
-        except Exception as exc:
-            fail(guarded(hydra_error_line, exc, sys.argv[1:]) or guarded(_raise, exc))
+            sys.argv[1:] = guarded(experiment.bare_as, bare, _readable(sys.argv[1:]),
+                                   _overrides(sys.argv[1:]))
+            if check is not None:
+                check(sys.argv[1:])
+            name = config_name(sys.argv[1:]) if callable(config_name) else config_name
+            try:
+                hydra.main(config_path=CONF_DIR, config_name=name, version_base="1.3")(task)()
+            except Exception as exc:
+                fail(guarded(hydra_error_line, exc, sys.argv[1:]) or guarded(_raise, exc))
+        except KeyboardInterrupt as exc:  # Ctrl-C, or a signal of STOP_SIGNALS (Stopped)
+            number = getattr(exc, "signal", signal.SIGINT)
+            name = signal.Signals(number).name + (" (Ctrl-C)" if number == signal.SIGINT else "")
+            fail(f"stopped by {name}: the tasks finished are kept and nothing complete was "
+                 "replaced; run the same command again to resume", status=128 + number)
+        finally:
+            for sig, handler in saved.items():
+                signal.signal(sig, handler)
     return main
+
+
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)  # a scheduler's or a closed terminal's stop
+
+
+class Stopped(KeyboardInterrupt):
+    """A stop signal, raised where the command is, as Ctrl-C's KeyboardInterrupt is: joblib
+    then stops its workers, ``guarded``'s last line of defence lets it through, and the
+    command says it in one line (exit status 128 + the signal)."""
+
+    def __init__(self, number: int):
+        super().__init__(number)
+        self.signal = number
+
+
+def _stop(number, frame):
+    raise Stopped(number)
 
 
 def _raise(exc):
@@ -187,6 +215,8 @@ def guarded(fn, *args):
         return fn(*args)
     except TmaError as exc:
         fail(str(exc))
+    except Interrupted as exc:  # a worker that died: the re-run resumes
+        fail(str(exc), exc.status)
     except OSError as exc:
         fail(os_error_line(exc))
     except OmegaConfBaseException as exc:  # e.g. an interpolation that cannot be resolved

@@ -28,3 +28,13 @@ class MissingFileError(InputError, FileNotFoundError):
 
 class ConfigTypeError(ConfigError, TypeError):
     """A configuration value of the wrong type (``except TypeError`` catches it too)."""
+
+
+class Interrupted(Exception):
+    """The work stopped before its end (a worker process that died, a signal): what was
+    finished is kept (each shard is written whole or not at all), nothing complete was
+    replaced, and the same command again resumes. ``status``: the command's exit status."""
+
+    def __init__(self, message: str, status: int = 2):
+        super().__init__(message)
+        self.status = status
