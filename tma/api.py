@@ -215,6 +215,9 @@ def estimate(data, estimator: str = "lm", sigma_deg: float | None = None,
     (``x0_m``.., ``jtj_ij``: what ``plot_contact`` and ``write_map`` draw from)."""
     from tma.estimation import estimate_log
     from tma.families import build_estimator, estimator_class
+    from tma.tables import plots_to_files
+
+    plots_to_files()  # the report module loads matplotlib
     from tma.families.bearings2d.report import contact_report
 
     if "name" in options:  # as the command line's estimator.name= (tma.experiment)
