@@ -51,7 +51,8 @@ class Engine(Params):
 
     engine: str = param("joblib", "where shards run: joblib (local worker processes, or this "
                         "process) or dask (a Dask cluster)", choices=ENGINES)
-    n_jobs: int = param(1, "joblib: worker processes (1: in this process)", "[1, inf)")
+    n_jobs: int = param(1, "joblib: worker processes (1: in this process), at most one per "
+                        "task", "[1, inf)")
     address: str | None = param(None, "dask: the scheduler of an existing cluster; null: a "
                                 "LocalCluster of n_workers processes on this machine",
                                 form=Form("a Dask scheduler address such as "

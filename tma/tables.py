@@ -9,7 +9,6 @@ import pandas as pd
 
 from tma.io.atomic import atomic_path, write_text_atomic
 
-
 log = logging.getLogger(__name__)
 
 
