@@ -20,8 +20,9 @@ import os
 from tma.parallel import FORK_SERVER, PRELOAD, die_with_parent
 
 die_with_parent(int(os.environ.get(FORK_SERVER) or 0))  # the command that started the server
-_server = os.getpid()
-os.register_at_fork(after_in_child=lambda: die_with_parent(_server))  # each worker
+_forking = [0]  # the pid of the process that forks (the server; a worker, for its children)
+os.register_at_fork(before=lambda: _forking.__setitem__(0, os.getpid()),
+                    after_in_child=lambda: die_with_parent(_forking[0]))
 
 for _name in filter(None, os.environ.get(PRELOAD, "").split(",")):
     try:
