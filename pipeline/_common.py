@@ -6,6 +6,7 @@ import os
 import re
 import signal
 import sys
+import threading
 import traceback
 import uuid
 from pathlib import Path
@@ -46,7 +47,8 @@ def stage_main(task, config_name="config", bare=None, check=None):
     ``check(arguments)`` runs before Hydra starts."""
     def main():
         os.environ["HYDRA_FULL_ERROR"] = "1"  # this process's Hydra: raise, we say it
-        saved = {sig: signal.signal(sig, _stop) for sig in STOP_SIGNALS}
+        main_thread = threading.current_thread() is threading.main_thread()
+        saved = {sig: signal.signal(sig, _stop) for sig in STOP_SIGNALS} if main_thread else {}
         try:
             sys.argv[1:] = guarded(experiment.bare_as, bare, _readable(sys.argv[1:]),
                                    _overrides(sys.argv[1:]))

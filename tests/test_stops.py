@@ -236,17 +236,20 @@ def logs(tmp_path_factory):
     return write_logs(tmp_path_factory.mktemp("env"))
 
 
-@pytest.mark.parametrize("variable, value", [("MPLBACKEND", "bogus"),
-                                             ("NUMBA_NUM_THREADS", "0")])
-def test_a_table_under_a_bad_environment(logs, tmp_path, variable, value):
+@pytest.mark.parametrize("variable, value, flags", [("MPLBACKEND", "bogus", []),
+                                                    ("MPLBACKEND", "bogus", ["-m"]),
+                                                    ("NUMBA_NUM_THREADS", "0", [])])
+def test_a_table_under_a_bad_environment(logs, tmp_path, variable, value, flags):
+    """Also as a multirun, whose jobs fork from the server that preloads matplotlib."""
     proc = subprocess.run(
-        [sys.executable, "-m", "pipeline.table", f"input={logs / 'nav_export.csv'}",
+        [sys.executable, "-m", "pipeline.table", *flags, f"input={logs / 'nav_export.csv'}",
          f"paths.data_dir={tmp_path / 'data'}", f"paths.tables_dir={tmp_path / 'tables'}",
-         "progress=false", "parallel=serial"],
+         "progress=false", "parallel=serial", *(["estimator=lm,nbearings"] if flags else [])],
         env=ENV | {variable: value}, capture_output=True, text=True, timeout=300, cwd=REPO)
     if variable == "MPLBACKEND":  # tma draws into files: Agg, said once
         assert proc.returncode == 0, proc.stderr
-        assert (tmp_path / "tables" / "nav_export-lm-T1.png").stat().st_size > 0
+        for estimator in ["lm", "nbearings"] if flags else ["lm"]:
+            assert (tmp_path / "tables" / f"nav_export-{estimator}-T1.png").stat().st_size > 0
         assert "MPLBACKEND=bogus is no matplotlib backend" in proc.stdout + proc.stderr
     else:
         assert proc.returncode == 2, proc.stderr
