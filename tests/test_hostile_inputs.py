@@ -83,13 +83,16 @@ def test_cli_still_says_each_error_in_one_line(logs, tmp_path):
 
 @FUZZ
 @given(sigma=st.one_of(st.booleans(), st.integers(-5, 200), st.floats(allow_nan=True),
-                       st.text(max_size=5)))
+                       st.floats(0, 2e-3), st.text(max_size=5)))
 def test_estimate_checks_sigma_deg_as_ingest_does(frame, sigma):
-    """One rule for both sides: ingest's declared ``sigma_deg`` in (0, 90), a number."""
+    """One rule for both sides: ingest's declared ``sigma_deg`` in [0.001, 90), a number (a
+    sigma so small that its square vanished, 1e-221, divided by zero; one below 0.001 deg
+    was used as 0.001 by the motion fit)."""
     good = (isinstance(sigma, int | float) and not isinstance(sigma, bool)
-            and 0 < sigma < 90)
+            and 1e-3 <= sigma < 90)
     if good:
-        assert (tma.estimate(frame, sigma_deg=sigma)["sigma_used_deg"] == float(sigma)).all()
+        used = tma.estimate(frame, sigma_deg=sigma)["sigma_used_deg"]
+        np.testing.assert_allclose(used, float(sigma), rtol=1e-12)
         return
     kind = TypeError if isinstance(sigma, bool | str) else ValueError
     with pytest.raises(kind) as exc:
