@@ -1,5 +1,6 @@
 """Turn a recorded log into a dataset: ``python -m pipeline.ingest input=log.csv``."""
 
+import sys
 from pathlib import Path
 
 from omegaconf import OmegaConf
@@ -16,6 +17,7 @@ def ingest_arguments(cfg) -> dict:
     return dict(input_path=cfg.input, data_dir=cfg.paths.data_dir, family=cfg.family,
                 name=cfg.name, fmt=cfg.format, force=cfg.force, navigation=cfg.navigation,
                 options={group: cfg[group] for group in option_groups(cfg.family)},
+                truth=cfg.get("truth"),
                 **{key: cfg[key] for key in setting_names(cfg.family)})
 
 
@@ -32,8 +34,18 @@ def check_option_keys(arguments):
     guarded(check_ingest_options, arguments, OmegaConf.load(INGEST_YAML).family)
 
 
-main = stage_main(lambda cfg: run_stage(ingest_stage, cfg), "ingest", bare="input",
-                  check=check_option_keys)
+def with_truth_shorthand(main):
+    """``main`` reading ``truth=FILE`` as ``truth.file=FILE`` (``tma.ais.options.shorthand``)."""
+    def shorthand_main():
+        from tma.ais.options import shorthand
+
+        sys.argv[1:] = shorthand(sys.argv[1:])
+        main()
+    return shorthand_main
+
+
+main = with_truth_shorthand(stage_main(lambda cfg: run_stage(ingest_stage, cfg), "ingest",
+                                       bare="input", check=check_option_keys))
 
 
 if __name__ == "__main__":

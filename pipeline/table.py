@@ -13,7 +13,7 @@ from omegaconf import open_dict
 from pipeline._common import log, run_stage, stage_main
 from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
-from pipeline.ingest import check_option_keys, ingest_arguments
+from pipeline.ingest import check_option_keys, ingest_arguments, with_truth_shorthand
 from pipeline.simulate import simulate_stage
 from tma.aggregate import prefetch_report
 from tma.errors import ConfigError
@@ -58,8 +58,9 @@ def _config_name(arguments) -> str:
     return "log_table" if any(a.startswith("input=") for a in arguments) else "config"
 
 
-main = stage_main(lambda cfg: run_stage(table_stage, cfg), _config_name, bare="input",
-                  check=lambda a: _config_name(a) == "config" or check_option_keys(a))
+main = with_truth_shorthand(stage_main(
+    lambda cfg: run_stage(table_stage, cfg), _config_name, bare="input",
+    check=lambda a: _config_name(a) == "config" or check_option_keys(a)))
 
 
 if __name__ == "__main__":

@@ -6,6 +6,7 @@ import os
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -177,7 +178,8 @@ def test_plot_and_map(workdir, tmp_path):
     found = tma.estimate(rec, estimator="last_leg")
     figure = tma.plot_contact(found, rec, "T2")
     assert "contact T2" in figure.axes[0].get_title()
-    with pytest.raises(KeyError, match="no contact 'T9'; contacts: T1, T2"):
+    with pytest.raises(ValueError, match="no contact 'T9' in these results; their contacts: "
+                       "T1, T2"):
         tma.plot_contact(found, rec, "T9")
     path = tma.write_map(found, rec, tmp_path / "m.mcap")
     from tests.conftest import plain_messages
@@ -185,6 +187,144 @@ def test_plot_and_map(workdir, tmp_path):
     assert {"/tma/estimate/T1", "/tma/estimate/T2", "/ownship/location_fix"} <= topics
     with pytest.raises(ValueError, match="estimate's columns"):
         tma.plot_contact(found[["label", "status"]], rec, "T1")
+
+
+def test_results_show_no_number_that_is_not_an_answer(tmp_path):
+    """Issue 28, item 4: an own-ship that never manoeuvres: the estimator's numbers diverge
+    or collapse; the results frame, the plot and the map show none of them (before: ranges
+    of 1e4-1e15 m and their x0_m.. as numbers, tracks drawn and mapped)."""
+    from tests.families.bearings2d.test_bearings2d_answers import line_data, straight_log
+    from tma.families import build_estimator
+    from tma.families.bearings2d.report import ESTIMATE_COLUMNS
+
+    rec = tma.read_log(straight_log(tmp_path / "straight.csv"))
+    found = tma.estimate(rec)
+    raw = build_estimator({"name": "lm", "initial_bearing_deg": None}).estimate(rec.logs[0])
+    assert np.isfinite(raw["range_now_m"]).all()
+    assert found[[*ESTIMATE_COLUMNS, "x0_m", "y0_m", "vx_m_s", "vy_m_s"]].isna().all().all()
+    assert list(found["status"]) == list(raw["status"]) and "ok" not in set(found["status"])
+    assert found["note"].str.contains("the estimate is not shown").all()
+    figure = tma.plot_contact(found, rec, "S1")
+    assert "no estimate shown" in figure.axes[0].get_title()
+    assert line_data(figure, "estimated track")[0].size == 0
+    from tests.conftest import plain_messages
+    topics = {ch.topic for ch, _, _ in plain_messages(tma.write_map(found, rec,
+                                                                    tmp_path / "m.mcap"))}
+    assert topics == {"/ownship/location_fix"}
+
+
+def test_plot_contact_of_a_leg_that_starts_late(tmp_path):
+    """Issue 28, item 5: the plot of a contact ``last_leg`` solved on a late leg shows
+    own-ship's whole path and every bearing, and the estimated track from its leg's start
+    (before: ValueError, operands could not be broadcast together)."""
+    from tests.families.bearings2d.test_bearings2d_answers import late_leg_log, line_data
+
+    rec = tma.read_log(late_leg_log(tmp_path / "turns.csv"))
+    found = tma.estimate(rec, estimator="last_leg")
+    late = found[(found["leg_start_s"] > 0) & found["range_now_m"].notna()]
+    assert len(late) >= 3, found[["label", "leg_start_s", "status"]]
+    (log,) = rec.logs
+    for r in late.itertuples(index=False):
+        figure = tma.plot_contact(found, rec, r.label)
+        assert line_data(figure, "own-ship")[0].size == log.t_s.size
+        row = list(log.track_id).index(r.track_id)
+        first = np.flatnonzero(np.isfinite(log.bearing_deg[row]))[0]
+        t = log.t_s[np.isfinite(log.bearing_deg[row])]
+        held = t[t >= r.leg_start_s]
+        x, y = line_data(figure, "estimated track")
+        assert x.size == held.size < t.size
+        np.testing.assert_allclose([x[0], y[0]], np.array([r.x0_m + r.vx_m_s * held[0],
+                                                           r.y0_m + r.vy_m_s * held[0]]) / 1e3,
+                                   rtol=1e-12)
+        lines = line_data(figure, "bearings")  # from the contact's first bearing on
+        np.testing.assert_allclose([lines[0][0], lines[1][0]],
+                                   [log.own_x_m[first] / 1e3, log.own_y_m[first] / 1e3])
+
+
+def _relative_frame(n=2):
+    from tma.families.bearings2d.scenario import Config, simulate_shard
+
+    log, _ = simulate_shard(Config(n_tracks=n, shard_size=n, sigma_deg=0.3, seed=5), 0)
+    return pd.DataFrame([{"time_s": t, "own_x_m": log.own_x_m[k], "own_y_m": log.own_y_m[k],
+                          "bearing_deg": log.bearing_deg[i, k], "track_id": i}
+                         for k, t in enumerate(log.t_s) for i in range(n)])
+
+
+def test_plot_contact_of_a_log_of_relative_times():
+    """Issue 30: results of a log of relative times, plotted with that log or with it dated
+    (``time.start_utc``) afterwards: titled in seconds from the start (before: TypeError)."""
+    frame = _relative_frame()
+    rec = tma.Recording.from_frames(frame)
+    found = tma.estimate(rec)
+    assert found["time_now_utc"].isna().all()
+    dated = tma.Recording.from_frames(frame, time={"start_utc": "2025-06-01T08:00:00Z"})
+    for recording in (rec, dated):
+        title = tma.plot_contact(found, recording, "1").axes[0].get_title()
+        assert "contact 1, status" in title and title.endswith("at t = 1200 s from the start")
+    title = tma.plot_contact(tma.estimate(dated), dated, 1).axes[0].get_title()
+    assert title.endswith("at 2025-06-01T08:20:00Z")
+    later = tma.Recording.from_frames(frame, time={"start_utc": "2025-06-02T08:00:00Z"})
+    with pytest.raises(ValueError, match="not estimated from this recording .contact '0': "
+                       "its last bearing is at 2025-06-01T08:20:00Z there, at another UTC"):
+        tma.plot_contact(tma.estimate(dated), later, "0")
+
+
+def test_plot_and_map_refuse_what_they_cannot_draw_in_one_line(workdir):
+    """Issue 30: an unknown label, another recording's results, arguments of the wrong kind:
+    one exception a pandas user catches, one line naming the cause and the fix (before:
+    KeyError, StopIteration, AttributeError)."""
+    rec = tma.read_log(workdir / "nav_export.csv")
+    found = tma.estimate(rec)
+    other = tma.Recording.from_frames(_relative_frame())
+    cases = [
+        (lambda: tma.plot_contact(found, rec, "T9"), ValueError,
+         "no contact 'T9' in these results; their contacts: T1, T2"),
+        (lambda: tma.plot_contact(found, other, "T1"), ValueError,
+         "these results were not estimated from this recording (contact 'T1': "),
+        (lambda: tma.write_map(tma.estimate(other), rec, "x.mcap"), ValueError,
+         "); pass the recording given to tma.estimate"),
+        (lambda: tma.plot_contact(found.to_dict(), rec, "T1"), TypeError,
+         "plot_contact needs the results DataFrame tma.estimate returned, got dict"),
+        (lambda: tma.write_map(found, "nav_export.csv", "x.mcap"), TypeError,
+         "write_map needs a Recording, a pandas DataFrame, or a dataset"),
+    ]
+    for call, kind, message in cases:
+        with pytest.raises(kind) as caught:
+            call()
+        assert message in str(caught.value) and "\n" not in str(caught.value), caught.value
+
+
+def test_write_map_names_the_path_it_cannot_write(workdir, tmp_path):
+    """Issue 30: the map's own path in one line, not its temporary file's; no directory made
+    for a mistyped one; an existing map is kept when a new one cannot be written."""
+    rec = tma.read_log(workdir / "nav_export.csv")
+    found = tma.estimate(rec)
+    missing = tmp_path / "no" / "such" / "m.mcap"
+    with pytest.raises(FileNotFoundError, match=f"cannot write the map to {missing}: there is "
+                       f"no directory {missing.parent}; create it or choose another path"):
+        tma.write_map(found, rec, missing)
+    assert not (tmp_path / "no").exists()
+    with pytest.raises(IsADirectoryError, match=f"{tmp_path}: it is a directory; give a file "
+                       "name"):
+        tma.write_map(found, rec, tmp_path)
+    if Path("/proc/self").is_dir():  # a directory that holds no files (Linux)
+        with pytest.raises(FileNotFoundError) as caught:
+            tma.write_map(found, rec, "/proc/m.mcap")
+        text = str(caught.value)
+        assert "cannot write the map to /proc/m.mcap: No such file or directory" in text
+        assert ".tmp-" not in text and "\n" not in text
+    if os.geteuid() != 0:  # root writes anywhere
+        locked = tmp_path / "locked"
+        locked.mkdir()
+        kept = tma.write_map(found, rec, locked / "m.mcap").read_bytes()
+        locked.chmod(0o500)
+        try:
+            with pytest.raises(PermissionError, match=f"cannot write the map to "
+                               f"{locked / 'm.mcap'}: Permission denied"):
+                tma.write_map(found, rec, locked / "m.mcap")
+        finally:
+            locked.chmod(0o700)
+        assert (locked / "m.mcap").read_bytes() == kept
 
 
 def test_import_tma_is_light():

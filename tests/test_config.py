@@ -250,12 +250,16 @@ def _option_schemas():
                 (f"reading options of {name}", options_schema(reader.OBSERVATION),
                  lambda key, value, reader=reader: source_options(
                      _nest(key.split("."), value), reader.OBSERVATION))]
+    from tma.ais.options import TruthOptions, truth_options
+
+    out.append(("truth options", TruthOptions, lambda key, value: truth_options(
+        {"file": "ais.csv", key: value} if key != "file" else {key: value})))
     return out + [("parallel", Engine, lambda key, value: engine_from({key: value}))]
 
 
 # a value not of its form, for each option declared with a form (a new one comes with its own)
 NOT_OF_THE_FORM = {"bearing.topic": [], "csv.delimiter": "::", "time.start_utc": "yesterday",
-                   "nmea.date": "1.6.2025", "address": "tcp://localhost"}
+                   "nmea.date": "1.6.2025", "address": "tcp://localhost", "match": "T1"}
 WRONG_TYPE = {bool: "maybe", int: "abc", float: "abc", str: ["a", "b"]}
 
 
@@ -286,7 +290,7 @@ def test_every_ingest_and_parallel_option_says_what_it_is_and_refuses_bad_values
     allowed."""
     rows = describe(schema)
     assert all(doc for *_, doc in rows), [key for key, *_, doc in rows if not doc]
-    prefix = "parallel." if what == "parallel" else ""
+    prefix = {"parallel": "parallel.", "truth options": "truth."}.get(what, "")
     kinds = set()
     for key, *_ in rows:
         declared = _declared(schema, key)
@@ -303,6 +307,7 @@ def test_every_ingest_and_parallel_option_says_what_it_is_and_refuses_bad_values
             assert named, (kind, message)
             assert any(shown in message for shown in _shown(bad)), (kind, message)
     assert kinds >= {"type", "range"} | (set() if what.startswith("ingest settings") else
+                                         {"form"} if what == "truth options" else
                                          {"choices", "form"}), kinds
 
 
@@ -318,7 +323,7 @@ def test_the_ingest_and_parallel_options_are_listed_with_their_declared_defaults
     text = capsys.readouterr().out
     for what, schema, _ in _option_schemas():
         for key, *_ in describe(schema):
-            shown = ("parallel." if what == "parallel" else "") + key
+            shown = {"parallel": "parallel.", "truth options": "truth."}.get(what, "") + key
             assert re.search(rf"^  {re.escape(shown)} ", text, re.M), (what, key)
     conf = OmegaConf.to_container(OmegaConf.load(CONF / "ingest.yaml"))
     reader = family(conf["family"]).ingest

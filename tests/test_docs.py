@@ -152,6 +152,9 @@ def write_logs(d: Path) -> Path:
                *[(f"/sonar/contact/{c}", "std_msgs/msg/Float64",
                   float64_messages(one.bearings)) for c in "ab"])  # one topic per contact
     write_foxglove(d / "foxglove.mcap", one)
+    from tests.families.bearings2d.ais_trial import write_trial
+
+    write_trial(d)  # trial.csv and its AIS: trial_ais.csv, trial_ais.nmea
     return d
 
 

@@ -169,7 +169,7 @@ def test_runs_name_unknown_families_and_recorded_runs(logs, tmp_path, caplog):
 def test_estimate_of_another_family_is_refused_naming_what_it_reads():
     with pytest.raises(ValueError) as exc:
         tma.estimate(tma.simulate("radar2d", n_tracks=2, shard_size=2))
-    assert one_line(exc).startswith("tma.estimate estimates bearings2d logs")
+    assert one_line(exc).startswith("tma.estimate reads bearings2d logs")
     assert "pipeline.table scenario=radar2d" in str(exc.value)
 
 

@@ -6,6 +6,7 @@ and the overrides that select them."""
 
 import json
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -142,3 +143,53 @@ def test_a_simulated_dataset_keeps_the_simulated_start(tmp_path):
     [config] = [json.loads(p.read_text())["config"]
                 for p in (tmp_path / "data" / "runs").glob("*/lm-*/manifest.json")]
     assert config["initial_bearing_deg"] == 0.0
+
+
+def _estimates(root, dataset):
+    [path] = (root / "data" / "runs" / dataset).glob("*/estimates.parquet")
+    return pd.read_parquet(path)
+
+
+def test_a_diverged_estimate_is_blank_in_the_table_its_csv_plots_and_map(tmp_path):
+    """Issue 28, item 4: an own-ship that never manoeuvres (no bearing gives the range): the
+    run keeps the estimator's numbers, the table, its CSV and the map show none of them, each
+    contact with its status and a note saying why (before: ranges of 1e4-1e15 m as numbers,
+    `± ?`, and tracks on the map)."""
+    from tests.conftest import plain_messages
+    from tests.families.bearings2d.test_bearings2d_answers import straight_log
+    from tma.families.bearings2d.report import ESTIMATE_COLUMNS
+
+    log = straight_log(tmp_path / "straight.csv")
+    proc = run_stage_here("table", f"input={log}", *data_paths(tmp_path), *QUIET)
+    raw = _estimates(tmp_path, "straight")
+    assert np.isfinite(raw["range_now_m"]).all()  # kept as the estimator gave them
+    csv = pd.read_csv(tmp_path / "tables" / "straight-lm.csv")
+    assert csv[ESTIMATE_COLUMNS].isna().all().all()
+    assert list(csv["status"]) == list(raw["status"]) and "ok" not in set(csv["status"])
+    assert csv["note"].str.contains("the estimate is not shown").all()
+    md = (tmp_path / "tables" / "straight-lm.md").read_text()
+    rows = [line.split(" | ") for line in md.splitlines() if line.startswith("| S")]
+    header = next(line for line in md.splitlines() if line.startswith("| track")).split(" | ")
+    assert len(rows) == 3
+    for name in ("range now (m)", "bearing now (deg)", "course (deg)", "speed (m/s)",
+                 "position now (lat, lon deg)"):
+        assert {row[header.index(name)] for row in rows} == {"-"}, name
+    assert "±" not in md.split("| track")[1]
+    assert {ch.topic for ch, _, _ in plain_messages(tmp_path / "tables" / "straight-lm.mcap")
+            } == {"/ownship/location_fix"}
+    assert "for S0, S1, S2: not in the map" in proc.stdout + proc.stderr
+    assert len(list((tmp_path / "tables").glob("straight-lm-S*.png"))) == 3
+
+
+def test_last_leg_plots_contacts_whose_leg_starts_late(tmp_path):
+    """Issue 28, item 5: ``last_leg`` re-solves turning targets on their last leg; the plot of
+    each cuts the estimated track at its leg's start, not own-ship (before: "internal error
+    (ValueError: operands could not be broadcast together...)")."""
+    from tests.families.bearings2d.test_bearings2d_answers import late_leg_log
+
+    log = late_leg_log(tmp_path / "turns.csv")
+    run_stage_here("table", f"input={log}", "estimator=last_leg", *data_paths(tmp_path), *QUIET)
+    raw = _estimates(tmp_path, "turns")
+    assert (raw["leg_start_s"] > 0).sum() >= 3, raw["leg_start_s"]  # legs that start late
+    assert len(list((tmp_path / "tables").glob("turns-last_leg-M*.png"))) == len(raw)
+    assert (tmp_path / "tables" / "turns-last_leg.mcap").exists()

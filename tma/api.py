@@ -18,6 +18,7 @@ dotted names (``options={"columns.time": "tid"}``). Recorded logs are ``bearings
 one family that ingests them).
 """
 
+import errno
 import logging
 from collections.abc import Sequence
 from pathlib import Path
@@ -153,6 +154,25 @@ class Recording:
         return pd.concat(frames, ignore_index=True).sort_values(
             ["log", "t_s", "track_id"], kind="stable").reset_index(drop=True)
 
+    @property
+    def truth(self) -> pd.DataFrame | None:
+        """The truth of its contacts from the AIS of its trial (``read_log(..., truth=FILE)``:
+        one row per contact with a truth, ``tma.ais.truth``), or None."""
+        return None if self._read.truth is None else self._read.truth.truth
+
+    @property
+    def truth_track(self) -> pd.DataFrame | None:
+        """Each contact's ship from its AIS at its bearing times, or None."""
+        return None if self._read.truth is None else self._read.truth.track
+
+    @property
+    def matches(self) -> pd.DataFrame | None:
+        """Per contact which ship it was matched to, how well it fits and why (or why not)."""
+        if self._read.truth is None:
+            return None
+        return pd.DataFrame([m.record() for m in self._read.truth.matches]).astype(
+            {"mmsi": "Int64"})
+
     def __repr__(self) -> str:
         n = sum(lg.n_tracks for lg in self.logs)
         span = max(lg.t_s[-1] for lg in self.logs)
@@ -162,20 +182,35 @@ class Recording:
 
 
 def read_log(path, *, navigation=None, format: str = "auto", sigma_deg: float | None = None,
-             min_bearings: int = 5, options: dict | None = None, **groups) -> Recording:
+             min_bearings: int = 5, truth=None, options: dict | None = None,
+             **groups) -> Recording:
     """Read a recorded bearing log (CSV/TSV, NMEA navigation, ROS 2, Foxglove or tma's own
     MCAP) as ``python -m pipeline.ingest input=<path>`` does, without storing it. Reading
     options by group (``columns={"time": "tid"}``, ``bearing={"topic": "/sonar/*"}``,
     ``time={"start_utc": "2025-06-01T08:00:00Z"}``, ``bad_rows="fail"``) or dotted in
-    ``options``; ``sigma_deg``: the sensor's nominal bearing noise, when known."""
+    ``options``; ``sigma_deg``: the sensor's nominal bearing noise, when known; ``truth``: the
+    AIS of the trial, a path or the ``truth.*`` options (``{"file": ..., "match": {"T1":
+    235031617}}``): ``estimate`` then scores each contact against it."""
     from tma.ingest import read_log as read
 
     return Recording(read(path, family=FAMILY, fmt=format, navigation=navigation,
                           options=_nested(options, groups), sigma_deg=sigma_deg,
-                          min_bearings=min_bearings))
+                          min_bearings=min_bearings, truth=truth))
 
 
-def _logs_of(data, sigma_deg):
+def _truth_of(data):
+    """``(truth, truth track)`` of a Recording or stored dataset scored against AIS, else
+    ``(None, None)``."""
+    if isinstance(data, Recording):
+        return data.truth, data.truth_track
+    if isinstance(data, StoredDataset) and data.recorded:
+        from tma.families.bearings2d.truth_report import dataset_truth
+
+        return dataset_truth(data.dataset)
+    return None, None
+
+
+def _logs_of(data, sigma_deg, what="estimate"):
     """(logs, recorded?) of a Recording, a DataFrame (read as ``Recording.from_frames``), a
     simulated or stored dataset; ``sigma_deg`` replaces the logs' nominal noise."""
     if isinstance(data, pd.DataFrame):
@@ -185,11 +220,13 @@ def _logs_of(data, sigma_deg):
     elif hasattr(data, "logs"):
         logs, recorded = list(data.logs), getattr(data, "recorded", False)
     else:
-        raise TypeError("estimate needs a Recording, a pandas DataFrame, or a dataset of "
-                        f"tma.simulate / tma.open_dataset, got {type(data).__name__}")
+        hint = (" (read a log file with tma.read_log first)" if isinstance(data, str | Path)
+                else "")
+        raise TypeError(f"{what} needs a Recording, a pandas DataFrame, or a dataset of "
+                        f"tma.simulate / tma.open_dataset, got {type(data).__name__}{hint}")
     family = getattr(data, "family", FAMILY)
     if family != FAMILY:
-        raise ConfigError(f"tma.estimate estimates {FAMILY} logs (a Recording, a DataFrame, a "
+        raise ConfigError(f"tma.{what} reads {FAMILY} logs (a Recording, a DataFrame, a "
                           f"{FAMILY} simulation or dataset), got a {family} dataset: its stages "
                           f"estimate it (python -m pipeline.table scenario={family})")
     if sigma_deg is not None:
@@ -211,8 +248,12 @@ def estimate(data, estimator: str = "lm", sigma_deg: float | None = None,
     (default: the log's, else estimated). Returns one row per contact: the per-track report
     ``pipeline.aggregate`` writes (label, time_now_utc, range/bearing/course/speed now with
     their one-sigma errors, x/y and lat/lon now, status and note, sqrt_ka_deg, fit and
-    trend-test p-values, leg_start_s/_utc...) followed by the estimate's own columns
-    (``x0_m``.., ``jtj_ij``: what ``plot_contact`` and ``write_map`` draw from)."""
+    trend-test p-values, leg_start_s/_utc...), for a log read with its AIS (``truth=``) the
+    truth, errors, z-scores and ``covered`` (``bearings2d.truth_report``), followed by the
+    estimate's own columns (``x0_m``.., ``jtj_ij``: what ``plot_contact`` and ``write_map``
+    draw from). An estimate that is no answer (diverged, collapsed, or without a one-sigma
+    error: ``bearings2d.status.not_an_answer``) is blank there, ``x0_m``.. included, with its
+    status and a note that says so."""
     from tma.estimation import estimate_log
     from tma.families import build_estimator, estimator_class
     from tma.tables import plots_to_files
@@ -234,42 +275,111 @@ def estimate(data, estimator: str = "lm", sigma_deg: float | None = None,
                          f"{FAMILY}'s")
     estimates = pd.concat([estimate_log(est, lg)[0].to_pandas() for lg in logs],
                           ignore_index=True)
-    report = contact_report(estimates, logs, "estimate")
+    report = contact_report(estimates, logs, "estimate",
+                            getattr(est.config, "max_range_rel_sd", None), recorded)
+    truth, _ = _truth_of(data)
+    if truth is not None:  # the columns against the AIS truth, as aggregate writes them
+        from tma.families.bearings2d.truth_report import with_truth
+
+        report = with_truth(report, estimates, truth)
     extra = [c for c in estimates.columns if c not in report.columns]
-    return pd.concat([report, estimates[extra]], axis=1)
+    results = pd.concat([report, estimates[extra]], axis=1)
+    results.loc[~np.isfinite(report["range_now_m"].to_numpy(float)), list(THETA)] = np.nan
+    return results
 
 
-def _estimates(results: pd.DataFrame) -> pd.DataFrame:
-    missing = [c for c in (*THETA, "t_last_s", "jtj_00") if c not in results.columns]
+def _estimates(results, what: str) -> pd.DataFrame:
+    if not isinstance(results, pd.DataFrame):
+        raise TypeError(f"{what} needs the results DataFrame tma.estimate returned, got "
+                        f"{type(results).__name__}")
+    missing = [c for c in ("label", "track_id", "status", "range_now_m", "t_now_s",
+                           "time_now_utc", "leg_start_s", *THETA, "t_last_s", "own_x_last_m",
+                           "own_y_last_m", "jtj_00", "sigma_used_deg", "range_sd_m")
+               if c not in results.columns]
     if missing:
         raise ValueError(f"these results lack the estimate's columns ({', '.join(missing)}): "
                          "pass what tma.estimate returned")
     return results
 
 
+SAME_TIME_S = 1e-6  # a contact's last bearing time in the results and in its recording
+SAME_PLACE_M = 1e-3  # own-ship there
+
+
+def _recording_of(results: pd.DataFrame, recording, what: str) -> list:
+    """The logs of ``recording``, checked to be those ``results`` were estimated from: each
+    contact's track id in them, its last bearing at the same time from the same own-ship
+    position, and its UTC the same where both are dated; ValueError naming the first
+    contact that differs."""
+    logs, _ = _logs_of(recording, None, what)
+    where = {int(i): (lg, row) for lg in logs for row, i in enumerate(lg.track_id)}
+    epoch = logs[0].epoch_utc_ns
+    from tma.utc import format_utc
+
+    for r in results.itertuples(index=False):
+        place = where.get(int(r.track_id))
+        if place is None:
+            why = f"track id {r.track_id} is not in this recording"
+        else:
+            lg, row = place
+            last = np.flatnonzero(np.isfinite(lg.bearing_deg[row]))[-1]
+            why = ""
+            if not (abs(lg.t_s[last] - r.t_last_s) <= SAME_TIME_S
+                    and abs(lg.own_x_m[last] - r.own_x_last_m) <= SAME_PLACE_M
+                    and abs(lg.own_y_m[last] - r.own_y_last_m) <= SAME_PLACE_M):
+                why = "its last bearing is at another time or own-ship position here"
+            elif isinstance(r.time_now_utc, str) and epoch is not None and (
+                    r.time_now_utc != format_utc(epoch + round(r.t_now_s * 1e9))):
+                why = f"its last bearing is at {r.time_now_utc} there, at another UTC here"
+        if why:
+            raise ValueError(f"these results were not estimated from this recording (contact "
+                             f"{r.label!r}: {why}); pass the recording given to tma.estimate")
+    return logs
+
+
 def plot_contact(results: pd.DataFrame, recording, label):
-    """The matplotlib Figure of one contact (own-ship, bearing lines, the estimated track and
-    its 95 % ellipse now), as aggregate draws ``<table>-<label>.png``: ``results`` from
-    ``estimate``, ``recording`` what it was estimated from, ``label`` the contact's."""
+    """The matplotlib Figure of one contact (own-ship's whole path, every bearing's line, the
+    estimated track from where its solution holds and its 95 % ellipse now; no track where
+    the results show no estimate), as aggregate draws ``<table>-<label>.png``: ``results``
+    from ``estimate``, ``recording`` what it was estimated from, ``label`` the contact's
+    (ValueError naming the contacts when there is no such one)."""
     from tma.families.bearings2d.map_outputs import contact_figure
 
-    logs, _ = _logs_of(recording, None)
-    return contact_figure(results, _estimates(results), logs, label,
-                          epoch_utc_ns=logs[0].epoch_utc_ns)
+    results = _estimates(results, "plot_contact")
+    logs = _recording_of(results, recording, "plot_contact")
+    return contact_figure(results, results, logs, label)
 
 
 def write_map(results: pd.DataFrame, recording, path) -> Path:
     """Write the estimated tracks and own-ship as Foxglove ``LocationFix`` messages (the map
-    MCAP aggregate writes) to ``path``; needs a log with a geographic origin and UTC times."""
+    MCAP aggregate writes) to ``path``, a file in an existing directory (written whole or not
+    at all); needs a log with a geographic origin and UTC times. Contacts whose results show
+    no estimate are left out (a warning names them). A path that cannot be written raises
+    the OSError the system gave (PermissionError, FileNotFoundError...), naming ``path``."""
     from tma.families.bearings2d.map_outputs import write_map_mcap
 
-    logs, _ = _logs_of(recording, None)
+    results = _estimates(results, "write_map")
+    logs = _recording_of(results, recording, "write_map")
     epoch, origin = logs[0].epoch_utc_ns, logs[0].origin_deg
     if origin is None or epoch is None:
         raise ValueError("a map needs own-ship in latitude/longitude and UTC times (a log "
                          "with relative times: read it with time={'start_utc': ...})")
-    return write_map_mcap(Path(path), results, _estimates(results), logs, epoch, origin,
-                          {"estimator": "tma.estimate"})
+    path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(errno.EISDIR, f"cannot write the map to {path}: it is a "
+                                f"directory; give a file name, e.g. {path / 'contacts.mcap'}")
+    if not path.parent.is_dir():
+        raise FileNotFoundError(errno.ENOENT, f"cannot write the map to {path}: there is no "
+                                f"directory {path.parent}; create it or choose another path")
+    try:
+        return write_map_mcap(path, results, results, logs, epoch, origin,
+                              {"estimator": "tma.estimate"},
+                              truth_track=_truth_of(recording)[1])
+    except OSError as exc:  # named by the temporary file it was writing: name the user's
+        message = (f"cannot write the map to {path}: {exc.strerror or exc}; choose a path "
+                   "you can write to")
+        raise (type(exc)(message) if exc.errno is None
+               else type(exc)(exc.errno, message)) from None
 
 
 class _LazyLogs(Sequence):

@@ -1,4 +1,5 @@
-"""The ingest stage: a recorded log -> a dataset of a family (no truth).
+"""The ingest stage: a recorded log -> a dataset of a family (no truth; with ``truth=FILE``
+the truth of its contacts from the AIS of its trial, ``tma.ais.truth``).
 
 ``input=`` holds the contacts (and usually the own-ship): a CSV/TSV table, or an MCAP log
 (ROS 2, Foxglove or tma's own schema); ``navigation=`` may give the own-ship from a separate
@@ -150,16 +151,18 @@ class Read:
     config: dict
     sources: dict
     summary: dict
+    truth: object = None  # tma.ais.truth.LogTruth when the log is scored against AIS
 
 
 def read_log(input_path, *, family: str, fmt="auto", navigation=None, options=None,
-             **settings) -> Read:
+             truth=None, **settings) -> Read:
     """Read and check a recorded log as ``ingest`` does, without storing it: ``fmt``: auto |
     csv | nmea | mcap (the input's kind); ``navigation``: a separate own-ship file or None;
     ``options``: the family's reading options or a config node of their groups
     (``columns``, ``bearing``, ``ownship``, ``csv``, ``time``, ``nav``, ``origin``), e.g.
     ``{"bearing": {"units": "rad"}}``; ``settings``: the family's own (``bearings2d``:
-    ``sigma_deg``, ``min_bearings``)."""
+    ``sigma_deg``, ``min_bearings``); ``truth``: the AIS of the trial (a path, or the
+    ``truth.*`` options: ``tma.ais.options``), the truth of its contacts (``tma.ais.truth``)."""
     reader = family_named(family).ingest
     if input_path is None or not str(input_path).strip():
         raise ConfigError(f"ingest needs input=<path to the {reader.OBSERVATION.role} log: "
@@ -173,7 +176,26 @@ def read_log(input_path, *, family: str, fmt="auto", navigation=None, options=No
     if nav_path is not None:
         sources["navigation"] = {"path": str(nav_path), "sha256": sha256_file(nav_path),
                                  "kind": nav_kind}
-    return _read(family, recordings, options, settings, {"format": fmt}, sources, str(path))
+    return with_truth(_read(family, recordings, options, settings, {"format": fmt}, sources,
+                            str(path)), truth, str(path))
+
+
+def with_truth(read: Read, truth, where: str) -> Read:
+    """``read`` with the truth of its contacts from the AIS ``truth`` names (none: as it
+    is); the truth options go into its config, the file into its sources."""
+    from tma.ais.options import truth_options
+
+    options = truth_options(truth)
+    if options.file is None:
+        return read
+    from tma.ais.truth import log_truth
+
+    lg = read.logs[0]
+    read.truth = log_truth(family_named(read.family).ingest.contacts(read.logs), lg.origin_deg,
+                           lg.epoch_utc_ns, options, where)
+    read.config["truth"] = {k: v for k, v in vars(options).items() if k != "file"}
+    read.sources["truth"] = read.truth.record
+    return read
 
 
 def read_frames(bearings, navigation=None, *, family: str, options=None, **settings) -> Read:
@@ -235,7 +257,7 @@ def _read(family, recordings, options, settings, config, sources, where) -> Read
 
 
 def ingest(input_path, *, data_dir, family: str, name=None, fmt="auto", force=False,
-           navigation=None, options=None, **settings) -> Path:
+           navigation=None, options=None, truth=None, **settings) -> Path:
     """Validate a recorded log and write it as a dataset of ``family`` (``read_log``, whose
     arguments these are); returns the dataset directory."""
     if not isinstance(force, bool):
@@ -248,7 +270,7 @@ def ingest(input_path, *, data_dir, family: str, name=None, fmt="auto", force=Fa
                               "<name>-<estimator>-<contact>.png and must fit a file name; "
                               f"give name= of at most {room} characters")
     read = read_log(input_path, family=family, fmt=fmt, navigation=navigation,
-                    options=options, **settings)
+                    options=options, truth=truth, **settings)
     root = datasets_dir(data_dir) / name
     with building([root], resume=False) as outputs:  # a failure leaves nothing behind
         if root.exists() and not is_owned(root):
@@ -256,17 +278,26 @@ def ingest(input_path, *, data_dir, family: str, name=None, fmt="auto", force=Fa
         if (root / MANIFEST).exists() and not force:
             raise InputError(f"dataset {root} exists: choose another name= or set force=true")
         _write_dataset(outputs.stage(root, fresh=True), family, name, read.logs, read.config,
-                       read.sources, read.summary)
+                       read.sources, read.summary, read.truth)
         return outputs.swap(root)
 
 
-def _write_dataset(stage, family, name, logs, config, sources, extra):
+def _write_dataset(stage, family, name, logs, config, sources, extra, truth=None):
     write_log = family_named(family).scenario.write_log
-    shards = {}
+    shards, files = {}, {}
+    if truth is not None:  # the AIS truth of its contacts (tma.ais.truth)
+        from tma.ais.truth import TRUTH, TRUTH_TRACK
+        from tma.io import arrow
+        from tma.io.atomic import write_parquet_atomic
+
+        for rel, frame in ((TRUTH, truth.truth), (TRUTH_TRACK, truth.track)):
+            write_parquet_atomic(stage / rel, arrow.table(
+                {c: frame[c].to_numpy() for c in frame.columns}))
+            files[rel] = file_record(stage / rel, rows=len(frame))
     for i, lg in enumerate(logs):
         rel = shard_relpath(i)
         n_msg = write_log(stage / rel, lg, {"tma.dataset": {
             "family": family, "source": sources["input"]["path"]}})
         shards[rel] = file_record(stage / rel, messages=n_msg, tracks=int(lg.n_tracks))
     write_manifest(stage, family=family, source="ingest", name=name, config=config,
-                   shards=shards, files={}, extra={**sources, **extra})
+                   shards=shards, files=files, extra={**sources, **extra})

@@ -50,10 +50,12 @@ def ingest_families() -> list[str]:
 
 def ingest_rows(name: str) -> list[tuple[str, str, str, str]]:
     """The ingest options of family ``name``: its settings, then the reading options."""
+    from tma.ais.options import TruthOptions
     from tma.sources.base import options_schema
 
     reader = family(name).ingest
-    return describe(reader.Settings) + describe(options_schema(reader.OBSERVATION))
+    return (describe(reader.Settings) + describe(options_schema(reader.OBSERVATION))
+            + describe(TruthOptions, "truth."))
 
 
 def ingest_tables() -> list[str]:

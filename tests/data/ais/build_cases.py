@@ -1,23 +1,32 @@
-"""Bearings-only TMA cases derived from real AIS tracks (the Solent, UK, 12 January 2016).
+"""Bearings-only TMA cases derived from real AIS tracks: two recordings (``RECORDINGS``).
 
-The AIS position reports in ``positions.csv.gz`` (see ``SOURCE.md``: a subset of the Solent
-recording shipped with Stone Soup, MIT licence) give the real motion of ships, tugs, ferries
-and hovercraft over 84 minutes, most of them reporting every 2-10 s. Each case pairs two:
+- ``solent``: the AIS position reports in ``positions.csv.gz`` (see ``SOURCE.md``: a subset of
+  the Solent recording shipped with Stone Soup, MIT licence) give the real motion of ships,
+  tugs, ferries and hovercraft in the Solent, UK, over 84 minutes on 12 January 2016, most of
+  them reporting every 2-10 s; 30 cases (``CASES``).
+- ``nyharbor``: ``../ais_nyharbor/positions.csv.gz`` (see its ``SOURCE.md``: New York Harbor,
+  2020-06-30 00:00-01:00 UTC, US MarineCadastre data from the PyPI package
+  ``tracktable-data``, BSD-2-Clause; fishing vessels left out) gives Staten Island and other
+  passenger ferries, tugs, harbour-service, police and fire boats and pleasure craft, about
+  one report a minute each (61-106 s apart underway, median 69 s); 36 cases (``NY_CASES``).
+
+Each case pairs two vessels of one recording:
 
 - own-ship: a vessel that turns. Over the case window (20 or 25 min) it is underway (speed at
   least ``MIN_SPEED_M_S``) at ``MIN_OWN_MOVING_FRAC`` of the motion samples or more, and its
   total course change (``Motion.course_change_deg``) is at least ``MIN_OWN_TURN_DEG``;
-- target: another vessel, ``MIN_RANGE_M``-``MAX_RANGE_M`` from own-ship at every bearing time;
-- no gap between reports above ``MAX_GAP_OWN_S`` (own-ship) or ``MAX_GAP_TARGET_S`` (target)
-  over the window, counting the reports that bracket it;
+- target: another vessel, ``MIN_RANGE_M`` to ``Rules.max_range_m`` from own-ship at every
+  bearing time;
+- no gap between reports above ``Rules.max_gap_own_s`` (own-ship) or
+  ``Rules.max_gap_target_s`` (target) over the window, counting the reports that bracket it;
 - bearings every ``STEP_S`` seconds from the start to the end of the window (both included).
 
 Geometry (angles in degrees clockwise from true north, x east, y north, WGS84, SI units):
 
 - a vessel's position at any time is linearly interpolated in latitude and longitude between
   its two bracketing reports (report times are the receiver's time stamps); duplicate time
-  stamps keep the first report, and a report more than ``SPIKE_M`` off the line between its
-  two neighbours is dropped as a position error;
+  stamps keep the first report, and a report more than ``Rules.spike_m`` off the line
+  between its two neighbours is dropped as a position error;
 - the true bearing and the range are the forward azimuth and the length of the WGS84 geodesic
   from own-ship's interpolated position to the target's (``pymap3d.vincenty.vdist``);
 - noisy bearing = true bearing + N(0, sigma_deg^2), wrapped to [0, 360); the noise of case
@@ -70,14 +79,38 @@ own_turn_deg, target_course_change_deg, target_speed_change_frac, target_course_
 target_speed_dev_frac, last_manoeuvre_utc, last_leg_course_deg, last_leg_speed_m_s,
 min_range_m, max_range_m`` (times ISO-8601 UTC with Z; the track label is the target MMSI).
 
-The cases (``CASES``: own-ship, target, window) were chosen once from the whole recording by
-``extract_subset.py --search`` with these rules; ``build_cases`` re-derives every number from
-``positions.csv.gz`` and raises if a case no longer meets them.
+Per recording (``Rules``): the rules that depend on how often the vessels report.
+
+- Solent (``SOLENT_RULES``, reports every 2-10 s): ``MAX_GAP_OWN_S`` 60 s, ``MAX_GAP_TARGET_S``
+  90 s, ``MAX_RANGE_M`` 19 km, ``SPIKE_M`` 300 m.
+- New York Harbor (``NYHARBOR_RULES``, one report a minute):
+  - gaps up to 150 s, own-ship and target: MarineCadastre keeps about one report a minute
+    (61-106 s apart for 90 % of the underway intervals; 4 of all 8,287 intervals are 60 s or
+    less), so 60/90 s would exclude every window; 150 s lets one report be missing, no more.
+    Between reports a vessel moves on the chord, as everywhere here, so a turn within a
+    minute is cut short: bearings and truth use the same interpolated positions, so a case
+    stays consistent, but its motion is the recording's, smoothed at one minute;
+  - ranges up to 15 km (issue 28's 1-15 km; the harbour is small enough);
+  - spikes over 2,000 m: with one-minute reports, a fast ferry or fire boat (13-20 m/s) that
+    turns or stops lies up to about 1 km off the line between its neighbours (996 m at most
+    in this recording), so the Solent's 300 m would drop genuine reports; 2 km keeps them
+    all and would still drop a gross error. None is dropped in this recording.
+  - unchanged, and why they still hold: the motion samples' 120 s velocity span
+    (``VELOCITY_SPAN_S``) and the truth's 120 s (``TRUTH_SPAN_S``) cover at least one whole
+    reporting interval, so each is a mean over reported displacement (2-3 reports), never an
+    extrapolation; position noise of a few metres over 120 s is under 0.1 m/s. The 180 s
+    last leg (``MIN_LAST_LEG_S``) holds 2-4 reports; the settle time of a manoeuvring target
+    is known to about one reporting interval.
+
+The cases (``CASES``, ``NY_CASES``: own-ship, target, window) were chosen once from each whole
+recording by ``extract_subset.py --search`` with these rules; ``build_cases`` re-derives every
+number from the positions file and raises if a case no longer meets them.
 
 Usage::
 
     python tests/data/ais/build_cases.py OUTDIR      # writes case_XX.csv and truth.csv
     python tests/data/ais/build_cases.py --summary   # prints the cases and a geometry check
+    python tests/data/ais/build_cases.py --recording nyharbor OUTDIR --summary
 """
 
 import argparse
@@ -93,11 +126,14 @@ from pymap3d.vincenty import vdist
 HERE = Path(__file__).resolve().parent
 POSITIONS_PATH = HERE / "positions.csv.gz"
 
-SEED = 20160112
+NY_POSITIONS_PATH = HERE.parent / "ais_nyharbor" / "positions.csv.gz"
+
+SEED = 20160112  # the Solent's; New York's is NY_SEED
+NY_SEED = 20200630
 SIGMA_DEG = 0.5
 STEP_S = 5.0  # bearing interval
 MIN_RANGE_M = 1_000.0
-MAX_RANGE_M = 19_000.0
+MAX_RANGE_M = 19_000.0  # these four: the Solent's (``Rules``: per recording)
 MAX_GAP_OWN_S = 60.0
 MAX_GAP_TARGET_S = 90.0
 MIN_SPEED_M_S = 1.0  # below this a vessel has no defined course
@@ -115,6 +151,23 @@ SETTLE_SPEED_FRAC = 0.10
 MIN_LAST_LEG_S = 180.0
 TRUTH_SPAN_S = 120.0
 SPIKE_M = 300.0  # a report this far off the line between its neighbours is dropped
+
+
+@dataclass(frozen=True)
+class Rules:
+    """The case rules that depend on how often a recording's vessels report (module
+    docstring, "Per recording"); the defaults are the Solent's."""
+
+    max_gap_own_s: float = MAX_GAP_OWN_S
+    max_gap_target_s: float = MAX_GAP_TARGET_S
+    max_range_m: float = MAX_RANGE_M
+    spike_m: float = SPIKE_M
+
+
+SOLENT_RULES = Rules()
+# one report a minute (MarineCadastre): see the module docstring for each value
+NYHARBOR_RULES = Rules(max_gap_own_s=150.0, max_gap_target_s=150.0, max_range_m=15_000.0,
+                       spike_m=2_000.0)
 
 EXPORT_COLUMNS = ("timestamp_utc", "latitude_deg", "longitude_deg", "bearing_deg", "track")
 
@@ -162,6 +215,75 @@ CASES: tuple[CaseSpec, ...] = (
     CaseSpec(232002939, 235031617, "2016-01-12T14:05:00Z", 1200),
     CaseSpec(235070763, 235031617, "2016-01-12T14:05:00Z", 1200),
 )
+
+
+# New York Harbor, 2020-06-30 00:00-01:00 UTC (tests/data/ais_nyharbor), chosen alike
+NY_CASES: tuple[CaseSpec, ...] = (
+    CaseSpec(367177370, 366939790, "2020-06-30T00:01:00Z", 1500),
+    CaseSpec(367531710, 367782880, "2020-06-30T00:01:00Z", 1500),
+    CaseSpec(367779540, 368564000, "2020-06-30T00:01:00Z", 1200),
+    CaseSpec(367790830, 896876500, "2020-06-30T00:01:00Z", 1500),
+    CaseSpec(367797260, 367796040, "2020-06-30T00:01:00Z", 1200),
+    CaseSpec(368025020, 367000930, "2020-06-30T00:02:00Z", 1500),
+    CaseSpec(368025020, 896876500, "2020-06-30T00:02:00Z", 1500),
+    CaseSpec(367779550, 367740750, "2020-06-30T00:05:00Z", 1500),
+    CaseSpec(367798430, 367351520, "2020-06-30T00:07:00Z", 1500),
+    CaseSpec(367798430, 896876500, "2020-06-30T00:07:00Z", 1500),
+    CaseSpec(366990560, 367177370, "2020-06-30T00:08:00Z", 1500),
+    CaseSpec(367177370, 367796040, "2020-06-30T00:09:00Z", 1200),
+    CaseSpec(367351520, 367796040, "2020-06-30T00:09:00Z", 1200),
+    CaseSpec(369990373, 367351520, "2020-06-30T00:12:00Z", 1500),
+    CaseSpec(367784630, 338133288, "2020-06-30T00:13:00Z", 1500),
+    CaseSpec(367000190, 367000930, "2020-06-30T00:14:00Z", 1500),
+    CaseSpec(367782690, 367000930, "2020-06-30T00:14:00Z", 1500),
+    CaseSpec(367740750, 338133288, "2020-06-30T00:15:00Z", 1200),
+    CaseSpec(366990560, 368564000, "2020-06-30T00:16:00Z", 1200),
+    CaseSpec(367000190, 367597240, "2020-06-30T00:16:00Z", 1200),
+    CaseSpec(367304010, 368564000, "2020-06-30T00:16:00Z", 1200),
+    CaseSpec(369990373, 368564000, "2020-06-30T00:17:00Z", 1200),
+    CaseSpec(367304010, 368130050, "2020-06-30T00:20:00Z", 1500),
+    CaseSpec(366999618, 338133288, "2020-06-30T00:21:00Z", 1500),
+    CaseSpec(367668450, 368564000, "2020-06-30T00:24:00Z", 1500),
+    CaseSpec(367531710, 338133288, "2020-06-30T00:25:00Z", 1200),
+    CaseSpec(367790830, 367596760, "2020-06-30T00:26:00Z", 1500),
+    CaseSpec(368130050, 338133288, "2020-06-30T00:26:00Z", 1500),
+    CaseSpec(367791140, 367596760, "2020-06-30T00:27:00Z", 1500),
+    CaseSpec(368004120, 367596760, "2020-06-30T00:27:00Z", 1500),
+    CaseSpec(367782880, 367596760, "2020-06-30T00:30:00Z", 1500),
+    CaseSpec(368004120, 896876500, "2020-06-30T00:31:00Z", 1500),
+    CaseSpec(367784640, 366993880, "2020-06-30T00:33:00Z", 1500),
+    CaseSpec(367798420, 366993880, "2020-06-30T00:33:00Z", 1500),
+    CaseSpec(367798420, 896876500, "2020-06-30T00:34:00Z", 1500),
+    CaseSpec(367782880, 366993880, "2020-06-30T00:37:00Z", 1200),
+)
+
+
+@dataclass(frozen=True)
+class Recording:
+    """One AIS recording: its position reports (``positions.csv.gz`` format), the cases chosen
+    from it, the seed of their bearing noise and the rules that depend on its reporting."""
+
+    name: str
+    positions_path: Path
+    cases: tuple[CaseSpec, ...]
+    seed: int
+    rules: Rules = SOLENT_RULES
+
+
+# every recording the cases are built from, by name (SOURCE.md beside each positions file)
+RECORDINGS: dict[str, Recording] = {
+    "solent": Recording("solent", POSITIONS_PATH, CASES, SEED),
+    "nyharbor": Recording("nyharbor", NY_POSITIONS_PATH, NY_CASES, NY_SEED, NYHARBOR_RULES),
+}
+
+
+def get_recording(name: str) -> Recording:
+    """The recording called ``name`` (a key of ``RECORDINGS``)."""
+    try:
+        return RECORDINGS[name]
+    except KeyError:
+        raise ValueError(f"unknown AIS recording {name!r}: one of {', '.join(RECORDINGS)}"
+                         ) from None
 
 
 @dataclass(frozen=True)
@@ -266,8 +388,9 @@ def load_positions(path=POSITIONS_PATH) -> pd.DataFrame:
     return df
 
 
-def drop_spikes(t: np.ndarray, lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
-    """Mask of the reports to keep: drops a report lying more than ``SPIKE_M`` from the point
+def drop_spikes(t: np.ndarray, lat: np.ndarray, lon: np.ndarray,
+                spike_m: float = SPIKE_M) -> np.ndarray:
+    """Mask of the reports to keep: drops a report lying more than ``spike_m`` from the point
     interpolated at its time between its two neighbours (a position error)."""
     keep = np.ones(len(t), dtype=bool)
     if len(t) < 3:
@@ -276,17 +399,18 @@ def drop_spikes(t: np.ndarray, lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
     lat_i = lat[:-2] + w * (lat[2:] - lat[:-2])
     lon_i = lon[:-2] + w * (lon[2:] - lon[:-2])
     e, n, _ = geodetic2enu(lat[1:-1], lon[1:-1], 0.0, lat_i, lon_i, 0.0)
-    keep[1:-1] = np.hypot(e, n) <= SPIKE_M
+    keep[1:-1] = np.hypot(e, n) <= spike_m
     return keep
 
 
-def tracks_from(df: pd.DataFrame) -> dict[int, Track]:
-    """One ``Track`` per MMSI: reports sorted by time, one per time stamp, spikes dropped."""
+def tracks_from(df: pd.DataFrame, rules: Rules = SOLENT_RULES) -> dict[int, Track]:
+    """One ``Track`` per MMSI: reports sorted by time, one per time stamp, spikes dropped
+    (``rules.spike_m``)."""
     tracks = {}
     for mmsi, g in df.sort_values(["mmsi", "t_s"], kind="stable").groupby("mmsi", sort=True):
         g = g.drop_duplicates("t_s", keep="first")
         t, lat, lon = (g[c].to_numpy(dtype=float) for c in ("t_s", "lat_deg", "lon_deg"))
-        keep = drop_spikes(t, lat, lon)
+        keep = drop_spikes(t, lat, lon, rules.spike_m)
         tracks[int(mmsi)] = Track(int(mmsi), t[keep], lat[keep], lon[keep])
     return tracks
 
@@ -357,9 +481,11 @@ def geometry(own: Track, target: Track, t) -> dict[str, np.ndarray]:
             "bearing_deg": np.asarray(brg, dtype=float) % 360.0}
 
 
-def check_case(own: Track, target: Track, t0: float, duration_s: float) -> dict:
-    """Everything the case rules need over [t0, t0 + duration_s]: ``ok`` says whether the
-    pair meets them, ``kind`` is the target class (or None), plus the numbers behind."""
+def check_case(own: Track, target: Track, t0: float, duration_s: float,
+               rules: Rules = SOLENT_RULES) -> dict:
+    """Everything the case rules (``rules``: the recording's) need over [t0, t0 +
+    duration_s]: ``ok`` says whether the pair meets them, ``kind`` is the target class (or
+    None), plus the numbers behind."""
     t1 = t0 + duration_s
     m_own, m_tgt = motion(own, t0, t1), motion(target, t0, t1)
     g = geometry(own, target, bearing_times(t0, duration_s))
@@ -375,22 +501,22 @@ def check_case(own: Track, target: Track, t0: float, duration_s: float) -> dict:
         "kind": classify(m_tgt, t1),
     }
     out["ok"] = bool(
-        out["own_gap_s"] <= MAX_GAP_OWN_S and out["target_gap_s"] <= MAX_GAP_TARGET_S
+        out["own_gap_s"] <= rules.max_gap_own_s and out["target_gap_s"] <= rules.max_gap_target_s
         and out["own_moving_frac"] >= MIN_OWN_MOVING_FRAC
         and out["own_turn_deg"] >= MIN_OWN_TURN_DEG
-        and out["min_range_m"] >= MIN_RANGE_M and out["max_range_m"] <= MAX_RANGE_M
+        and out["min_range_m"] >= MIN_RANGE_M and out["max_range_m"] <= rules.max_range_m
         and out["kind"] is not None)
     return out
 
 
 def make_case(index: int, spec: CaseSpec, tracks: dict[int, Track], sigma_deg: float,
-              seed: int) -> tuple[pd.DataFrame, dict]:
+              seed: int, rules: Rules = SOLENT_RULES) -> tuple[pd.DataFrame, dict]:
     """Case number ``index`` (1-based): its navigation export (with the noise-free
     ``true_bearing_deg`` and ``range_m`` as extra columns) and its truth row."""
     own, target = tracks[spec.own_mmsi], tracks[spec.target_mmsi]
     t0 = float(to_seconds(spec.start_utc)[0])
     t1 = t0 + spec.duration_s
-    chk = check_case(own, target, t0, spec.duration_s)
+    chk = check_case(own, target, t0, spec.duration_s, rules)
     if not chk["ok"]:
         raise ValueError(f"case {index} ({spec}) no longer meets the case rules: {chk}")
     t = bearing_times(t0, spec.duration_s)
@@ -426,31 +552,37 @@ def make_case(index: int, spec: CaseSpec, tracks: dict[int, Track], sigma_deg: f
     return df, truth
 
 
-def build_cases(positions_path=POSITIONS_PATH, sigma_deg: float = SIGMA_DEG,
-                seed: int = SEED, cases=None) -> tuple[dict[str, pd.DataFrame], pd.DataFrame]:
-    """All cases: ``({"case_01": navigation export, ...}, truth)``.
+def build_cases(positions_path=None, sigma_deg: float = SIGMA_DEG, seed: int | None = None,
+                cases=None, recording: str = "solent"
+                ) -> tuple[dict[str, pd.DataFrame], pd.DataFrame]:
+    """All cases of ``recording`` (a key of ``RECORDINGS``): ``({"case_01": navigation
+    export, ...}, truth)``.
 
     Each export has the columns ``EXPORT_COLUMNS`` (own-ship's interpolated position, the
     noisy bearing in [0, 360) deg, the target MMSI as track label) plus ``true_bearing_deg``
     and ``range_m`` (noise-free geometry; not written by ``write_cases``). ``truth`` has one
-    row per case (columns in the module docstring). ``cases`` defaults to ``CASES``.
+    row per case (columns in the module docstring). ``positions_path``, ``seed`` and
+    ``cases`` default to the recording's.
     """
-    tracks = tracks_from(load_positions(positions_path))
+    rec = get_recording(recording)
+    tracks = tracks_from(load_positions(rec.positions_path if positions_path is None
+                                        else positions_path), rec.rules)
+    seed = rec.seed if seed is None else seed
     exports, rows = {}, []
-    for i, spec in enumerate(CASES if cases is None else cases, start=1):
-        df, row = make_case(i, spec, tracks, sigma_deg, seed)
+    for i, spec in enumerate(rec.cases if cases is None else cases, start=1):
+        df, row = make_case(i, spec, tracks, sigma_deg, seed, rec.rules)
         exports[row["case"]] = df
         rows.append(row)
     return exports, pd.DataFrame(rows)
 
 
-def write_cases(outdir, positions_path=POSITIONS_PATH, sigma_deg: float = SIGMA_DEG,
-                seed: int = SEED) -> pd.DataFrame:
-    """Write ``case_XX.csv`` (navigation exports) and ``truth.csv`` into ``outdir``; returns
-    the truth table."""
+def write_cases(outdir, positions_path=None, sigma_deg: float = SIGMA_DEG,
+                seed: int | None = None, recording: str = "solent") -> pd.DataFrame:
+    """Write the cases of ``recording`` (a key of ``RECORDINGS``) into ``outdir`` as
+    ``case_XX.csv`` (navigation exports) and ``truth.csv``; returns the truth table."""
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
-    exports, truth = build_cases(positions_path, sigma_deg, seed)
+    exports, truth = build_cases(positions_path, sigma_deg, seed, recording=recording)
     for name, df in exports.items():
         df.loc[:, list(EXPORT_COLUMNS)].to_csv(
             outdir / f"{name}.csv", index=False, float_format="%.7f", lineterminator="\n")
@@ -458,9 +590,11 @@ def write_cases(outdir, positions_path=POSITIONS_PATH, sigma_deg: float = SIGMA_
     return truth
 
 
-def summary(positions_path=POSITIONS_PATH) -> str:
+def summary(positions_path=None, recording: str = "solent") -> str:
     """A table of the cases and an independent check of the bearings against the reports."""
-    exports, truth = build_cases(positions_path)
+    rec = get_recording(recording)
+    positions_path = rec.positions_path if positions_path is None else positions_path
+    exports, truth = build_cases(positions_path, recording=recording)
     cols = ["case", "kind", "own_mmsi", "target_mmsi", "start_utc", "n_bearings", "range_m",
             "own_turn_deg", "target_course_change_deg", "target_speed_change_frac",
             "course_deg", "speed_m_s"]
@@ -471,7 +605,7 @@ def summary(positions_path=POSITIONS_PATH) -> str:
     # Check: at every bearing time within 0.05 s of a target report, the noise-free bearing
     # must match the azimuth, in the local ENU plane at own-ship's position, to the *reported*
     # target position, up to what the target moves in those 0.05 s.
-    tracks = tracks_from(load_positions(positions_path))
+    tracks = tracks_from(load_positions(positions_path), rec.rules)
     worst, n_checked, resid = 0.0, 0, []
     for (_, row), df in zip(truth.iterrows(), exports.values(), strict=True):
         t = to_seconds(df["timestamp_utc"].to_numpy())
@@ -500,17 +634,20 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("outdir", nargs="?", help="folder for case_XX.csv and truth.csv")
     parser.add_argument("--summary", action="store_true", help="print the cases and a check")
-    parser.add_argument("--positions", default=str(POSITIONS_PATH), help="position reports")
+    parser.add_argument("--recording", default="solent", choices=sorted(RECORDINGS),
+                        help="which AIS recording (default: solent)")
+    parser.add_argument("--positions", help="position reports (default: the recording's)")
     parser.add_argument("--sigma-deg", type=float, default=SIGMA_DEG)
-    parser.add_argument("--seed", type=int, default=SEED)
+    parser.add_argument("--seed", type=int, help="noise seed (default: the recording's)")
     args = parser.parse_args(argv)
     if not args.outdir and not args.summary:
         parser.error("give OUTDIR and/or --summary")
     if args.outdir:
-        truth = write_cases(args.outdir, args.positions, args.sigma_deg, args.seed)
+        truth = write_cases(args.outdir, args.positions, args.sigma_deg, args.seed,
+                            recording=args.recording)
         print(f"wrote {len(truth)} cases to {args.outdir}")
     if args.summary:
-        print(summary(args.positions))
+        print(summary(args.positions, args.recording))
     return 0
 
 

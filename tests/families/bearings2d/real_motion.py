@@ -39,14 +39,16 @@ def _cases_module():
     return module
 
 
-def run_cases(workdir, estimator: dict, sigma_deg=None) -> pd.DataFrame:
-    """Every case ingested (``sigma_deg``: as ``ingest sigma_deg=``) and estimated with
+def run_cases(workdir, estimator: dict, sigma_deg=None, recording: str = "solent"
+              ) -> pd.DataFrame:
+    """Every case of the AIS ``recording`` (``build_cases.RECORDINGS``: ``solent``,
+    ``nyharbor``) ingested (``sigma_deg``: as ``ingest sigma_deg=``) and estimated with
     ``estimator`` (an estimator config node, e.g. ``{"name": "lm"}``; each track starts from
     its first bearing), one row per case: the estimate, its one-sigma errors, status, and
     the errors against the truth (``z``: the largest |error| / sd of range, course, speed)."""
     workdir = Path(workdir)
     cases = _cases_module()
-    truth = cases.write_cases(workdir / "cases")
+    truth = cases.write_cases(workdir / "cases", recording=recording)
     rows = []
     for case in truth.itertuples(index=False):
         root = ingest(workdir / "cases" / f"{case.case}.csv", data_dir=workdir / "data",

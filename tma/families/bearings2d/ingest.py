@@ -200,3 +200,18 @@ def ingest(input_path, **kwargs):
     from tma.ingest import ingest as ingest_log
 
     return ingest_log(input_path, family="bearings2d", **kwargs)
+
+
+def contacts(logs: list[BearingsLog]):
+    """Each track of ``logs`` as a ``tma.ais.match.Contact`` (its bearings, own-ship there,
+    its label and the log's nominal sigma): what ``ingest truth=FILE`` matches to the AIS."""
+    from tma.ais.match import Contact
+
+    out = []
+    for lg in logs:
+        labels = lg.track_label if lg.track_label is not None else lg.track_id.astype(str)
+        for row, track in enumerate(lg.track_id.tolist()):
+            have = np.isfinite(lg.bearing_deg[row])
+            out.append(Contact(int(track), str(labels[row]), lg.t_s[have], lg.own_x_m[have],
+                               lg.own_y_m[have], lg.bearing_deg[row, have], lg.sigma_deg))
+    return out

@@ -22,11 +22,13 @@ readers skip), ``tma.tracks`` (the contacts' text labels), ``tma.sensor`` (the n
 bearing noise) and ``tma.target`` (how the targets move, when known: a simulation).
 """
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
 from tma.errors import InputError
+from tma.families.bearings2d.manoeuvres import ManoeuvrePrior
 from tma.geo import MAX_MAPPED_M, LocationFix, local_to_geodetic, location_fix
 from tma.io.mcap_log import (
     COMPRESSION,
@@ -97,6 +99,9 @@ class BearingsLog:
     random acceleration per axis (m^2/s^3; 0: constant velocity), as a simulation knows it;
     None when not declared (a recording: the estimators then test for manoeuvres and
     assume real-ship motion). Stored in the metadata record ``tma.target``.
+    manoeuvres: the targets' declared manoeuvres (``manoeuvres.ManoeuvrePrior``), with
+    ``accel_psd_m2_s3`` only; None: none (or, without ``accel_psd_m2_s3``, not declared).
+    Stored in ``tma.target`` too.
     """
 
     t_s: np.ndarray
@@ -109,6 +114,7 @@ class BearingsLog:
     origin_deg: tuple[float, float] | None = None
     track_label: np.ndarray | None = None
     accel_psd_m2_s3: float | None = None
+    manoeuvres: ManoeuvrePrior | None = None
 
     @property
     def n_tracks(self) -> int:
@@ -142,6 +148,13 @@ class BearingsLog:
         if q is not None and not 0 <= q < 1e6:
             raise InputError(f"{where}: the targets' declared accel_psd_m2_s3 {q!r} is not in "
                              "[0, 1e6) m^2/s^3")
+        m = self.manoeuvres
+        if m is not None and (q is None or not (0 <= m.rate_per_h <= 1000 and m.dv_m_s >= 0
+                                                and m.step_s > 0
+                                                and min(m.durations_s, default=0) > 0)):
+            raise InputError(f"{where}: the targets' declared manoeuvres {m!r} are not a "
+                             "prior (rate in [0, 1000] per hour, sizes >= 0, durations > 0), "
+                             "or are declared without accel_psd_m2_s3")
         if self.epoch_utc_ns is not None and not 0 <= self.epoch_utc_ns < MAX_EPOCH_NS:
             raise InputError(f"{where}: epoch_utc_ns {self.epoch_utc_ns!r} is not a UTC time "
                              "between 1970 and 2200 in ns")
@@ -169,7 +182,10 @@ def write_bearings_log(path, log: BearingsLog, metadata=None, encoding="protobuf
     if log.sigma_deg is not None:
         metadata[SENSOR] = json_record({"sigma_deg": log.sigma_deg})
     if log.accel_psd_m2_s3 is not None:
-        metadata[TARGET] = json_record({"accel_psd_m2_s3": log.accel_psd_m2_s3})
+        target = {"accel_psd_m2_s3": log.accel_psd_m2_s3}
+        if log.manoeuvres is not None:
+            target["manoeuvres"] = dataclasses.asdict(log.manoeuvres)
+        metadata[TARGET] = json_record(target)
     if log.track_label is not None:
         metadata[TRACKS] = json_record({"track_id": log.track_id,
                                         "label": [str(s) for s in log.track_label]})
@@ -230,11 +246,18 @@ def nominal_sigma(metadata: dict, where: str) -> float | None:
         return None if sigma is None else number(sigma)
 
 
-def declared_motion(metadata: dict, where: str) -> float | None:
+def declared_motion(metadata: dict, where: str) -> tuple[float | None, ManoeuvrePrior | None]:
+    """The targets' declared wander and manoeuvres (``BearingsLog``), from ``tma.target``."""
     if TARGET not in metadata:
-        return None
+        return None, None
     with schema_errors(where, f"the metadata record {TARGET}"):
-        return number(read_json_record(metadata, TARGET, where)["accel_psd_m2_s3"])
+        record = read_json_record(metadata, TARGET, where)
+        q, m = number(record["accel_psd_m2_s3"]), record.get("manoeuvres")
+        if m is None:
+            return q, None
+        return q, ManoeuvrePrior(number(m["rate_per_h"]), number(m["dv_m_s"]),
+                                 tuple(number(d) for d in m["durations_s"]),
+                                 number(m["step_s"]))
 
 
 def read_bearings_log(path) -> BearingsLog:
@@ -294,7 +317,7 @@ def read_bearings_log(path) -> BearingsLog:
         track_id=track_id, bearing_deg=bearing, sigma_deg=nominal_sigma(metadata, where),
         epoch_utc_ns=read_epoch(metadata, where), origin_deg=geo_origin(metadata, where),
         track_label=track_labels(metadata, track_id, where),
-        accel_psd_m2_s3=declared_motion(metadata, where),
     )
+    log.accel_psd_m2_s3, log.manoeuvres = declared_motion(metadata, where)
     log.validate(where)
     return log

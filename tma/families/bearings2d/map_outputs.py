@@ -55,8 +55,12 @@ log = logging.getLogger(__name__)
 
 CHI2_2_P95 = 5.991464547107979  # chi-square(2) 95 % point: the 95 % position ellipse
 MAX_PLOTS = 100  # PNGs per table: a log of thousands of contacts gets the first 100
+LISTED = 20  # contacts named in a message
 BEARING_LINES = 40  # at most about this many bearing lines per plot (every k-th bearing)
 ESTIMATE_TOPIC = "/tma/estimate/{label}"
+THETA = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")  # position at t = 0 and velocity (m, m/s)
+NOMINAL_REACH_M = 20_000.0  # bearing lines of a contact without an estimate to reach
+TRUTH_TOPIC = "/tma/truth/{label}"  # the contact's ship, from its AIS (ingest truth=FILE)
 
 
 # -- covariance ------------------------------------------------------------------------------
@@ -77,6 +81,17 @@ def theta_covariance(estimates: pd.DataFrame) -> np.ndarray:
     cov *= np.deg2rad(estimates["sigma_used_deg"].to_numpy(float))[:, None, None] ** 2
     cov[~usable] = np.nan
     return cov
+
+
+def shown_estimates(report: pd.DataFrame, estimates: pd.DataFrame):
+    """``(theta, theta_cov)`` of each track, ``(n, 4)`` and ``(n, 4, 4)``, as the report shows
+    them: NaN where it shows no estimate (its range is blank: diverged, collapsed or without
+    a one-sigma error, ``status.not_an_answer``), so that no plot or map draws one there."""
+    theta = estimates[list(THETA)].to_numpy(float).copy()
+    cov = theta_covariance(estimates)
+    hidden = ~np.isfinite(report["range_now_m"].to_numpy(float))
+    theta[hidden], cov[hidden] = np.nan, np.nan
+    return theta, cov
 
 
 def position_covariance(theta_cov: np.ndarray, t_s) -> np.ndarray:
@@ -144,16 +159,18 @@ class _TrackPlots:
         self.fig.subplots_adjust(left=0.1, right=0.97, bottom=0.07, top=0.91)
 
     def draw(self, title: str, lg: BearingsLog, row: int, theta, cov_now, t_from=-np.inf):
-        """One contact: own-ship, bearing lines, the estimated track from ``t_from`` (where
-        its solution holds: ``leg_start_s``), 95 % ellipse (km)."""
+        """One contact: own-ship's whole path, every bearing's line, the estimated track
+        from ``t_from`` (where its solution holds: ``leg_start_s``; ``last_leg`` solves a
+        later leg) and its 95 % ellipse now (km); no track where ``theta`` is NaN (no
+        estimate shown)."""
         valid = np.flatnonzero(np.isfinite(lg.bearing_deg[row]))
-        t = lg.t_s[valid]
-        t = t[t >= t_from] if (t >= t_from).any() else t
+        held = valid[lg.t_s[valid] >= t_from]  # the bearings the solution rests on
+        held = held if held.size else valid
         own = np.column_stack([lg.own_x_m, lg.own_y_m])
-        track = theta[:2] + np.outer(t, theta[2:])  # estimated positions over its span
+        track = theta[:2] + np.outer(lg.t_s[held], theta[2:])  # estimated positions then
         finite = np.isfinite(track).all()
-        reach = (np.hypot(*(track - own[valid]).T).max() * 1.3 if finite
-                 else 20_000.0)  # no estimate: lines of a nominal 20 km
+        reach = (np.hypot(*(track - own[held]).T).max() * 1.3 if finite
+                 else NOMINAL_REACH_M)
         step = max(1, int(np.ceil(valid.size / BEARING_LINES)))
         b = np.deg2rad(lg.bearing_deg[row, valid[::step]])
         start = own[valid[::step]]
@@ -192,14 +209,13 @@ class _TrackPlots:
 
 
 def write_track_plots(report: pd.DataFrame, estimates: pd.DataFrame, logs, tables_dir,
-                      name: str, epoch_utc_ns=None, progress=None) -> list[Path]:
+                      name: str, progress=None) -> list[Path]:
     """``<name>-<label>.png`` per contact (the first ``MAX_PLOTS``), titled with the time of
-    its last bearing in UTC (``epoch_utc_ns``: of t = 0), or in seconds from the log's start
-    when it is not dated; returns their paths. ``progress``: a progress bar (None: on a
-    terminal only)."""
-    theta = estimates[["x0_m", "y0_m", "vx_m_s", "vy_m_s"]].to_numpy(float)
-    cov_now = position_covariance(theta_covariance(estimates),
-                                  estimates["t_last_s"].to_numpy(float))
+    its last bearing in UTC (the report's), or in seconds from the log's start when it is
+    not dated; returns their paths. ``progress``: a progress bar (None: on a terminal
+    only)."""
+    theta, theta_cov = shown_estimates(report, estimates)
+    cov_now = position_covariance(theta_cov, estimates["t_last_s"].to_numpy(float))
     where = {int(i): (lg, row) for lg in logs for row, i in enumerate(lg.track_id)}
     shown = shown_labels(report["label"])
     if len(report) > MAX_PLOTS:
@@ -220,51 +236,62 @@ def write_track_plots(report: pd.DataFrame, estimates: pd.DataFrame, logs, table
                 part = f"{part}-{r.track_id}"
             used.add(part)
             path = Path(tables_dir) / fit_file_name(name, part, ".png")
-            save_figure(plots.draw(plot_title(name, shown[n], r, epoch_utc_ns), lg, row,
-                                   theta[n], cov_now[n], r.leg_start_s), path)
+            save_figure(plots.draw(plot_title(name, shown[n], r), lg, row, theta[n],
+                                   cov_now[n], r.leg_start_s), path)
             paths.append(path)
     finally:
         plots.close()
     return paths
 
 
-def plot_title(name: str, shown: str, r, epoch_utc_ns) -> str:
-    """A contact plot's title: the contact, its status and its kinematics now (UTC, or
-    seconds from the log's start when it is not dated). ``r``: its report row."""
+def plot_title(name: str, shown: str, r) -> str:
+    """A contact plot's title: the contact, its status and its kinematics now, at the UTC of
+    its last bearing (or in seconds from the log's start when the report has none: a log
+    that is not dated). ``r``: its report row; where it shows no estimate (blank range), the
+    title says so and the report's note says why."""
+    when = (r.time_now_utc if isinstance(r.time_now_utc, str)
+            else f"t = {r.t_now_s:g} s from the start")
+    if not np.isfinite(r.range_now_m):
+        return (f"{name}: contact {shown}, status {r.status}\nno estimate shown (the table's "
+                f"note says why), last bearing at {when}")
     return (f"{name}: contact {shown}, status {r.status}\nrange {r.range_now_m / 1e3:.2f} km, "
-            f"course {r.course_deg:.1f} deg, speed {r.speed_m_s:.2f} m/s at "
-            + (f"t = {r.t_now_s:g} s from the start" if epoch_utc_ns is None
-               else r.time_now_utc))
+            f"course {r.course_deg:.1f} deg, speed {r.speed_m_s:.2f} m/s at {when}")
 
 
-def contact_figure(report: pd.DataFrame, estimates: pd.DataFrame, logs, label: str,
-                   name: str = "tma", epoch_utc_ns=None):
+def contact_figure(report: pd.DataFrame, estimates: pd.DataFrame, logs, label,
+                   name: str = "tma"):
     """The matplotlib Figure of one contact's plot (as ``write_track_plots`` draws it),
-    ``label`` its report label; KeyError naming the labels when there is no such contact."""
-    match = np.flatnonzero(report["label"].astype(str).to_numpy() == str(label))
+    ``label`` its report label (or track id); ValueError naming the contacts when there is no
+    such contact, or when ``logs`` do not hold its bearings."""
+    labels = report["label"].astype(str).to_numpy()
+    match = np.flatnonzero(labels == str(label))
     if match.size == 0:
-        raise KeyError(f"no contact {label!r}; contacts: {', '.join(map(str, report['label']))}")
+        listed = ", ".join(labels[:LISTED]) + (", ..." if labels.size > LISTED else "")
+        raise ValueError(f"no contact {label!r} in these results; their contacts: {listed}")
     n = int(match[0])
     r = report.iloc[n]
-    est = estimates.iloc[[n]]
-    theta = est[["x0_m", "y0_m", "vx_m_s", "vy_m_s"]].to_numpy(float)[0]
-    cov_now = position_covariance(theta_covariance(est), est["t_last_s"].to_numpy(float))[0]
-    lg, row = next((lg, row) for lg in logs for row, i in enumerate(lg.track_id)
-                   if int(i) == int(r.track_id))
+    place = next(((lg, row) for lg in logs for row, i in enumerate(lg.track_id)
+                  if int(i) == int(r.track_id)), None)
+    if place is None:
+        raise ValueError(f"contact {label!r} (track id {r.track_id}) is not in this recording: "
+                         "pass the recording these results were estimated from")
+    theta, theta_cov = shown_estimates(report.iloc[[n]], estimates.iloc[[n]])
+    cov_now = position_covariance(theta_cov, estimates["t_last_s"].to_numpy(float)[[n]])[0]
     plots = _TrackPlots()
-    return plots.draw(plot_title(name, shown_labels(report["label"])[n], r, epoch_utc_ns), lg,
-                      row, theta, cov_now, r.leg_start_s)
+    return plots.draw(plot_title(name, shown_labels(report["label"])[n], r), *place,
+                      theta[0], cov_now, r.leg_start_s)
 
 
 # -- the estimated tracks as an MCAP ---------------------------------------------------------
 
 def write_map_mcap(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, epoch_utc_ns,
-                   origin_deg, run: dict) -> Path:
+                   origin_deg, run: dict, truth_track: pd.DataFrame | None = None) -> Path:
     """Write the estimated tracks and own-ship as ``foxglove.LocationFix`` (see the module
-    docstring), in time order; returns ``path``. Tracks without a finite estimate within
-    ``MAX_MAPPED_M`` of the origin are left out (logged)."""
-    theta = estimates[["x0_m", "y0_m", "vx_m_s", "vy_m_s"]].to_numpy(float)
-    theta_cov = theta_covariance(estimates)
+    docstring), in time order; returns ``path``. Tracks whose estimate the report does not
+    show (blank: ``shown_estimates``) or that lie beyond ``MAX_MAPPED_M`` of the origin are
+    left out (logged). ``truth_track``: the contacts' ships from their AIS
+    (``tma.ais.truth``), beside the estimates (``truth_parts``)."""
+    theta, theta_cov = shown_estimates(report, estimates)
     where = {int(i): (k, row) for k, lg in enumerate(logs) for row, i in enumerate(lg.track_id)}
     own_topics = ([OWNSHIP_FIX_TOPIC] if len(logs) == 1
                   else [f"/ownship/{k}/location_fix" for k in range(len(logs))])
@@ -283,7 +310,7 @@ def write_map_mcap(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, ep
         t = t[held] if held.any() else t  # where the solution holds (its leg)
         x, y = (theta[n, :2, None] + theta[n, 2:, None] * t)
         lat, lon = local_to_geodetic(x, y, origin_deg)
-        if not np.isfinite(lat).all():  # no finite estimate, or one farther than a map
+        if not np.isfinite(lat).all():  # no estimate shown, or one farther than a map
             skipped.append(shown[n])
             continue
         topic = ESTIMATE_TOPIC.format(label=shown[n])
@@ -297,9 +324,14 @@ def write_map_mcap(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, ep
             "estimate": "the estimator's track over the bearings its solution rests on (from "
                         "leg_start_s); covariance as in the report"}))
         parts.append((t, lat.tolist(), lon.tolist(), cov, f"contact {shown[n]}"))
+    if truth_track is not None:
+        for channel, part in truth_parts(report, truth_track):
+            channels.append(channel)
+            parts.append(part)
     if skipped:
-        log.warning("%s: no finite estimate within %g km of the origin for %s: not in the map",
-                    path, MAX_MAPPED_M / 1e3, ", ".join(skipped))
+        log.warning("%s: no estimate shown (the table's note says why) or none within %g km "
+                    "of the origin for %s: not in the map", path, MAX_MAPPED_M / 1e3,
+                    ", ".join(skipped))
     t_all = np.concatenate([p[0] for p in parts])
     which = np.repeat(np.arange(len(parts)), [p[0].size for p in parts])
     order = np.lexsort((which, t_all))  # time order; own-ship first at equal times
@@ -324,4 +356,25 @@ def _fixes(t_ns, frame: str, lat, lon, cov) -> list[bytes]:
         if cov is not None:
             fix.position_covariance[:] = cov[k]
         out.append(fix.SerializeToString(deterministic=True))
+    return out
+
+
+def truth_parts(report: pd.DataFrame, truth_track: pd.DataFrame) -> list:
+    """``(channel, part)`` per contact with an AIS truth: its ship's position at each of its
+    bearing times on ``/tma/truth/<label>`` (``foxglove.LocationFix``, no covariance), as
+    ``write_map_mcap`` writes the estimates beside it."""
+    shown = dict(zip(report["track_id"].tolist(), shown_labels(report["label"]), strict=True))
+    mmsi = (dict(zip(report["track_id"].tolist(), report["truth_mmsi"].tolist(), strict=True))
+            if "truth_mmsi" in report else {})
+    out = []
+    for track_id, rows in truth_track.groupby("track_id", sort=True):
+        if track_id not in shown:
+            continue
+        label = shown[track_id]
+        channel = Channel.protobuf(TRUTH_TOPIC.format(label=label), LocationFix, {
+            "track_id": str(track_id), "mmsi": str(mmsi.get(track_id, "")),
+            "truth": "the contact's ship from its AIS, interpolated at its bearing times"})
+        out.append((channel, (rows["t_s"].to_numpy(float), rows["lat_deg"].tolist(),
+                              rows["lon_deg"].tolist(), None, f"AIS {mmsi.get(track_id, '')}"
+                              f" (contact {label})")))
     return out

@@ -157,7 +157,9 @@ def _chol_solve(A, b, L, y):
 def _filter(t, ox, oy, z, w, weighted, lo, hi, nom, lam, prior, p0, mf, Pf, Pp, nu, S):
     """Kalman filter over epochs lo..hi linearised about ``nom`` (K, 4); filtered means and
     covariances, predicted covariances (index k: the prediction into k) and the innovations
-    (NaN where no bearing). ``p0``: the diffuse prior's (position, velocity) variances."""
+    (NaN where no bearing). ``lam`` (K,): the process level of the step into each epoch
+    (``lam[k]``: from k - 1 to k); ``p0``: the diffuse prior's (position, velocity)
+    variances about ``prior`` (4,)."""
     m, mp, P = np.empty(4), np.empty(4), np.zeros((4, 4))
     h, kg, tmp, A = np.zeros(4), np.empty(4), np.empty(4), np.empty((4, 4))
     for i in range(4):
@@ -166,7 +168,7 @@ def _filter(t, ox, oy, z, w, weighted, lo, hi, nom, lam, prior, p0, mf, Pf, Pp, 
     P[2, 2] = P[3, 3] = p0[1]
     for k in range(lo, hi + 1):
         if k > lo:
-            _predict(m, P, t[k] - t[k - 1], lam, mp, Pp[k])
+            _predict(m, P, t[k] - t[k - 1], lam[k], mp, Pp[k])
             for i in range(4):
                 m[i] = mp[i]
                 for j in range(4):
@@ -218,17 +220,18 @@ def _bearing_cost(ox, oy, z, w, weighted, lo, hi, s):
 
 @njit(error_model="numpy", depends=(atan2,))
 def _map_cost(t, ox, oy, z, w, weighted, lo, hi, s, lam, prior, p0):
-    """MAP cost (units of sigma^2): squared bearing residuals, the NCV process term
-    (lam > 0) and the diffuse prior about ``prior`` (4,)."""
+    """MAP cost (units of sigma^2): squared bearing residuals, the NCV process term of each
+    step with ``lam[k]`` > 0 (K,: the step into epoch k) and the diffuse prior about
+    ``prior`` (4,)."""
     c = _bearing_cost(ox, oy, z, w, weighted, lo, hi, s)
-    if lam > 0.0:
-        for k in range(lo, hi):
+    for k in range(lo, hi):
+        if lam[k + 1] > 0.0:
             T = t[k + 1] - t[k]
             a11, a12, a22 = 12.0 / (T * T * T), -6.0 / (T * T), 4.0 / T  # Q1(T)^-1
             for axis in range(2):
                 dp = s[k + 1, axis] - s[k, axis] - T * s[k, axis + 2]
                 dv = s[k + 1, axis + 2] - s[k, axis + 2]
-                c += (a11 * dp * dp + 2.0 * a12 * dp * dv + a22 * dv * dv) / lam
+                c += (a11 * dp * dp + 2.0 * a12 * dp * dv + a22 * dv * dv) / lam[k + 1]
     for i in range(4):
         e = s[lo, i] - prior[i]
         c += e * e / p0[0 if i < 2 else 1]
@@ -236,13 +239,12 @@ def _map_cost(t, ox, oy, z, w, weighted, lo, hi, s, lam, prior, p0):
 
 
 @njit(error_model="numpy", depends=(atan2,))
-def _fit(t, ox, oy, z, w, weighted, lo, hi, nom, lam, p0, max_iter, tol_m, mf, Pf, Pp, nu,
-         S, ms, trial):
+def _fit(t, ox, oy, z, w, weighted, lo, hi, nom, lam, prior, p0, max_iter, tol_m, mf, Pf,
+         Pp, nu, S, ms, trial):
     """Gauss-Newton (iterated smoother) from ``nom`` (K, 4, updated in place to the MAP
-    trajectory); returns the passes made (-1: a covariance was not positive definite)."""
-    prior = np.empty(4)
-    for i in range(4):
-        prior[i] = nom[lo, i]
+    trajectory) under the process levels ``lam`` (K,) and the diffuse prior about ``prior``
+    (4,) at epoch lo; returns the passes made (-1: a covariance was not positive
+    definite)."""
     cost = _map_cost(t, ox, oy, z, w, weighted, lo, hi, nom, lam, prior, p0)
     passes = 0
     for _ in range(max_iter):
@@ -311,7 +313,8 @@ def _householder(A, rows, cols):
 def _srif(t, ox, oy, z, w, weighted, lo, hi, nom, lam, e, S, R, r):
     """Square-root information filter (Bierman, "Factorization Methods for Discrete
     Sequential Estimation", 1977) over epochs lo..hi, linearised about ``nom``, from no
-    prior information at all (exactly diffuse), R = 1, Q = lam Q1. Writes the standardised
+    prior information at all (exactly diffuse), R = 1, Q = lam[k] Q1 on the step into epoch
+    k. Writes the standardised
     innovations ``e`` and their variances ``S`` (inf for a bearing that brought a direction
     the earlier ones left undetermined; NaN where no bearing) and leaves the information
     array (R upper triangular, r) of the last epoch: P = R^-1 R^-T, state R^-1 r.
@@ -332,12 +335,13 @@ def _srif(t, ox, oy, z, w, weighted, lo, hi, nom, lam, e, S, R, r):
             for i in range(4):
                 R[i, 2] -= T * R[i, 0]
                 R[i, 3] -= T * R[i, 1]
-            if lam > 0.0:
+            if lam[k] > 0.0:
                 # x = F^-1 (x' - L u), u ~ N(0, I): rows [I, 0 | 0] and
                 # [-R F^-1 L, R F^-1 | r] in the unknowns (u, x'), triangularised
-                l11 = math.sqrt(lam * T * T * T / 3.0)
-                l21 = lam * T * T / 2.0 / l11
-                l22 = math.sqrt(max(lam * T - l21 * l21, 0.0))
+                lk = lam[k]
+                l11 = math.sqrt(lk * T * T * T / 3.0)
+                l21 = lk * T * T / 2.0 / l11
+                l22 = math.sqrt(max(lk * T - l21 * l21, 0.0))
                 for i in range(8):
                     for j in range(9):
                         A[i, j] = 0.0
@@ -420,7 +424,8 @@ def smooth_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, lam
     Pf, Pp = np.empty((K, 4, 4)), np.empty((K, 4, 4))
     nu, S, S0 = np.empty(K), np.empty(K), np.empty(K)
     R, r, Rinv = np.empty((4, 4)), np.empty(4), np.empty((4, 4))
-    p0 = np.empty(2)
+    p0, prior = np.empty(2), np.empty(4)
+    lam_k, none = np.empty(K), np.zeros(K)  # per step: this track's level; no process noise
     for i in range(n):
         lo, hi = first[i], last[i]
         z, w = measured[i], (weight[i] if weighted else measured[i])
@@ -438,8 +443,10 @@ def smooth_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, lam
             nom[k, 3] = theta[i, 3]
         p0[0] = p0_pos[i] * p0_pos[i] / scale2[i]
         p0[1] = PRIOR_SPEED_M_S * PRIOR_SPEED_M_S / scale2[i]
-        made = _fit(t, ox, oy, z, w, weighted, lo, hi, nom, lam[i], p0, max_iter, tol_m, mf,
-                    Pf, Pp, nu, S, ms, trial)
+        lam_k[:] = lam[i]
+        prior[:] = nom[lo]
+        made = _fit(t, ox, oy, z, w, weighted, lo, hi, nom, lam_k, prior, p0, max_iter, tol_m,
+                    mf, Pf, Pp, nu, S, ms, trial)
         passes[i] = made
         if made < 0:
             continue
@@ -447,8 +454,8 @@ def smooth_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, lam
         # does not change (a pass with q = 0 finds them; with q > 0 every variance is larger
         # and, for a tiny sigma, all would pass MAX_S)
         if lam[i] > 0.0:
-            _srif(t, ox, oy, z, w, weighted, lo, hi, nom, 0.0, nu, S0, R, r)
-        _srif(t, ox, oy, z, w, weighted, lo, hi, nom, lam[i], nu, S, R, r)
+            _srif(t, ox, oy, z, w, weighted, lo, hi, nom, none, nu, S0, R, r)
+        _srif(t, ox, oy, z, w, weighted, lo, hi, nom, lam_k, nu, S, R, r)
         for k in range(lo, hi + 1):
             if nu[k] == nu[k] and (S0[k] if lam[i] > 0.0 else S[k]) <= MAX_S:
                 e[i, k] = nu[k]

@@ -16,7 +16,12 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 import pyarrow as pa  # noqa: E402
 
-from tma.families.bearings2d import benchmark, manoeuvre_table, paper  # noqa: E402
+from tma.families.bearings2d import (  # noqa: E402
+    benchmark,
+    manoeuvre_table,
+    paper,
+    real_motion_table,
+)
 from tma.families.bearings2d.map_outputs import (  # noqa: E402
     MAX_PLOTS,
     position_covariance,
@@ -32,7 +37,13 @@ from tma.families.bearings2d.metrics import (  # noqa: E402
     summary_row,
     track_metrics,
 )
-from tma.families.bearings2d.status import STATUSES  # noqa: E402
+from tma.families.bearings2d.status import STATUSES, not_an_answer  # noqa: E402
+from tma.families.bearings2d.truth_report import (  # noqa: E402
+    coverage_text,
+    dataset_truth,
+    shown_columns,
+    with_truth,
+)
 from tma.geo import local_to_geodetic  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
 from tma.sources.labels import shown_labels  # noqa: E402
@@ -170,26 +181,55 @@ def status_note(report: pd.DataFrame, stop_reason=None, sigma_known=True) -> lis
             note = (NOT_CONVERGED.get(stop, SINGULAR) if stop is not None else
                     "the estimator stopped before converging")
         elif status == "unobservable":
-            note = (f"range sd {row.range_sd_m / row.range_now_m:.0%} of the range: not "
-                    "determined from this geometry (no own-ship manoeuvre? target too far? "
-                    "too much target motion?)")
+            note = ((f"range sd {row.range_sd_m / row.range_now_m:.0%} of the range: "
+                     if np.isfinite(row.range_sd_m) else "range ") +
+                    "not determined from this geometry (no own-ship manoeuvre? target too "
+                    "far? too much target motion?)")
         elif status == "approximate":
             note = ("the estimator's one-sigma errors are not honest here: it is biased "
                     "(nbearings) or assumes a constant-velocity target while this log's "
                     "targets are not known to move so; use lm")
         else:
             note = ""
-        if pd.isna(row.range_sd_m):
-            note = "; ".join(filter(None, [note if status != "unobservable" else "",
-                                           "J^T J is singular: no uncertainty can be given"]))
         notes.append(note)
     return notes
 
 
+# what a report shows of an estimate: blank, all of it, where it is no answer
+# (``status.not_an_answer``)
+ESTIMATE_COLUMNS = ["x_now_m", "x_sd_m", "y_now_m", "y_sd_m", "lat_now_deg", "lon_now_deg",
+                    "range_now_m", "range_sd_m", "bearing_now_deg", "bearing_sd_deg",
+                    "course_deg", "course_sd_deg", "speed_m_s", "speed_sd_m_s"]
+
+
+def blank_non_answers(report: pd.DataFrame, max_range_rel_sd=None,
+                      recorded=True) -> np.ndarray:
+    """Blank (NaN) every estimated number of the tracks whose estimate is no answer
+    (``status.not_an_answer``: diverged, collapsed, or without a one-sigma error), in place,
+    and add why to their note; their status stays (the cause). Returns the mask."""
+    why = not_an_answer(report["range_now_m"], report["range_sd_m"], report["speed_m_s"],
+                        *(() if max_range_rel_sd is None else (max_range_rel_sd,)),
+                        recorded=recorded)
+    blank = why != ""
+    if blank.any():
+        for column in ESTIMATE_COLUMNS:
+            report[column] = report[column].astype(float).mask(blank)
+        report["note"] = [
+            "; ".join(filter(None, [note, f"the estimate is not shown: {reason}"]))
+            if reason and not note.startswith("no finite estimate") else note
+            for note, reason in zip(report["note"], why, strict=True)]
+    return blank
+
+
 def track_report(estimates: pd.DataFrame, epoch_utc_ns=None, origin_deg=None,
-                 labels=None, sigma_known=True) -> pd.DataFrame:
+                 labels=None, sigma_known=True, max_range_rel_sd=None,
+                 recorded=True) -> pd.DataFrame:
     """Per-track state and kinematics at each track's last bearing ("now") with 1-sigma
     errors and the status, as the estimator computed them; a note says why a track is not ok.
+    An estimate that is no answer (``status.not_an_answer``: diverged, collapsed, or without
+    a one-sigma error) is blank, with its status and a note that says so
+    (``max_range_rel_sd``: the estimator's, where above 1; ``recorded``: a recording, whose
+    targets are real vessels).
 
     ``label``: the contact's name (``labels``: track id -> text; else the id);
     ``t_now_s``: the last bearing, in seconds from the log's start (its first bearing, the
@@ -229,16 +269,22 @@ def track_report(estimates: pd.DataFrame, epoch_utc_ns=None, origin_deg=None,
         "converged": e["converged"].astype(bool),
     })
     report["note"] = status_note(report, e["stop_reason"].to_numpy(), sigma_known)
+    blank_non_answers(report, max_range_rel_sd, recorded)
     return report
 
 
-def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str) -> list[Path]:
-    def pm(value, sd, fmt):
-        return [f"{v:{fmt}} ± {e:{fmt}}" if np.isfinite(e) else f"{v:{fmt}} ± ? (unobservable)"
-                for v, e in report[[value, sd]].to_numpy()]
+def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str,
+                       geographic=None) -> list[Path]:
+    """``<name>.csv`` (every column of ``report``) and ``<name>.md`` (its formatted cells; a
+    blank estimate as ``-``); ``geographic``: the log has a geographic origin (a column of
+    latitude and longitude; None: where the report has any)."""
+
+    def pm(value, sd, fmt):  # blank ("-") where the estimate is no answer (its note says)
+        return [f"{v:{fmt}} ± {e:{fmt}}" if np.isfinite(v) and np.isfinite(e) else "-"
+                for v, e in report[[value, sd]].to_numpy(float)]
 
     def position():
-        if report["lat_now_deg"].isna().all():
+        if not (report["lat_now_deg"].notna().any() if geographic is None else geographic):
             return {}
         return {"position now (lat, lon deg)": [
             f"{a:.5f}, {b:.5f}" if np.isfinite(a) else "-"
@@ -253,25 +299,35 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str)
         "bearing now (deg)": pm("bearing_now_deg", "bearing_sd_deg", ".2f"),
         "course (deg)": pm("course_deg", "course_sd_deg", ".1f"),
         "speed (m/s)": pm("speed_m_s", "speed_sd_m_s", ".2f"),
+        **shown_columns(report),  # against the AIS truth, when the log has one
         "sqrt(Ka) (deg)": report["sqrt_ka_deg"].map("{:.3g}".format),
         "holds from": (report["leg_start_s"].map("t = {:.1f} s".format)
                        if report["leg_start_utc"].isna().all() else report["leg_start_utc"]),
         "status": report["status"],
         "why": report["note"],
     })
-    intro = (f"Estimates per track of `{source}` (no ground truth). 'now' is each track's last "
+    scored = "covered" in report  # against the AIS of its trial (truth_report)
+    intro = (f"Estimates per track of `{source}` "
+             f"({'against the AIS of its trial' if scored else 'no ground truth'}). 'now' is "
+             "each track's last "
              "bearing epoch, in seconds from the log's start (its first bearing) and in UTC "
              "when the log is dated; ± is one standard deviation (sigma as in column "
              "sigma_used_deg of the CSV: nominal, or estimated from the residuals), which "
              "includes the "
              "target's own motion (accel_psd_m2_s3: a nearly-constant-velocity target) for "
              "`lm`; 'holds from' is the first bearing the solution rests on. "
-             "Trust only `ok` tracks; 'why' says what is wrong with the others. The CSV also "
+             "Trust only `ok` tracks; 'why' says what is wrong with the others, and why an "
+             "estimate that is no answer (diverged, collapsed onto own-ship, or without a "
+             "one-sigma error) is not shown ('-'). The CSV also "
              "holds the position now in local metres (x east, y north) with its one-sigma "
              f"errors; `{name}-<track>.png` shows each contact on a plan (the first "
              f"{MAX_PLOTS}).")
+    if scored:
+        intro += (" AIS ship: the contact's ship and how well its AIS fits the bearings; z: "
+                  "(estimate - truth) / one sigma; covered: the truth within the estimate's 95 % "
+                  "region of position and velocity (the CSV has the errors and the truth).")
     return write_table(tables_dir, name, f"Bearings-only TMA estimates: {name}", intro, report,
-                       shown)
+                       shown, notes=coverage_text(report) if scored else "")
 
 
 STATUS_WHY = {  # a verdict in a few words, for the one warning line of its tracks
@@ -301,12 +357,15 @@ def warn_not_ok(report: pd.DataFrame, where: str):
                         "each", where, rows.size, status, STATUS_WHY[status], names)
 
 
-def contact_report(estimates: pd.DataFrame, logs, where: str) -> pd.DataFrame:
-    """``track_report`` of the estimates of ``logs`` (a recorded log's, one per own-ship):
-    their UTC epoch, origin and labels. What aggregate writes, and ``tma.estimate`` returns."""
+def contact_report(estimates: pd.DataFrame, logs, where: str, max_range_rel_sd=None,
+                   recorded=True) -> pd.DataFrame:
+    """``track_report`` of the estimates of ``logs`` (a recorded log's, one per own-ship, or
+    a simulated one's: not ``recorded``): their UTC epoch, origin and labels. What aggregate
+    writes, and ``tma.estimate`` returns (``max_range_rel_sd``: the estimator's)."""
     epoch, origin, labels = reference(logs, where)
     return track_report(estimates, epoch, origin, labels,
-                        sigma_known=any(lg.sigma_deg is not None for lg in logs))
+                        sigma_known=any(lg.sigma_deg is not None for lg in logs),
+                        max_range_rel_sd=max_range_rel_sd, recorded=recorded)
 
 
 def _report_without_truth(entry, tables_dir, name: str, progress=None) -> list[Path]:
@@ -315,14 +374,19 @@ def _report_without_truth(entry, tables_dir, name: str, progress=None) -> list[P
     m, dataset = entry.dataset.manifest, entry.dataset
     logs = read_logs(dataset)
     epoch, origin, _ = reference(logs, str(dataset.root))
-    report = contact_report(entry.estimates, logs, str(dataset.root))
+    report = contact_report(entry.estimates, logs, str(dataset.root),
+                            entry.manifest["config"].get("max_range_rel_sd"))
+    truth, truth_track = dataset_truth(dataset)
+    if truth is not None:  # scored against the AIS of its trial (ingest truth=FILE)
+        report = with_truth(report, entry.estimates, truth)
+        log.info("%s: %s", dataset.name, coverage_text(report))
     warn_not_ok(report, dataset.name)
     write_parquet_atomic(entry.run_root / "report.parquet",
                          pa.Table.from_pandas(report, preserve_index=False))
     written = write_track_report(report, tables_dir, name,
-                                 m.get("input", {}).get("path", dataset.name))
-    written += write_track_plots(report, entry.estimates, logs, tables_dir, name, epoch,
-                                 progress)
+                                 m.get("input", {}).get("path", dataset.name),
+                                 geographic=origin is not None)
+    written += write_track_plots(report, entry.estimates, logs, tables_dir, name, progress)
     if origin is None:
         log.info("%s: no map MCAP (%s.mcap): the dataset has no geographic origin (its "
                  "own-ship is in local metres; ingest latitude/longitude navigation or give "
@@ -334,14 +398,16 @@ def _report_without_truth(entry, tables_dir, name: str, progress=None) -> list[P
     else:
         written.append(write_map_mcap(Path(tables_dir) / f"{name}.mcap", report,
                                       entry.estimates, logs, epoch, origin,
-                                      {"dataset": dataset.name, "estimator": entry.estimator}))
+                                      {"dataset": dataset.name, "estimator": entry.estimator},
+                                      truth_track=truth_track))
     return written
 
 
 # the other kinds of table of simulated runs an experiment may ask for (``report=``): each
 # estimator against the Cramer-Rao bound, and targets that manoeuvre
 REPORTS = {"benchmark": benchmark.write_benchmark,
-           "manoeuvre": manoeuvre_table.write_manoeuvre_table}
+           "manoeuvre": manoeuvre_table.write_manoeuvre_table,
+           "real_motion": real_motion_table.write_real_motion_table}  # AIS own-ship, targets
 
 
 def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) -> list[Path]:
@@ -354,7 +420,7 @@ def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) 
         if id(entry.dataset) not in truths:  # read (and checked) once per dataset
             truths[id(entry.dataset)] = entry.dataset.read_truth()
         truth = truths[id(entry.dataset)]
-        if truth is None:
+        if truth is None or entry.dataset.manifest["source"] != "simulate":  # a recorded log
             name = table_name if len(entries) == 1 else f"{entry.dataset.name}-{entry.estimator}"
             written += _report_without_truth(entry, tables_dir, name, progress)
             continue

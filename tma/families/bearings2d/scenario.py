@@ -29,9 +29,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tma.ais.recording import RealPairs
 from tma.angles import bearing_from_north, course_from_velocity, wrap_to_pi
 from tma.config import param, require
-from tma.families.bearings2d import target_motion
+from tma.families.bearings2d import real_motion, target_motion
 from tma.families.bearings2d.log import BearingsLog, read_bearings_log, write_bearings_log
 from tma.families.bearings2d.target_motion import TargetConfig
 from tma.io import arrow
@@ -113,11 +114,14 @@ class Config(ScenarioConfig):
     target: TargetConfig = param(doc="how the targets move beyond constant velocity "
                                  "(manoeuvres, wander), and whether the log says so",
                                  factory=TargetConfig)
+    real: RealPairs = param(doc="own-ship and targets from an AIS recording instead "
+                            "(real_motion.py)", factory=RealPairs)
 
     def __post_init__(self):
         super().__post_init__()
         where = self.where
         target_motion.check(self.target, where)
+        real_motion.check(self)
         require((self.origin.lat is None) == (self.origin.lon is None), where,
                 "origin.lat and origin.lon must be given together (or both null)")
         p = self.population
@@ -133,6 +137,8 @@ class Config(ScenarioConfig):
 
 
 def label(cfg: Config) -> str:
+    if cfg.real.file is not None:
+        return real_motion.label(cfg)
     outliers = f"-out{cfg.outliers.prob:g}" if cfg.outliers.prob > 0 else ""
     target = cfg.target
     motion = "".join([f"-q{target.accel_psd_m2_s3:g}" if target.accel_psd_m2_s3 > 0 else "",
@@ -154,6 +160,8 @@ def epochs(cfg: Config, path: LegPath) -> np.ndarray:
 
 def simulate_shard(cfg: Config, shard_index: int):
     """Simulate one shard: ``(BearingsLog, truth pyarrow.Table)``."""
+    if cfg.real.file is not None:  # real ship motion from AIS (real_motion.py)
+        return real_motion.simulate_shard(cfg, shard_index)
     track_id = shard_track_ids(cfg, shard_index)
     n = track_id.size
     rng = shard_rng(cfg, shard_index)
@@ -191,6 +199,7 @@ def simulate_shard(cfg: Config, shard_index: int):
         epoch_utc_ns=cfg.epoch_ns,
         origin_deg=None if origin.lat is None else (origin.lat, origin.lon),
         accel_psd_m2_s3=cfg.target.declared_psd(),
+        manoeuvres=cfg.target.declared_manoeuvres(rms_speed(pop)),
     )
     columns = {"track_id": track_id, "x0_m": x0, "y0_m": y0, "vx_m_s": vx, "vy_m_s": vy}
     if moving:  # the state at the last bearing, as the straight line through it
@@ -205,6 +214,12 @@ def simulate_shard(cfg: Config, shard_index: int):
         **({"manoeuvring": ~np.isnan(last["manoeuvre_start_s"]), **last} if moving else {}),
     })
     return log, truth
+
+
+def rms_speed(pop: PopulationConfig) -> float:
+    """The root mean square of the targets' speed, uniform in [min, max] (m/s)."""
+    a, b = pop.speed_min_m_s, pop.speed_max_m_s
+    return float(np.sqrt((a * a + a * b + b * b) / 3.0))
 
 
 def with_outliers(measured_rad, cfg: Config, shard_index: int) -> np.ndarray:

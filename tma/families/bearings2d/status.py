@@ -291,3 +291,64 @@ def assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t_now_s,
         "fit_p_value": fit_p,
         "status": status,
     }
+
+
+# -- what an output shows as an answer -------------------------------------------------------
+
+# The plausible targets of a recorded log: vessels (and the aircraft a bearing sensor may see)
+MIN_RANGE_M = 10.0  # own-ship's GNSS fixes err by metres: closer, a bearing has no origin
+MAX_RANGE_M = 2e6  # as far as the local plane maps (tma.geo.MAX_MAPPED_M)
+MAX_SPEED_M_S = 343.0  # the speed of sound in air: no ship (50 m/s at most), few aircraft
+COLLAPSED_REL_SD = 1.0  # a range sd above the range itself: own-ship within one sigma
+
+
+def not_an_answer(range_m, range_sd_m, speed_m_s, max_range_rel_sd=COLLAPSED_REL_SD,
+                  recorded=True) -> np.ndarray:
+    """Why each estimate is no answer to show (an empty string where it is one): the one rule
+    every output (tables, CSV, plots, map, the Python API's results) applies before it shows
+    an estimate. The status says how far an answer can be trusted and why (it stays); this
+    says that a number is no answer at all, diverged or collapsed, whatever the status.
+
+    - no finite range or speed: there is no estimate;
+    - a range sd NaN or infinite: the information matrix J^T J is singular (or its
+      propagation to range broke down), so no one-sigma error can be given;
+    - a range sd above ``max(COLLAPSED_REL_SD, max_range_rel_sd)`` times the range: own-ship
+      lies within one sigma of the estimate. The sd is the delta method's, a first-order
+      expansion of the bearings in the target's position, whose derivative grows as
+      1 / range: it holds while the error is small beside the range, and means nothing once
+      the error reaches own-ship, where a bearing can turn by anything. An estimate
+      collapsed onto own-ship (11 m +- 13 m for a target 2 km away, on real ship motion) or
+      run away (490 km +- 23,000 km) is such a number. ``max_range_rel_sd`` is the status's
+      threshold (``unobservable`` above it): an ``ok`` track, within it, is never blanked;
+    - on a ``recorded`` log, whose targets are real: a range below ``MIN_RANGE_M`` (10 m:
+      own-ship's GNSS fixes, the bearings' origin, err by metres, so bearings cannot place
+      a contact nearer; the estimators' fits collapse to 1e-9-1e-7 m from own-ship where it
+      does not manoeuvre, with errors that look small), beyond ``MAX_RANGE_M`` (2000 km:
+      the local plane is no map there, and no bearing sensor at sea reaches that far), or a
+      speed beyond ``MAX_SPEED_M_S`` (343 m/s: faster than any vessel and most aircraft):
+      a fit run away to where bearings barely constrain it (seen at 1e10-1e13 m and
+      1e3-1e10 m/s). A simulated log declares its own scale (distances of 1e-9 m to 1e9 m,
+      speeds up to 1e4 m/s are valid scenarios), so only the rules on information apply.
+    """
+    rng, sd, speed = (np.asarray(a, dtype=float) for a in (range_m, range_sd_m, speed_m_s))
+    limit = max(COLLAPSED_REL_SD, float(max_range_rel_sd))
+    with np.errstate(invalid="ignore"):
+        conditions = [
+            ~(np.isfinite(rng) & np.isfinite(speed)),
+            ~np.isfinite(sd),
+            sd > limit * rng,
+            recorded & (rng < MIN_RANGE_M),
+            recorded & (rng > MAX_RANGE_M),
+            recorded & (speed > MAX_SPEED_M_S),
+        ]
+    reasons = [
+        "there is no finite estimate",
+        "J^T J is singular, so no one-sigma error can be given",
+        "its one-sigma range error exceeds the range itself (own-ship within one sigma: a "
+        "collapsed or runaway estimate, whose linearised error means nothing)",
+        f"it collapsed onto own-ship (nearer than {MIN_RANGE_M:g} m: within the error of "
+        "own-ship's navigation fixes)",
+        f"it diverged beyond {MAX_RANGE_M / 1e3:g} km, farther than a bearing reaches",
+        f"it diverged to a speed beyond {MAX_SPEED_M_S:g} m/s, faster than a vessel goes",
+    ]
+    return np.select(conditions, reasons, "").astype(object)

@@ -3,10 +3,13 @@ manoeuvres (course and speed changes at random times, at ship-like turn rates an
 accelerations) and nearly-constant-velocity wander (white random acceleration), either or
 both on top of the scenario's constant-velocity target.
 
-Manoeuvres (``ManoeuvreConfig``): a share ``prob`` of the targets manoeuvre ``count`` times.
-Manoeuvre j starts at a time drawn uniform over [``start_frac``, ``end_frac``] of the
-observation (sorted; one that would start before the previous has ended starts when it
-ends), turns by an angle uniform in [``course_change_min_deg``, ``course_change_max_deg``],
+Manoeuvres (``ManoeuvreConfig``): a share ``prob`` of the targets manoeuvre ``count`` times,
+each starting at a time drawn uniform over [``start_frac``, ``end_frac``] of the observation;
+or (``rate_per_h`` > 0) every target manoeuvres at the times of a Poisson process of that
+rate over the whole observation (at most ``MAX_POISSON`` times: a Poisson count given, its
+times are uniform). Start times are sorted; one that would start before the previous has
+ended starts when it ends. Each turns by an angle uniform in [``course_change_min_deg``,
+``course_change_max_deg``],
 left or right alike, at a rate uniform in [``turn_rate_min_deg_s``,
 ``turn_rate_max_deg_s``], and changes speed by a factor uniform in [1 - ``speed_change_rel``,
 1 + ``speed_change_rel``] at ``accel_m_s2``; it ends when both are done. Course and speed
@@ -22,15 +25,25 @@ MANOEUVRE_STREAM))`` and ``(shard, WANDER_STREAM)``, the manoeuvres drawn for ev
 whatever ``prob``: the targets and noise of a dataset do not change with these options (off,
 a dataset's bearings are as without them), a manoeuvre of a target is the same at every
 ``prob`` that makes it manoeuvre, and the wander at two q differs by its scale alone.
+
+What the log declares (``declared``): the wander q and, for Poisson manoeuvres, the prior
+the estimators assume (``manoeuvres.ManoeuvrePrior``: the same rate, and the velocity
+change's size and the durations implied by the turn and speed-change distributions,
+``declared_prior``); targets with ``prob`` manoeuvres (a fixed count at times within a
+window, not a rate) declare nothing: the estimators treat them as a recording's.
 """
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from tma.config import param, require
+from tma.families.bearings2d.manoeuvres import ManoeuvrePrior
 
 MANOEUVRE_STREAM, WANDER_STREAM = 2, 3  # spawn-key elements under the shard's (shard,)
+DURATIONS = 3  # a declared prior's durations: the means of the thirds of their distribution
+MAX_POISSON = 30  # Poisson manoeuvres per target at most (P(more) < 1e-9 below 10 per run)
 GAUSS_NODES = (0.5 - np.sqrt(15) / 10, 0.5, 0.5 + np.sqrt(15) / 10)  # on [0, 1]
 GAUSS_WEIGHTS = (5 / 18, 8 / 18, 5 / 18)
 
@@ -40,6 +53,9 @@ class ManoeuvreConfig:
     """Course and speed changes (module docstring); ``prob`` 0: none."""
 
     prob: float = param(0.0, "share of the targets that manoeuvre", "[0, 1]")
+    rate_per_h: float = param(0.0, "instead of prob: every target manoeuvres at the times of "
+                              "a Poisson process of this rate (per hour) over the observation",
+                              "[0, 1000]")
     count: int = param(1, "manoeuvres of each manoeuvring target", "[1, 100]")
     start_frac: float = param(0.3, "manoeuvres start within [start_frac, end_frac] of the "
                               "observation", "[0, 1]")
@@ -71,22 +87,56 @@ class TargetConfig:
     @property
     def moving(self) -> bool:
         """Whether the targets do anything but hold course and speed."""
-        return self.accel_psd_m2_s3 > 0 or self.manoeuvres.prob > 0
+        m = self.manoeuvres
+        return self.accel_psd_m2_s3 > 0 or m.prob > 0 or m.rate_per_h > 0
 
     def declared_psd(self) -> float | None:
-        """What the log declares of the targets' motion (``BearingsLog.accel_psd_m2_s3``)."""
+        """What the log declares of the targets' wander (``BearingsLog.accel_psd_m2_s3``)."""
         return self.accel_psd_m2_s3 if self.declared and self.manoeuvres.prob == 0 else None
+
+    def declared_manoeuvres(self, speed_m_s: float) -> ManoeuvrePrior | None:
+        """What the log declares of the targets' manoeuvres (``BearingsLog.manoeuvres``):
+        for Poisson manoeuvres, ``declared_prior`` at the population's RMS speed."""
+        m = self.manoeuvres
+        if not self.declared or m.prob > 0 or m.rate_per_h == 0:
+            return None
+        return declared_prior(m, speed_m_s)
 
 
 def check(cfg: TargetConfig, where: str):
     """The rules between fields (each field's own range is its ``param``'s)."""
     m = cfg.manoeuvres
+    require(m.prob == 0 or m.rate_per_h == 0, where,
+            "target.manoeuvres takes prob (a share of the targets) or rate_per_h (a Poisson "
+            "rate), not both")
     require(m.start_frac <= m.end_frac, where,
             "target.manoeuvres needs start_frac <= end_frac")
     require(m.course_change_min_deg <= m.course_change_max_deg, where,
             "target.manoeuvres needs course_change_min_deg <= course_change_max_deg")
     require(m.turn_rate_min_deg_s <= m.turn_rate_max_deg_s, where,
             "target.manoeuvres needs turn_rate_min_deg_s <= turn_rate_max_deg_s")
+
+
+def declared_prior(m: ManoeuvreConfig, speed_m_s: float) -> ManoeuvrePrior:
+    """The estimators' prior for the Poisson manoeuvres ``m`` of targets whose RMS speed is
+    ``speed_m_s``: the same rate; the velocity change's sd per axis, dv^2 = E|dv|^2 / 2 =
+    v^2 (1 + a^2 / 6 - E cos(phi)) for a turn phi uniform in [min, max] and a speed factor
+    uniform in [1 - a, 1 + a]; the durations, max(|phi| / turn rate, v |f - 1| / accel),
+    summarised by the means of the ``DURATIONS`` parts of their distribution (over a grid of
+    32 quantiles of each of phi, the turn rate and f)."""
+    lo, hi = np.deg2rad(m.course_change_min_deg), np.deg2rad(m.course_change_max_deg)
+    mean_cos = (math.sin(hi) - math.sin(lo)) / (hi - lo) if hi > lo else math.cos(lo)
+    a = m.speed_change_rel
+    dv_rel = math.sqrt(max(1.0 + a * a / 6.0 - mean_cos, 0.0))
+    u = (np.arange(32) + 0.5) / 32
+    phi = lo + (hi - lo) * u[:, None, None]
+    rate = np.deg2rad(m.turn_rate_min_deg_s + (m.turn_rate_max_deg_s - m.turn_rate_min_deg_s)
+                      * u[None, :, None])
+    f = 1.0 - a + 2.0 * a * u[None, None, :]
+    duration = np.sort(np.maximum(phi / rate, speed_m_s * np.abs(f - 1.0) / m.accel_m_s2),
+                       axis=None)
+    durations = tuple(float(part.mean()) for part in np.array_split(duration, DURATIONS))
+    return ManoeuvrePrior(m.rate_per_h, dv_rel * speed_m_s, durations)
 
 
 def _ramp(t, start, duration):
@@ -99,22 +149,34 @@ def _ramp(t, start, duration):
 
 def manoeuvre_plan(cfg: ManoeuvreConfig, duration_s, speed0, rng):
     """Per target (n = ``speed0.size``): start, turn (rad, signed: > 0 right), turn duration,
-    speed change (m/s) and its duration of each manoeuvre, arrays (count, n), and whether
-    the target manoeuvres (n,)."""
+    speed change (m/s) and its duration of each manoeuvre, arrays (slots, n) (a slot without
+    a manoeuvre: no turn, no speed change, start inf), whether the target manoeuvres (n,)
+    and the index of its last manoeuvre (n,; 0 where none)."""
     n = speed0.size
-    manoeuvres = rng.random(n) < cfg.prob
-    times = np.sort(rng.uniform(cfg.start_frac, cfg.end_frac, (cfg.count, n)), axis=0)
-    times *= duration_s
+    if cfg.rate_per_h > 0:
+        slots = MAX_POISSON
+        count = np.minimum(rng.poisson(cfg.rate_per_h / 3600.0 * duration_s, n), slots)
+        active = np.arange(slots)[:, None] < count
+        times = np.sort(np.where(active, rng.uniform(0.0, duration_s, (slots, n)), np.inf),
+                        axis=0)
+        manoeuvres = count > 0
+    else:
+        slots, active = cfg.count, None
+        manoeuvres = rng.random(n) < cfg.prob
+        times = np.sort(rng.uniform(cfg.start_frac, cfg.end_frac, (slots, n)), axis=0)
+        times *= duration_s
     angle = np.deg2rad(rng.uniform(cfg.course_change_min_deg, cfg.course_change_max_deg,
-                                   (cfg.count, n)))
-    turn = np.where(rng.random((cfg.count, n)) < 0.5, -angle, angle)
+                                   (slots, n)))
+    turn = np.where(rng.random((slots, n)) < 0.5, -angle, angle)
     rate = np.deg2rad(rng.uniform(cfg.turn_rate_min_deg_s, cfg.turn_rate_max_deg_s,
-                                  (cfg.count, n)))
-    factor = rng.uniform(1 - cfg.speed_change_rel, 1 + cfg.speed_change_rel, (cfg.count, n))
-    start = np.empty((cfg.count, n))
-    turn_s, dv, dv_s = np.abs(turn) / rate, np.empty((cfg.count, n)), np.empty((cfg.count, n))
+                                  (slots, n)))
+    factor = rng.uniform(1 - cfg.speed_change_rel, 1 + cfg.speed_change_rel, (slots, n))
+    if active is not None:
+        turn, factor = np.where(active, turn, 0.0), np.where(active, factor, 1.0)
+    start = np.empty((slots, n))
+    turn_s, dv, dv_s = np.abs(turn) / rate, np.empty((slots, n)), np.empty((slots, n))
     speed, end = speed0.copy(), np.zeros(n)
-    for j in range(cfg.count):
+    for j in range(slots):
         start[j] = np.maximum(times[j], end)
         dv[j] = speed * (factor[j] - 1)
         dv_s[j] = np.abs(dv[j]) / cfg.accel_m_s2
@@ -122,8 +184,9 @@ def manoeuvre_plan(cfg: ManoeuvreConfig, duration_s, speed0, rng):
         end = start[j] + np.maximum(turn_s[j], dv_s[j])
     off = ~manoeuvres
     turn[:, off], dv[:, off] = 0.0, 0.0
+    last = np.maximum(count - 1, 0) if active is not None else np.full(n, slots - 1)
     return {"start": start, "turn": turn, "turn_s": turn_s, "dv": dv, "dv_s": dv_s,
-            "manoeuvres": manoeuvres}
+            "manoeuvres": manoeuvres, "last": last}
 
 
 def course_speed(plan, course0, speed0, t):
@@ -185,11 +248,20 @@ def target_paths(cfg: TargetConfig, x0, y0, course0, speed0, t, manoeuvre_rng, w
         px, py, vx, vy = wander(cfg.accel_psd_m2_s3, t, n, wander_rng)
         x, y = x + px, y + py
         v_end = v_end + np.column_stack([vx[:, -1], vy[:, -1]])
-    on = plan["manoeuvres"]
-    last_start = np.where(on, plan["start"][-1], np.nan)
-    last_end = last_start + np.maximum(plan["turn_s"][-1], plan["dv_s"][-1])
-    speed_before = speed0 + plan["dv"][:-1].sum(axis=0)
+    # the last manoeuvre that started within the observation
+    # (delayed ones are sorted last; a slot without a manoeuvre starts at inf)
+    j = plan["last"] - np.sum(np.isfinite(plan["start"]) & (plan["start"] > t[-1]), axis=0)
+    on = plan["manoeuvres"] & (j >= 0)
+    j = np.maximum(j, 0)
+
+    def of(key):
+        return np.take_along_axis(plan[key], j[None], axis=0)[0]
+
+    last_start = np.where(on, of("start"), np.nan)
+    last_end = last_start + np.maximum(of("turn_s"), of("dv_s"))
+    before = np.arange(plan["dv"].shape[0])[:, None] < j
+    speed_before = speed0 + np.sum(np.where(before, plan["dv"], 0.0), axis=0)
     last = {"manoeuvre_start_s": last_start, "manoeuvre_end_s": last_end,
-            "course_change_deg": np.where(on, np.rad2deg(plan["turn"][-1]), np.nan),
-            "speed_change_rel": np.where(on, plan["dv"][-1] / speed_before, np.nan)}
+            "course_change_deg": np.where(on, np.rad2deg(of("turn")), np.nan),
+            "speed_change_rel": np.where(on, of("dv") / speed_before, np.nan)}
     return x, y, v_end, last

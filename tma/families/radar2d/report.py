@@ -12,7 +12,7 @@ import pandas as pd  # noqa: E402
 import pyarrow as pa  # noqa: E402
 
 from tma.families import estimator_class  # noqa: E402
-from tma.families.radar2d import paper  # noqa: E402
+from tma.families.radar2d import paper, real_motion_table  # noqa: E402
 from tma.families.radar2d.metrics import (  # noqa: E402
     DEFAULT_MEMORY,
     GATE_M,
@@ -76,7 +76,13 @@ def _intro(by_dataset: dict) -> str:
     return intro + "\n\n" + "\n".join(lines)
 
 
+# the other kinds of table an experiment may ask for (``report=``): vessels of an AIS recording
+REPORTS = {"real_motion": real_motion_table.write_real_motion_table}
+
+
 def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) -> list[Path]:
+    if report is not None:
+        return REPORTS[report](entries, tables_dir, table_name)
     # one set of segments per dataset, so that its rows are measured on the same scans: the
     # rule's J is the longest memory among the dataset's trackers (the default if none has one)
     configs = {e.dataset.name: e.dataset.manifest["config"] for e in entries}

@@ -11,8 +11,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tma.ais.recording import RealWindows
 from tma.config import param, require
 from tma.errors import ConfigError
+from tma.families.radar2d import real_motion
 from tma.families.radar2d.log import RadarLog, read_radar_log, write_radar_log
 from tma.io import arrow
 from tma.path import LegPath, leg_config
@@ -56,6 +58,8 @@ class Config(ScenarioConfig):
                                   "(0, inf)")
     seed: int = 20260103
     shard_size: int = 500
+    real: RealWindows = param(doc="the vessel from an AIS recording instead (real_motion.py)",
+                              factory=RealWindows)
 
     def __post_init__(self):
         super().__post_init__()
@@ -74,6 +78,8 @@ class Config(ScenarioConfig):
 
 
 def label(cfg: Config) -> str:
+    if cfg.real.file is not None:
+        return real_motion.label(cfg)
     return f"v{cfg.speed_m_s:g}-{cfg.noise}-n{cfg.n_tracks}"
 
 
@@ -93,6 +99,8 @@ def sensor_metadata(cfg: Config) -> dict:
 
 
 def simulate_shard(cfg: Config, shard_index: int):
+    if cfg.real.file is not None:  # real vessel motion from AIS (real_motion.py)
+        return real_motion.simulate_shard(cfg, shard_index)
     track_id = shard_track_ids(cfg, shard_index)
     n = track_id.size
     rng = shard_rng(cfg, shard_index)

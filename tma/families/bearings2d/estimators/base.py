@@ -1,6 +1,7 @@
 """The shared pieces of the bearings-only estimators: settings, the per-track status and
 one-sigma errors every output carries, and F / J^T J at a solution."""
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -8,8 +9,9 @@ import numpy as np
 from tma.config import param
 from tma.errors import InputError
 from tma.estimator import Estimator, EstimatorConfig
-from tma.families.bearings2d import ncv
+from tma.families.bearings2d import manoeuvres, ncv
 from tma.families.bearings2d.log import BearingsLog
+from tma.families.bearings2d.manoeuvres import RECORDED_MANOEUVRES, ManoeuvrePrior
 from tma.families.bearings2d.model import BearingTerms
 from tma.families.bearings2d.ncv import RECORDED_ACCEL_PSD
 from tma.families.bearings2d.status import (
@@ -55,6 +57,13 @@ class BearingsConfig(EstimatorConfig):
         None, "the targets' random acceleration, spectral density per axis (m^2/s^3; 0: "
         "constant velocity); null: the log's declared one, else (a recording) real-ship "
         "motion, ncv.RECORDED_ACCEL_PSD", "[0, 1e6)")
+    manoeuvre_rate_per_h: float | None = param(
+        None, "the targets' manoeuvres per hour (Poisson; 0: none); null: the log's declared "
+        "ones, else (a recording) real-ship manoeuvres, manoeuvres.RECORDED_MANOEUVRES",
+        "[0, 1000]")
+    motion_prior_scale: float = param(1.0, "the targets' assumed random acceleration and "
+                                      "manoeuvre rate times this (1: as declared or assumed; "
+                                      "to measure what a wrong prior does)", "(0, 1e6)")
     motion_test: str = param("auto", "the trend test of the residual sequence (status "
                              "manoeuvring): auto runs it on a log that declares its targets' "
                              "motion or its noise not (a recording)", choices=MOTION_TESTS)
@@ -106,9 +115,7 @@ class BearingsEstimator(Estimator):
         if valid.all():
             valid = None  # every bearing present: skip masking in the hot loops
         self.log_sigma_deg = log.sigma_deg  # the log's nominal noise (None: unknown), for solve
-        q = cfg.accel_psd_m2_s3
-        if q is None:
-            q = RECORDED_ACCEL_PSD if log.accel_psd_m2_s3 is None else log.accel_psd_m2_s3
+        q, prior = self.motion(log)
         self.accel_psd = q  # the targets' motion the outputs assume, for solve
         undeclared = log.accel_psd_m2_s3 is None or log.sigma_deg is None
         test = cfg.motion_test == "on" or (cfg.motion_test == "auto"
@@ -134,7 +141,8 @@ class BearingsEstimator(Estimator):
         n = theta.shape[0]
         motion_p = np.full(n, np.nan)
         approximate = np.full(n, not self.honest_errors)
-        follows = q > 0 and self.models_motion
+        follows = (q > 0 or prior is not None) and self.models_motion
+        p_manoeuvre = np.full(n, np.nan)
         # residuals below any sensor's noise (a noiseless log, declared or not) have no
         # pattern to test: round-off has one
         tested = np.full(n, test) & (np.sqrt(sigma2) >= ncv.MIN_SIGMA_RAD)
@@ -152,9 +160,12 @@ class BearingsEstimator(Estimator):
                 if rows.size == 0 or not (iterate or test):
                     continue
                 fit = self._motion_fit(t, ox, oy, measured, use, first, last, theta, rows,
-                                       q if follows else 0.0, sigma2, iterate,
-                                       log.sigma_deg is None and iterate, own_fit_test)
+                                       q if follows else 0.0, prior if follows else None,
+                                       sigma2, iterate, log.sigma_deg is None and iterate,
+                                       own_fit_test)
                 innovations[rows] = fit["innovations"]
+                if "p_manoeuvre" in fit:
+                    p_manoeuvre[rows] = fit["p_manoeuvre"]
                 if iterate:
                     theta, cost, jtj, sigma2, fit_p = (
                         np.array(v, dtype=float) for v in (theta, cost, jtj, sigma2, fit_p))
@@ -165,7 +176,7 @@ class BearingsEstimator(Estimator):
             if test:
                 motion_p = np.where(tested, trend_test_p(innovations, t, cfg.motion_terms),
                                     np.nan)
-        approximate |= q > 0 and not self.models_motion
+        approximate |= (q > 0 or prior is not None) and not self.models_motion
         trust = assess(theta, jtj, sigma2, fit_p, motion_p, out["converged"], approximate,
                        t[last], ox[last], oy[last], cfg, motion_tested=tested)
         leg_start = out.pop("leg_start_s", t[first])
@@ -180,10 +191,31 @@ class BearingsEstimator(Estimator):
             "accel_psd_m2_s3": np.full(n, float(q) if self.models_motion else 0.0),
             "motion_p_value": motion_p,
         }
+        if prior is not None and self.models_motion:  # (not in the constant-velocity runs)
+            columns["manoeuvre_rate_per_h"] = np.full(n, prior.rate_per_h)
+            columns["p_manoeuvre"] = p_manoeuvre
         for i in range(4):
             for j in range(i, 4):
                 columns[f"jtj_{i}{j}"] = jtj[:, i, j]
         return columns
+
+    def motion(self, log: BearingsLog) -> tuple[float, ManoeuvrePrior | None]:
+        """The targets' motion the outputs assume: the random acceleration q (m^2/s^3) and
+        the manoeuvres' prior (None: no manoeuvres), as set, else as the log declares, else
+        (a recording, which declares nothing) real-ship motion; both scaled by
+        ``motion_prior_scale``."""
+        cfg = self.config
+        recorded = log.accel_psd_m2_s3 is None
+        q = cfg.accel_psd_m2_s3
+        if q is None:
+            q = RECORDED_ACCEL_PSD if recorded else log.accel_psd_m2_s3
+        prior = RECORDED_MANOEUVRES if recorded else log.manoeuvres
+        if cfg.manoeuvre_rate_per_h is not None:
+            prior = dataclasses.replace(prior or RECORDED_MANOEUVRES,
+                                        rate_per_h=cfg.manoeuvre_rate_per_h)
+        if prior is not None:
+            prior = prior.scaled(cfg.motion_prior_scale)
+        return q * cfg.motion_prior_scale, prior if prior and prior.rate_per_h > 0 else None
 
     def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
         """``valid``: mask or None (all present); ``first``: index of each track's first
@@ -194,20 +226,25 @@ class BearingsEstimator(Estimator):
         raise NotImplementedError
 
     @staticmethod
-    def _motion_fit(t, ox, oy, measured, use, first, last, theta, rows, q, sigma2, iterate,
-                    sigma_unknown, robust):
-        """``ncv.smooth`` of tracks ``rows`` (``iterate`` False: about their constant-velocity
-        line); a robust fit's (``robust``) bearings more than ``GROSS_SIGMAS`` off the
-        motion fit are outliers: dropped, and fitted again."""
+    def _motion_fit(t, ox, oy, measured, use, first, last, theta, rows, q, prior, sigma2,
+                    iterate, sigma_unknown, robust):
+        """The motion fit of tracks ``rows``: ``ncv.smooth`` (``iterate`` False: about their
+        constant-velocity line), or with a manoeuvre ``prior`` ``manoeuvres.mixture``; a
+        robust fit's (``robust``) bearings more than ``GROSS_SIGMAS`` off the motion fit are
+        outliers: dropped, and fitted again."""
         part = None if use is None else use[rows]
         sigma_rad = np.full(rows.size, np.nan) if sigma_unknown else np.sqrt(sigma2[rows])
-        args = (t, ox, oy, measured[rows])
-        fit = ncv.smooth(*args, part, first[rows], last[rows], theta[rows], q, sigma_rad,
-                         iterate=iterate)
+
+        def fit_of(part):
+            args = (t, ox, oy, measured[rows], part, first[rows], last[rows], theta[rows], q)
+            if prior is None or not iterate:
+                return ncv.smooth(*args, sigma_rad, iterate=iterate)
+            return manoeuvres.mixture(*args, prior, sigma_rad)
+
+        fit = fit_of(part)
         wild = np.abs(np.nan_to_num(fit["innovations"])) > GROSS_SIGMAS
         if iterate and robust and wild.any():
-            part = (np.ones(wild.shape, dtype=bool) if part is None else part) & ~wild
-            fit = ncv.smooth(*args, part, first[rows], last[rows], theta[rows], q, sigma_rad)
+            fit = fit_of((np.ones(wild.shape, dtype=bool) if part is None else part) & ~wild)
         return fit
 
     @staticmethod

@@ -1,0 +1,161 @@
+"""The manoeuvring-target model (``manoeuvres.py``) against independent references: each
+component's MAP state, covariance and marginal likelihood against a dense least-squares
+solution of the same problem (scipy), and the mixture against its definition."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+from tma.families.bearings2d import manoeuvres, ncv
+
+
+def _geometry(K=40, dt=10.0, seed=1, turn_at=None):
+    """Own-ship on two legs at 10 m/s (turning at a third of the time), a target 4 km away;
+    with ``turn_at`` (s) the target turns 60 deg there. Bearings with 0.3 deg noise."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(K) * dt
+    ox = np.where(t < t[-1] / 3, 0.0, 10.0 * (t - t[-1] / 3))
+    oy = np.minimum(t, t[-1] / 3) * 10.0
+    vx, vy = np.full(K, 3.0), np.full(K, -2.0)
+    if turn_at is not None:
+        c, s = math.cos(math.radians(60)), math.sin(math.radians(60))
+        after = t >= turn_at
+        vx[after], vy[after] = c * 3.0 + s * -2.0, -s * 3.0 + c * -2.0
+    x = 3000.0 + np.concatenate([[0.0], np.cumsum(vx[:-1] * dt)])
+    y = 2500.0 + np.concatenate([[0.0], np.cumsum(vy[:-1] * dt)])
+    sigma = math.radians(0.3)
+    z = np.arctan2(x - ox, y - oy) + sigma * rng.standard_normal(K)
+    theta = np.array([3000.0, 2500.0, 3.0, -2.0])
+    return t, ox, oy, z, sigma, theta
+
+
+def _dense(t, ox, oy, z, levels, sigma, theta, prior, p0):
+    """The same problem as one dense least squares in (first state, process noises u_k ~
+    N(0, I)): x_k = F x_{k-1} + L_k u_k, L_k the Cholesky factor of q_k Q1(T) per axis, with
+    the component's weak Gaussian prior (mean ``prior``, variances ``p0``: position,
+    velocity) on the first state; returns (-F / 2 - log |det R|, the log marginal
+    likelihood up to a constant of sigma and the prior, state at the last epoch, its
+    covariance)."""
+    K = t.size
+
+    def states(w):
+        x = np.empty((K, 4))
+        x[0] = w[:4]
+        for k in range(1, K):
+            T = t[k] - t[k - 1]
+            q = levels[k]
+            x[k] = [x[k - 1, 0] + T * x[k - 1, 2], x[k - 1, 1] + T * x[k - 1, 3],
+                    x[k - 1, 2], x[k - 1, 3]]
+            if q > 0:
+                l11 = math.sqrt(q * T**3 / 3)
+                l21 = q * T**2 / 2 / l11
+                l22 = math.sqrt(q * T - l21**2)
+                u = w[4 * k: 4 * k + 4]
+                x[k] += [l11 * u[0], l11 * u[1], l21 * u[0] + l22 * u[2],
+                         l21 * u[1] + l22 * u[3]]
+        return x
+
+    sd0 = np.sqrt(np.repeat(p0, 2))
+
+    def residuals(w):
+        x = states(w)
+        r = z - np.arctan2(x[:, 0] - ox, x[:, 1] - oy)
+        r = (r + math.pi) % (2 * math.pi) - math.pi
+        return np.concatenate([r / sigma, (w[:4] - prior) / sd0, w[4:]])
+
+    w0 = np.zeros(4 * K)
+    w0[:4] = theta
+    fit = least_squares(residuals, w0, jac="3-point", method="lm", xtol=1e-15, ftol=1e-15,
+                        gtol=1e-15, max_nfev=20000)
+    J = fit.jac
+    H = J.T @ J
+    sign, logdet = np.linalg.slogdet(H)
+    assert sign > 0
+    cov_w = np.linalg.inv(H)
+    # the last state is linear in w about the solution: its Jacobian by differences
+    eps = 1e-6
+    base = states(fit.x)[-1]
+    A = np.empty((4, w0.size))
+    for j in range(w0.size):
+        dw = np.zeros(w0.size)
+        dw[j] = eps * max(1.0, abs(fit.x[j]))
+        A[:, j] = (states(fit.x + dw)[-1] - base) / dw[j]
+    return -0.5 * 2 * fit.cost - 0.5 * logdet, base, A @ cov_w @ A.T
+
+
+def _levels(t, q, tau=None, q_burst=0.0, duration=0.0):
+    levels = np.full(t.size, q)
+    if tau is not None:
+        lam = np.empty(t.size)
+        manoeuvres._levels(t, 0, t.size - 1, q, np.array([tau]), np.array([duration]),
+                           np.array([q_burst]), 1, lam)
+        levels = lam
+    return levels
+
+
+@pytest.mark.parametrize("turn_at", [None, 270.0])
+def test_each_component_matches_a_dense_least_squares_solution(turn_at):
+    t, ox, oy, z, sigma, theta = _geometry(turn_at=turn_at)
+    p0 = np.array([(ncv.PRIOR_RANGES * math.hypot(theta[0] - ox[0], theta[1] - oy[0])) ** 2,
+                   ncv.PRIOR_SPEED_M_S**2])
+    patterns = [_levels(t, 1e-4), _levels(t, 1e-4, tau=250.0, q_burst=0.1, duration=60.0)]
+    ours, ref = [], []
+    for levels in patterns:
+        loglik, mean, cov, _ = manoeuvres.component(t, ox, oy, z, theta, levels, sigma)
+        ref_loglik, ref_mean, ref_cov = _dense(t, ox, oy, z, levels, sigma, theta, theta, p0)
+        assert np.all(np.abs(mean - ref_mean) <= 1e-3 * np.sqrt(np.diag(cov))), (mean, ref_mean)
+        # (the reference's Jacobians are finite differences)
+        np.testing.assert_allclose(cov, ref_cov, rtol=1e-3, atol=1e-9 * np.abs(cov).max())
+        ours.append(loglik)
+        ref.append(ref_loglik)
+    # the likelihoods agree up to one constant (sigma's and the prior's), so do their
+    # differences: the components' weights to 1 %
+    assert ours[1] - ours[0] == pytest.approx(ref[1] - ref[0], abs=0.01)
+    if turn_at is not None:  # a turn there: the burst component explains the bearings far better
+        assert ours[1] - ours[0] > 5
+
+
+def test_without_manoeuvres_the_mixture_is_the_ncv_answer():
+    t, ox, oy, z, sigma, theta = _geometry()
+    args = (t, ox, oy, z[None], None, np.array([0]), np.array([t.size - 1]), theta[None], 1e-4)
+    steady = ncv.smooth(*args, np.array([sigma]))
+    prior = manoeuvres.ManoeuvrePrior(0.0, 2.0, (60.0, 240.0))
+    mixed = manoeuvres.mixture(*args, prior, np.array([sigma]))
+    np.testing.assert_array_equal(mixed["theta"], steady["theta"])
+    np.testing.assert_array_equal(mixed["cov_theta"], steady["cov_theta"])
+    assert mixed["p_manoeuvre"][0] == 0.0
+
+
+def test_the_mixture_averages_its_components_by_prior_and_likelihood():
+    """A turn the bearings show: the mixture's answer against Bayesian model averaging done
+    by hand over every configuration of none or one manoeuvre (``component``, each refined,
+    weighted by ``log_priors``); at a low rate the configurations of two or three
+    manoeuvres the mixture also weighs carry a few per cent, within the tolerance."""
+    t, ox, oy, z, sigma, theta = _geometry(turn_at=270.0)
+    prior = manoeuvres.ManoeuvrePrior(0.5, 2.0, (30.0, 120.0), step_s=100.0)
+    q = 1e-4
+    mixed = manoeuvres.mixture(t, ox, oy, z[None], None, np.array([0]), np.array([t.size - 1]),
+                               theta[None], q, prior, np.array([sigma]))
+    log_none, taus, log_each = manoeuvres.log_priors(prior, t[:1], t[-1:])
+    none = manoeuvres.component(t, ox, oy, z, theta, _levels(t, q), sigma)
+    comps, logw = [none], [log_none[0] + none[0]]
+    for j, tau in enumerate(taus[0]):
+        for duration in prior.durations_s:
+            levels = _levels(t, q, tau=tau, q_burst=prior.dv_m_s**2 / duration,
+                             duration=duration)
+            c = manoeuvres.component(t, ox, oy, z, theta, levels, sigma, start=none[3],
+                                     prior_state=none[3][0])
+            comps.append(c)
+            logw.append(log_none[0] + log_each[0, j] + c[0])
+    w = np.exp(np.array(logw) - max(logw))
+    w /= w.sum()
+    means = np.array([c[1] for c in comps])
+    mean = w @ means
+    cov = sum(wi * (c[2] + np.outer(m - mean, m - mean)) for wi, c, m in zip(w, comps, means))
+    sd = np.sqrt(np.diag(cov))
+    assert np.all(np.abs(mixed["state"][0] - mean) <= 0.1 * sd), (mixed["state"][0], mean)
+    np.testing.assert_allclose(np.sqrt(np.diag(mixed["cov"][0])), sd, rtol=0.1)
+    assert mixed["p_manoeuvre"][0] == pytest.approx(1 - w[0], abs=0.01)
+    assert mixed["p_manoeuvre"][0] > 0.99  # the turn is plain in the bearings

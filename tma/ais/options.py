@@ -1,0 +1,125 @@
+"""The ``truth.*`` options of ``ingest`` (a recorded log scored against the AIS of its trial)
+and the errors a truth file causes.
+
+``truth=FILE`` on the command line is ``truth.file=FILE`` (``shorthand``), so that
+``truth.match={T1:235031617}`` and the other keys sit beside it in one group. In Python,
+``tma.read_log(path, truth="ais.csv")`` or ``truth={"file": ..., "match": {...}}``.
+"""
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from tma.config import Form, Params, param
+from tma.errors import ConfigError, InputError
+
+FIT_SIGMAS = 3.0  # a ship fits when its RMS bearing difference is within this many sigma
+MIN_FIT_DEG = 0.1  # ... and never needs to fit closer than this (sigma 0, or tiny)
+
+
+class TruthError(InputError, ValueError):
+    """A truth file or match that cannot give the truth: one line for the user; a
+    ``ValueError`` for pandas users."""
+
+
+class TruthFileNotFound(InputError, FileNotFoundError):
+    """``truth.file`` names no file."""
+
+
+def _match_problem(value) -> str | None:
+    """What is wrong with a ``truth.match`` value ('' when the form says it), or None."""
+    if not isinstance(value, dict) or not value:
+        return ""
+    for contact, mmsi in value.items():
+        text = str(mmsi).strip()
+        if isinstance(mmsi, bool) or not text.isdigit() or not 10**6 <= int(text) < 10**9:
+            return f"contact {contact}'s MMSI {mmsi!r} is not a whole number of 7 to 9 digits"
+    return None
+
+
+MATCH = Form("a map {contact: MMSI} (truth.match={T1:235031617}), MMSIs of 7 to 9 digits",
+             _match_problem)
+
+
+@dataclass
+class TruthOptions(Params):
+    """What ``ingest`` scores a recorded log against (``truth.*``)."""
+
+    file: str | None = param(None, "the AIS of the trial: decoded position reports (CSV with "
+                             "time, MMSI, latitude, longitude) or NMEA !AIVDM/!AIVDO sentences "
+                             "with time stamps; null: no truth")
+    match: Any = param(None, "which ship each contact is: {contact: MMSI} (contacts left out "
+                       "are matched by their bearings); null: every contact by its bearings",
+                       form=MATCH)
+    max_gap_s: float = param(90.0, "the truth of a contact is refused where its ship's AIS has "
+                             "a gap longer than this (s) over the contact's bearings",
+                             "(0, 1e6)")
+    max_rms_deg: float | None = param(None, "a ship fits a contact when the RMS difference "
+                                      "between the bearings it would give and the contact's is "
+                                      "at most this (deg); null: 3 sigma (the log's nominal "
+                                      "sigma, else estimated from the bearings' second "
+                                      "differences), at least 0.1 deg", "(0, 180)")
+    ambiguity_ratio: float = param(2.0, "a second ship that fits with an RMS within this factor "
+                                   "of the best one's makes the match ambiguous (no truth)",
+                                   "[1, 1e3)")
+    max_range_km: float = param(100.0, "a ship farther than this (km) from own-ship at every "
+                                "bearing of a contact is not that contact", "(0, 2000)")
+    velocity_span_s: float = param(120.0, "the true course and speed at the last bearing: the "
+                                   "ship's mean velocity over this span before it (s)",
+                                   "(0, 3600)")
+
+    @property
+    def where(self) -> str:
+        return ""  # the keys say it: truth.max_gap_s
+
+    @property
+    def key_prefix(self) -> str:
+        return "truth."
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.file is not None and not str(self.file).strip():
+            raise ConfigError("truth.file must be a file path, got ''")
+        self.match = _match_map(self.match)
+        if self.match and self.file is None:
+            raise ConfigError("truth.match needs the AIS file: give truth=FILE")
+
+
+def _match_map(value) -> dict[str, int] | None:
+    """``{contact: mmsi}`` with contacts as text and MMSIs as integers."""
+    if value is None:
+        return None
+    problem = _match_problem(value)
+    if problem:
+        raise ConfigError(f"truth.match={value}: {problem}; truth.match must be {MATCH.text}")
+    if problem is not None:
+        raise ConfigError(f"truth.match must be {MATCH.text}, got '{value}'")
+    return {str(contact): int(str(mmsi).strip()) for contact, mmsi in value.items()}
+
+
+def truth_options(node) -> TruthOptions:
+    """The truth options from a path (``truth=FILE``), a config node of the group, or None."""
+    if isinstance(node, TruthOptions):
+        return node
+    if node is None:
+        node = {}
+    elif not isinstance(node, dict):
+        from omegaconf import DictConfig, OmegaConf
+
+        node = (OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig)
+                else {"file": str(node)})
+    known = TruthOptions.__dataclass_fields__
+    unknown = [k for k in node if k not in known]
+    if unknown:
+        raise ConfigError(f"unknown option truth.{unknown[0]} (the truth options: "
+                          f"{', '.join(f'truth.{k}' for k in known)})")
+    if isinstance(node.get("file"), Path):
+        node = {**node, "file": str(node["file"])}
+    return TruthOptions(**node)
+
+
+def shorthand(arguments: list[str]) -> list[str]:
+    """The command line with ``truth=FILE`` as ``truth.file=FILE`` (the group holds
+    ``truth.match`` and the bounds beside the file)."""
+    return [f"truth.file={a.split('=', 1)[1]}" if a.startswith("truth=") else a
+            for a in arguments]

@@ -1,0 +1,316 @@
+"""AIS position reports from a file, as one table: MMSI, UTC time, latitude, longitude.
+
+Two kinds of file, told apart by their content:
+
+- **decoded reports** (CSV; gzip too), as the common exports write them: a time, an MMSI, a
+  latitude and a longitude column, found by name in any case (``TIME``, ``MMSI``, ``LAT``,
+  ``LON`` below: Danish Maritime Authority ``# Timestamp`` (dd/mm/yyyy), MarineCadastre
+  ``BaseDateTime``, Stone Soup's Solent file ``Time``/``Latitude_degrees``...), other
+  columns ignored. Times: ISO-8601 (a time without zone is UTC, as AIS time is, and noted),
+  DMA's dd/mm/yyyy HH:MM:SS, or Unix time (s, ms, us, ns by magnitude);
+- **raw NMEA** ``!AIVDM``/``!AIVDO`` sentences (any talker), each with a time stamp: a tag
+  block's ``c:`` (Unix time), an ISO-8601 or Unix time before the sentence, or a Unix time
+  after its checksum. Decoded by pyais; multi-part messages are assembled (their time is
+  that of their last part). Position reports are types 1, 2, 3 (class A), 18, 19 (class B)
+  and 27 (long range); other types (static data, base stations...) are counted and not used.
+
+Left out and counted per reason, with their line numbers (``tma.sources.base.Dropped``): a
+bad checksum, a sentence pyais cannot read or decode, a multi-part message missing a part, a
+sentence without a time stamp, a missing or unreadable time, MMSI or position, a position
+"not available" (latitude 91, longitude 181) or off the globe. A file of another kind (an
+MCAP log, own-ship NMEA, a bearing log) or with no usable report left is refused in one line.
+Times are the receiver's stamps (the reports' own UTC second is not used).
+"""
+
+import gzip
+import re
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+
+from tma.ais.options import TruthError, TruthFileNotFound
+from tma.sources.base import Dropped, line_places
+from tma.utc import UNIX_FROM_S, UNIX_MAGNITUDE, UNIX_SCALE_NS, UTC_FROM_NS
+
+POSITION_TYPES = (1, 2, 3, 18, 19, 27)
+TIME = ("timestamp_utc", "timestamp", "basedatetime", "time_utc", "datetime", "date_time",
+        "time", "utc", "t", "received", "time_s")
+MMSI = ("mmsi", "userid", "user_id", "mmsi_number", "shipid")
+LAT = ("latitude_deg", "latitude_degrees", "latitude", "lat_deg", "lat")
+LON = ("longitude_deg", "longitude_degrees", "longitude", "lon_deg", "lon", "long", "lng")
+SENTENCE = re.compile(rb"(?:\\[^\\]*\\)?![A-Z]{2}VD[MO],[^*\s]*\*[0-9A-Fa-f]{2}")
+AIS_IN = re.compile(rb"![A-Z]{2}VD[MO],")
+TAG_TIME = re.compile(rb"^\\[^\\]*\bc:(\d+(?:\.\d+)?)")
+DMA_TIME = re.compile(r"^\d{2}/\d{2}/\d{4}")
+MCAP_MAGIC = b"\x89MCAP"
+GZIP_MAGIC = b"\x1f\x8b"
+TYPE_NAMES = {4: "base station", 5: "static and voyage data", 8: "binary broadcast",
+              21: "aid to navigation", 24: "class B static data"}
+
+
+@dataclass
+class Reports:
+    """Position reports, sorted by MMSI then time: ``mmsi`` (int64), ``t_ns`` (UTC ns since
+    1970, int64), ``lat_deg``, ``lon_deg`` (WGS84); ``kind`` ``csv`` or ``nmea``; ``dropped``
+    what was left out and why; ``notes`` what was found by itself."""
+
+    source: str
+    kind: str
+    mmsi: np.ndarray
+    t_ns: np.ndarray
+    lat_deg: np.ndarray
+    lon_deg: np.ndarray
+    dropped: Dropped = field(default_factory=Dropped)
+    notes: list[str] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return self.mmsi.size
+
+    def span_text(self) -> str:
+        """``2016-01-12T13:02:11Z to 14:26:41Z`` (whole seconds)."""
+        a, b = (datetime.fromtimestamp(v // 10**9, UTC) for v in (self.t_ns.min(),
+                                                                   self.t_ns.max()))
+        end = b.strftime("%H:%M:%SZ" if a.date() == b.date() else "%Y-%m-%dT%H:%M:%SZ")
+        return f"{a.strftime('%Y-%m-%dT%H:%M:%SZ')} to {end}"
+
+    def record(self) -> dict:
+        """What a dataset's manifest keeps of the file read."""
+        return {"kind": self.kind, "reports": len(self), "ships": int(np.unique(self.mmsi).size),
+                "dropped": self.dropped.record(), "notes": list(self.notes)}
+
+
+def read_reports(path) -> Reports:
+    """The position reports of an AIS file (module docstring); ``TruthError`` for a file of
+    another kind or without a usable report, ``TruthFileNotFound`` for no file."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise TruthFileNotFound(f"truth={path}: no such file") from None
+    except IsADirectoryError:
+        raise TruthError(f"truth={path}: a directory, not an AIS file") from None
+    if data.startswith(GZIP_MAGIC):
+        try:
+            data = gzip.decompress(data)
+        except (OSError, EOFError) as exc:
+            raise TruthError(f"truth={path}: a damaged gzip file ({exc})") from None
+    if data.startswith(MCAP_MAGIC):
+        raise TruthError(f"truth={path}: an MCAP log, not AIS: truth= takes decoded AIS "
+                         "position reports (CSV: time, MMSI, latitude, longitude) or NMEA "
+                         "!AIVDM/!AIVDO sentences; give the log as input=")
+    if b"\x00" in data[:4096]:
+        raise TruthError(f"truth={path}: a binary file, not AIS position reports (CSV) or "
+                         "NMEA !AIVDM/!AIVDO sentences")
+    reports = (_read_nmea(path, data) if AIS_IN.search(data[:65536]) else
+               _read_csv(path, data))
+    if not len(reports):
+        why = reports.dropped.text() or "the file holds none"
+        raise TruthError(f"truth={path}: no AIS position report could be read ({why})")
+    order = np.lexsort((reports.t_ns, reports.mmsi))
+    for name in ("mmsi", "t_ns", "lat_deg", "lon_deg"):
+        setattr(reports, name, getattr(reports, name)[order])
+    return reports
+
+
+# -- raw NMEA ----------------------------------------------------------------------------------
+
+def _read_nmea(path: Path, data: bytes) -> Reports:
+    from pyais.exceptions import AISBaseException
+    from pyais.messages import AISSentence, NMEASentenceFactory
+
+    dropped, rows, others, pending = Dropped("drop"), [], {}, {}
+    bad = {"bad checksum": [], "not a readable AIS sentence": [], "no time stamp": [],
+           "undecodable AIS message": [], "position not available (lat 91, lon 181)": [],
+           "multi-part message missing a part": []}
+    zoneless = False
+    for number, line in enumerate(data.splitlines(), start=1):
+        found = SENTENCE.search(line)
+        if found is None:
+            if line.strip():
+                bad["not a readable AIS sentence"].append(number)
+            continue
+        raw = found.group(0)
+        try:
+            sentence = NMEASentenceFactory.produce(raw)
+        except (AISBaseException, ValueError):
+            bad["not a readable AIS sentence"].append(number)
+            continue
+        if not sentence.is_valid:
+            bad["bad checksum"].append(number)
+            continue
+        t_ns, naive = _line_time(raw, line[:found.start()], line[found.end():])
+        zoneless |= naive
+        if t_ns is None:
+            bad["no time stamp"].append(number)
+            continue
+        if sentence.frag_cnt > 1:  # a part of a multi-part message: wait for the others
+            key = (sentence.talker_id, sentence.channel, sentence.seq_id)
+            parts = pending.get(key)
+            if sentence.frag_num == 1 or parts is None:
+                if parts:
+                    bad["multi-part message missing a part"].append(parts[0][1])
+                parts = pending[key] = []
+            parts.append((sentence, number))
+            if len(parts) < sentence.frag_cnt:
+                continue
+            del pending[key]
+            if [p.frag_num for p, _ in parts] != list(range(1, sentence.frag_cnt + 1)):
+                bad["multi-part message missing a part"].append(parts[0][1])
+                continue
+            sentence = AISSentence.assemble_from_iterable([p for p, _ in parts])
+        try:
+            message = sentence.decode()
+            kind = int(message.msg_type)
+            if kind in POSITION_TYPES:
+                lat, lon, mmsi = float(message.lat), float(message.lon), int(message.mmsi)
+        except (AISBaseException, ValueError, TypeError, AttributeError, KeyError):
+            bad["undecodable AIS message"].append(number)
+            continue
+        if kind not in POSITION_TYPES:
+            others[kind] = others.get(kind, 0) + 1
+        elif not (abs(lat) <= 90 and abs(lon) <= 180):
+            bad["position not available (lat 91, lon 181)"].append(number)
+        else:
+            rows.append((mmsi, t_ns, lat, lon))
+    for parts in pending.values():
+        bad["multi-part message missing a part"].append(parts[0][1])
+    for reason, lines in bad.items():
+        if lines:
+            dropped.add(reason, len(lines), [f"line {n}" for n in lines[:5]])
+    notes = []
+    if others:
+        notes.append(f"{path.name}: {sum(others.values())} AIS message(s) that are not position "
+                     "reports, not used (" + ", ".join(
+                         f"{n} of type {k}" + (f" {TYPE_NAMES[k]}" if k in TYPE_NAMES else "")
+                         for k, n in sorted(others.items())) + ")")
+    if zoneless:
+        notes.append(f"{path.name}: time stamps without a zone taken as UTC (AIS time is UTC)")
+    table = np.array(rows, dtype=float).reshape(-1, 4)
+    return Reports(str(path), "nmea", table[:, 0].astype(np.int64),
+                   np.array([r[1] for r in rows], dtype=np.int64), table[:, 2], table[:, 3],
+                   dropped, notes)
+
+
+def _line_time(sentence: bytes, before: bytes, after: bytes) -> tuple[int | None, bool]:
+    """UTC ns of a sentence's line: its tag block's ``c:``, else a time before it, else a
+    Unix time after its checksum; and whether the text had no zone (taken as UTC)."""
+    tag = TAG_TIME.match(sentence)
+    if tag:
+        return _unix_ns(float(tag.group(1))), False
+    text = before.decode("ascii", "replace").strip().strip(",;")
+    if text:
+        return _text_ns(text)
+    text = after.decode("ascii", "replace").strip().strip(",;").split(",")[0].strip()
+    if text:
+        return _text_ns(text)
+    return None, False
+
+
+def _unix_ns(value: float) -> int | None:
+    """Unix time in s, ms, us or ns (by magnitude) as UTC ns; None below 1973."""
+    unit = next((u for bound, u in UNIX_MAGNITUDE if value >= bound), None)
+    return None if unit is None else int(round(value * UNIX_SCALE_NS[unit]))
+
+
+def _text_ns(text: str) -> tuple[int | None, bool]:
+    try:
+        return _unix_ns(float(text)), False
+    except ValueError:
+        pass
+    try:
+        when = datetime.fromisoformat(text.replace("Z", "+00:00").replace("z", "+00:00"))
+    except ValueError:
+        return None, False
+    naive = when.tzinfo is None
+    when = when.replace(tzinfo=UTC) if naive else when
+    ns = int(round(when.timestamp() * 1e6)) * 1000
+    return (ns if ns >= UTC_FROM_NS else None), naive
+
+
+# -- decoded reports (CSV) ---------------------------------------------------------------------
+
+def _normal(name: str) -> str:
+    return re.sub(r"\s+", "_", str(name).strip().lstrip("#").strip().lower())
+
+
+def _read_csv(path: Path, data: bytes) -> Reports:
+    import io
+
+    import pandas as pd
+
+    text = data.decode("utf-8-sig", errors="replace")
+    first = next((line for line in text.splitlines() if line.strip()), "")
+    if first.lstrip().startswith("$"):
+        raise TruthError(f"truth={path}: NMEA without AIS sentences (own-ship navigation: "
+                         "GGA/RMC?); truth= takes the ships' AIS: NMEA !AIVDM/!AIVDO sentences "
+                         "or decoded position reports (CSV: time, MMSI, latitude, longitude)")
+    delimiter = max(",;\t|", key=first.count)
+    try:
+        frame = pd.read_csv(io.StringIO(text), sep=delimiter, dtype=str, keep_default_na=False,
+                            skipinitialspace=True)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, ValueError) as exc:
+        raise TruthError(f"truth={path}: not a table of AIS position reports ("
+                         f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__})"
+                         ) from None
+    names = {_normal(c): c for c in frame.columns}
+    found = {role: next((names[n] for n in spellings if n in names), None)
+             for role, spellings in (("time", TIME), ("mmsi", MMSI), ("lat", LAT),
+                                     ("lon", LON))}
+    missing = [role for role, col in found.items() if col is None]
+    if missing:
+        shown = ", ".join(map(str, frame.columns[:12])) + (", ..." if frame.shape[1] > 12 else "")
+        kind = (" (a bearing log? truth= takes the ships' AIS, input= the bearings)"
+                if any("bearing" in _normal(c) for c in frame.columns) else "")
+        raise TruthError(f"truth={path}: not AIS position reports: no {' or '.join(missing)} "
+                         f"column among {shown}{kind}; the reports need a time "
+                         f"({', '.join(TIME[:6])}...), an MMSI ({', '.join(MMSI[:2])}), a "
+                         f"latitude ({', '.join(LAT)}) and a longitude ({', '.join(LON)}) column")
+    line = np.arange(len(frame)) + 2  # the header is line 1
+    dropped, notes = Dropped("drop"), [f"{path.name}: AIS columns " + ", ".join(
+        f"{role} {col}" for role, col in found.items())]
+    t_ns = _times(frame[found["time"]], path, found["time"], notes)
+    mmsi = pd.to_numeric(frame[found["mmsi"]].str.strip(), errors="coerce").to_numpy(float)
+    lat = pd.to_numeric(frame[found["lat"]].str.strip(), errors="coerce").to_numpy(float)
+    lon = pd.to_numeric(frame[found["lon"]].str.strip(), errors="coerce").to_numpy(float)
+    keep = np.ones(len(frame), dtype=bool)
+    places = line_places(line)
+    for bad, reason in (
+            (t_ns < 0, "time missing or unreadable"),
+            (~((mmsi > 0) & (mmsi < 1e9) & (mmsi == np.round(mmsi))),
+             "MMSI missing or not a whole number"),
+            (~(np.isfinite(lat) & np.isfinite(lon)), "position missing or not a number"),
+            (~((np.abs(lat) <= 90) & (np.abs(lon) <= 180)),
+             "position not available (lat 91, lon 181) or off the globe")):
+        bad &= keep
+        keep &= dropped.drop(bad, reason, places, "")
+    return Reports(str(path), "csv", mmsi[keep].astype(np.int64), t_ns[keep], lat[keep],
+                   lon[keep], dropped, notes)
+
+
+def _times(series, path: Path, column: str, notes: list[str]) -> np.ndarray:
+    """A time column as UTC ns (int64), -1 where missing or unreadable."""
+    import pandas as pd
+
+    text = series.str.strip()
+    numbers = pd.to_numeric(text, errors="coerce").to_numpy(float)
+    if np.isfinite(numbers).mean() > 0.5:  # Unix time
+        median = float(np.nanmedian(numbers))
+        unit = next((u for bound, u in UNIX_MAGNITUDE if median >= bound), None)
+        if unit is None:
+            raise TruthError(f"truth={path}: {column} holds relative times (median "
+                             f"{median:g}); AIS reports need UTC times (ISO-8601 or Unix time "
+                             f"from {UNIX_FROM_S:g} s)")
+        notes.append(f"{path.name}: {column} read as Unix time ({unit})")
+        ns = numbers * UNIX_SCALE_NS[unit]
+        return np.where(np.isfinite(ns), np.round(np.nan_to_num(ns)), -1).astype(np.int64)
+    dma = text.str.match(DMA_TIME.pattern).mean() > 0.5
+    stamps = (pd.to_datetime(text, format="%d/%m/%Y %H:%M:%S", errors="coerce", utc=True)
+              if dma else pd.to_datetime(text, format="ISO8601", errors="coerce", utc=True))
+    zoned = text.str.contains(r"(?:[Zz]|[+-]\d\d:?\d\d)$", regex=True).mean() > 0.5
+    if not zoned:
+        notes.append(f"{path.name}: {column} has no time zone: taken as UTC (AIS time is UTC)")
+    ns = stamps.dt.as_unit("ns").array.asi8.copy()
+    ns[stamps.isna().to_numpy() | (ns < UTC_FROM_NS)] = -1
+    return ns

@@ -1,0 +1,118 @@
+"""Vessel tracks from AIS position reports: one per MMSI, cleaned, on a local plane.
+
+A vessel's reports are sorted by time; of reports with the same time stamp the first is
+kept, and a report lying more than ``SPIKE_M`` (300 m) from the point interpolated at its time
+between its two neighbours is dropped as a position error (a corrupt report; a real vessel
+does not jump off its track and back). On a log's plane (``tma.geo``: east-north at its
+origin, times in seconds from its epoch) a vessel's position at any time is interpolated
+linearly between its two bracketing reports; the interval between them is the *gap* the
+interpolation bridges, infinite outside the reports (no extrapolation).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tma.ais.reports import Reports
+from tma.geo import geodetic_to_local
+
+SPIKE_M = 300.0  # a report this far off the line between its neighbours is dropped
+
+
+@dataclass(frozen=True)
+class VesselTrack:
+    """One vessel's cleaned reports: ``t_ns`` (UTC ns), ``lat_deg``, ``lon_deg``; ``spikes``
+    the reports dropped as position errors."""
+
+    mmsi: int
+    t_ns: np.ndarray
+    lat_deg: np.ndarray
+    lon_deg: np.ndarray
+    spikes: int = 0
+
+    def on_plane(self, origin_deg, epoch_ns: int) -> "PlaneTrack":
+        """The track on the plane tangent at ``origin_deg`` (lat, lon), times in s from
+        ``epoch_ns``."""
+        x, y = geodetic_to_local(self.lat_deg, self.lon_deg, origin_deg)
+        return PlaneTrack(self.mmsi, (self.t_ns - epoch_ns) / 1e9, x, y)
+
+
+@dataclass(frozen=True)
+class PlaneTrack:
+    """A vessel's reports on a local plane: ``t_s`` (s, increasing), ``x_m`` east, ``y_m``
+    north."""
+
+    mmsi: int
+    t_s: np.ndarray
+    x_m: np.ndarray
+    y_m: np.ndarray
+
+    def at(self, t) -> tuple[np.ndarray, np.ndarray]:
+        """Position (m) at times ``t`` (s), linear between reports (NaN outside them)."""
+        t = np.asarray(t, float)
+        inside = (t >= self.t_s[0]) & (t <= self.t_s[-1])
+        x = np.where(inside, np.interp(t, self.t_s, self.x_m), np.nan)
+        y = np.where(inside, np.interp(t, self.t_s, self.y_m), np.nan)
+        return x, y
+
+    def gap(self, t) -> np.ndarray:
+        """Per time in ``t`` the interval (s) between the reports that bracket it (0 at a
+        report's own time); inf outside the reports."""
+        t = np.asarray(t, float)
+        i = np.searchsorted(self.t_s, t, side="right")
+        inside = (t >= self.t_s[0]) & (t <= self.t_s[-1])
+        hi = self.t_s[np.clip(i, 0, self.t_s.size - 1)]
+        lo = self.t_s[np.clip(i - 1, 0, self.t_s.size - 1)]
+        at_report = np.isin(t, self.t_s)
+        return np.where(inside, np.where(at_report, 0.0, hi - lo), np.inf)
+
+    def max_gap(self, t0: float, t1: float) -> float:
+        """The longest interval (s) without a report over [t0, t1], counting the reports that
+        bracket it; inf when the reports do not cover [t0, t1]."""
+        if t0 < self.t_s[0] or t1 > self.t_s[-1]:
+            return float("inf")
+        i0 = np.searchsorted(self.t_s, t0, side="right") - 1
+        i1 = np.searchsorted(self.t_s, t1, side="left")
+        return float(np.max(np.diff(self.t_s[i0:i1 + 1]))) if i1 > i0 else 0.0
+
+    def mean_velocity(self, ta, tb) -> tuple[np.ndarray, np.ndarray]:
+        """Mean velocity (m/s east, north) from ``ta`` to ``tb`` (s): displacement / time."""
+        ta, tb = np.asarray(ta, float), np.asarray(tb, float)
+        xa, ya = self.at(ta)
+        xb, yb = self.at(tb)
+        return (xb - xa) / (tb - ta), (yb - ya) / (tb - ta)
+
+
+def drop_spikes(t_ns: np.ndarray, lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
+    """Mask of the reports to keep: drops a report more than ``SPIKE_M`` from the point
+    interpolated at its time between its two neighbours."""
+    import pymap3d
+
+    keep = np.ones(t_ns.size, dtype=bool)
+    if t_ns.size < 3:
+        return keep
+    t = (t_ns - t_ns[0]) / 1e9
+    w = (t[1:-1] - t[:-2]) / (t[2:] - t[:-2])
+    lat_i = lat[:-2] + w * (lat[2:] - lat[:-2])
+    lon_i = lon[:-2] + w * (lon[2:] - lon[:-2])
+    e, n, _ = pymap3d.geodetic2enu(lat[1:-1], lon[1:-1], 0.0, lat_i, lon_i, 0.0)
+    keep[1:-1] = np.hypot(e, n) <= SPIKE_M
+    return keep
+
+
+def vessel_tracks(reports: Reports, mmsis=None) -> dict[int, VesselTrack]:
+    """One cleaned ``VesselTrack`` per MMSI of ``reports`` (of ``mmsis`` only, if given)."""
+    starts = np.flatnonzero(np.r_[True, reports.mmsi[1:] != reports.mmsi[:-1]])
+    ends = np.r_[starts[1:], reports.mmsi.size]
+    wanted = None if mmsis is None else {int(m) for m in mmsis}
+    tracks = {}
+    for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
+        mmsi = int(reports.mmsi[a])
+        if wanted is not None and mmsi not in wanted:
+            continue
+        t, lat, lon = reports.t_ns[a:b], reports.lat_deg[a:b], reports.lon_deg[a:b]
+        first = np.r_[True, t[1:] != t[:-1]]  # sorted by time: one report per time stamp
+        t, lat, lon = t[first], lat[first], lon[first]
+        keep = drop_spikes(t, lat, lon)
+        tracks[mmsi] = VesselTrack(mmsi, t[keep], lat[keep], lon[keep], int((~keep).sum()))
+    return tracks

@@ -1,0 +1,129 @@
+"""A recorded log scored against the AIS of its trial: the truth columns of its per-contact
+report (``ingest truth=FILE``, ``tma.ais.truth``).
+
+Per contact with a truth, at its last bearing ("now", where the report gives the estimate):
+the ship (``truth_mmsi``, ``truth_match``: ``given`` or ``bearings``, ``truth_rms_deg``: how
+well its AIS fits the contact's bearings), its true range, bearing, course and speed and
+position (``true_*``), the errors of the estimate (estimate - truth: ``range_err_m``,
+``bearing_err_deg``, ``course_err_deg`` wrapped to [-180, 180), ``speed_err_m_s``), their
+z-scores (error / the estimate's one-sigma error: ``range_z``...) and ``covered``: whether the
+truth lies in the estimate's 95 % region, the normalised error (theta_hat - theta)^T Sigma^-1
+(theta_hat - theta) of theta = (x0, y0, vx, vy) (``nees``) below the chi-square(4) 95 % point:
+the test the simulated tables' ``consistent (ok)`` column counts, so an ``ok`` contact
+covers its truth 95 % of the time when its errors are honest. ``coverage`` counts the covered
+``ok`` contacts over the log, with a 95 % Wilson interval. Contacts without a truth (no ship
+fits, ambiguous, an AIS gap: the manifest says why) have these columns blank.
+"""
+
+import numpy as np
+import pandas as pd
+
+from tma.angles import wrap_to_180
+from tma.families.bearings2d.metrics import NEES_95, THETA, normalised_error
+from tma.families.bearings2d.status import kinematics_now
+from tma.stats import wilson_interval
+
+# quantity: (the report's estimate, its one-sigma error, the unit of the columns' names)
+QUANTITIES = {"range": ("range_now_m", "range_sd_m", "m"),
+              "bearing": ("bearing_now_deg", "bearing_sd_deg", "deg"),
+              "course": ("course_deg", "course_sd_deg", "deg"),
+              "speed": ("speed_m_s", "speed_sd_m_s", "m_s")}
+COLUMNS = ["truth_mmsi", "truth_match", "truth_rms_deg", "true_x_m", "true_y_m",
+           *[f"true_{q}_{u}" for q, (_, _, u) in QUANTITIES.items()],
+           *[f"{q}_err_{u}" for q, (_, _, u) in QUANTITIES.items()],
+           *[f"{q}_z" for q in QUANTITIES], "nees", "covered"]
+
+
+def dataset_truth(dataset):
+    """``(truth, truth track)`` DataFrames of an ingested dataset scored against AIS
+    (verified), or ``(None, None)``."""
+    from tma.ais.truth import TRUTH, TRUTH_TRACK
+    from tma.io import arrow
+
+    if TRUTH not in dataset.manifest["files"]:
+        return None, None
+    return tuple(arrow.read_table(dataset.verified_path(rel)).to_pandas()
+                 for rel in (TRUTH, TRUTH_TRACK))
+
+
+def with_truth(report: pd.DataFrame, estimates: pd.DataFrame, truth: pd.DataFrame
+               ) -> pd.DataFrame:
+    """``report`` (``report.track_report``, one row per track of ``estimates``) with the truth
+    columns (module docstring); blank for tracks the truth lacks."""
+    df = estimates.merge(truth[["track_id", "mmsi", "match", "rms_deg", *THETA]],
+                         on="track_id", how="left", suffixes=("", "_true"), validate="one_to_one")
+    has = df["mmsi"].notna().to_numpy()
+    at = (df["t_last_s"].to_numpy(float), df["own_x_last_m"].to_numpy(float),
+          df["own_y_last_m"].to_numpy(float))
+    (rng, brg, crs, spd), _ = kinematics_now(df[[f"{c}_true" for c in THETA]].to_numpy(float),
+                                             *at, jacobian=False)
+    true = {"range": rng, "bearing": np.rad2deg(brg) % 360.0, "course": np.rad2deg(crs) % 360.0,
+            "speed": spd}
+    t = at[0]
+    out = report.copy()
+    out["truth_mmsi"] = pd.array([int(m) if h else pd.NA for m, h in zip(
+        df["mmsi"].to_numpy(), has, strict=True)], dtype="Int64")
+    out["truth_match"] = df["match"].where(has, None)
+    out["truth_rms_deg"] = df["rms_deg"].to_numpy(float)
+    out["true_x_m"] = (df["x0_m_true"] + df["vx_m_s_true"] * t).to_numpy(float)
+    out["true_y_m"] = (df["y0_m_true"] + df["vy_m_s_true"] * t).to_numpy(float)
+    for q, (_, _, unit) in QUANTITIES.items():
+        out[f"true_{q}_{unit}"] = true[q]
+    for q, (column, sd, unit) in QUANTITIES.items():
+        err = report[column].to_numpy(float) - true[q]
+        if unit == "deg":
+            err = wrap_to_180(err)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out[f"{q}_err_{unit}"] = err
+            out[f"{q}_z"] = err / report[sd].to_numpy(float)
+    nees = np.where(has, normalised_error(df.assign(**{f"{c}_true": df[f"{c}_true"].fillna(0.0)
+                                                       for c in THETA})), np.nan)
+    out["nees"] = nees
+    out["covered"] = pd.array([bool(v <= NEES_95) if np.isfinite(v) else pd.NA for v in nees],
+                              dtype="boolean")
+    return out
+
+
+def coverage(report: pd.DataFrame) -> dict:
+    """Over the ``ok`` contacts with a truth: how many, how many covered, the share and its
+    95 % Wilson interval; and the contacts with a truth."""
+    scored = report["covered"].notna()
+    ok = scored & (report["status"] == "ok")
+    k, n = int(report.loc[ok, "covered"].sum()), int(ok.sum())
+    lo, hi = wilson_interval(k, n)
+    return {"contacts": len(report), "with_truth": int(scored.sum()), "ok": n, "covered": k,
+            "share": k / n if n else np.nan, "share_lo": float(lo), "share_hi": float(hi)}
+
+
+def coverage_text(report: pd.DataFrame) -> str:
+    """The log's line of coverage, for the table and the log."""
+    c = coverage(report)
+    if not c["ok"]:
+        return (f"Against the AIS truth: {c['with_truth']} of {c['contacts']} contacts have a "
+                "truth, none of them `ok`.")
+    return (f"Against the AIS truth: {c['with_truth']} of {c['contacts']} contacts have a truth; "
+            f"{c['covered']} of the {c['ok']} `ok` ones are covered by their errors "
+            f"({100 * c['share']:.0f} %, 95 % interval {100 * c['share_lo']:.0f}-"
+            f"{100 * c['share_hi']:.0f} %; honest errors cover 95 %).")
+
+
+def shown_columns(report: pd.DataFrame) -> dict:
+    """The Markdown table's truth columns (none without a truth)."""
+    if "covered" not in report:
+        return {}
+
+    def cell(value, fmt):
+        return "-" if pd.isna(value) else format(value, fmt)
+
+    return {
+        "AIS ship (RMS deg)": [
+            "-" if pd.isna(m) else f"{m} ({r:.2f})"
+            for m, r in report[["truth_mmsi", "truth_rms_deg"]].itertuples(index=False)],
+        "true range / course / speed": [
+            "-" if pd.isna(a) else f"{a:.0f} m / {b:.1f} deg / {c:.2f} m/s" for a, b, c in
+            report[["true_range_m", "true_course_deg", "true_speed_m_s"]].to_numpy()],
+        "z range / course / speed": [
+            "-" if pd.isna(a) else f"{cell(a, '+.1f')} / {cell(b, '+.1f')} / {cell(c, '+.1f')}"
+            for a, b, c in report[["range_z", "course_z", "speed_z"]].to_numpy()],
+        "covered": ["-" if pd.isna(v) else ("yes" if v else "no") for v in report["covered"]],
+    }
