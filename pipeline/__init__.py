@@ -21,6 +21,13 @@ def _command() -> str | None:
 
 
 if _command():
+    try:
+        os.getcwd()
+    except FileNotFoundError:  # every relative path (data/, the log) would be relative to it
+        print("error: the working directory no longer exists (deleted, or its disk "
+              "unmounted): cd to a directory that exists and run the command again",
+              file=sys.stderr)
+        sys.exit(2)
     # the command's local workers start from a server that imports what they need meanwhile
     # (tma.parallel.preload_workers); they see the environment as it is now, sweep id included
     multirun = "-m" in sys.argv[1:] or "--multirun" in sys.argv[1:]  # argv[0] is "-m" here

@@ -4,7 +4,9 @@ callbacks, and the hand-over of the composed config to the core (``tma.experimen
 import logging
 import os
 import re
+import signal
 import sys
+import threading
 import traceback
 import uuid
 from pathlib import Path
@@ -20,7 +22,7 @@ from omegaconf.errors import ConfigAttributeError, ConfigKeyError, OmegaConfBase
 
 from pipeline import SWEEP_ENV  # set while a multirun runs
 from tma import experiment
-from tma.errors import TmaError
+from tma.errors import Interrupted, TmaError
 from tma.io.atomic import write_json_atomic
 from tma.parallel import Engine, engine_from, keep_freed_memory, quick_exit
 
@@ -45,15 +47,44 @@ def stage_main(task, config_name="config", bare=None, check=None):
     ``check(arguments)`` runs before Hydra starts."""
     def main():
         os.environ["HYDRA_FULL_ERROR"] = "1"  # this process's Hydra: raise, we say it
-        sys.argv[1:] = guarded(experiment.bare_as, bare, sys.argv[1:], _overrides(sys.argv[1:]))
-        if check is not None:
-            check(sys.argv[1:])
-        name = config_name(sys.argv[1:]) if callable(config_name) else config_name
+        main_thread = threading.current_thread() is threading.main_thread()
+        saved = {sig: signal.signal(sig, _stop) for sig in STOP_SIGNALS} if main_thread else {}
         try:
-            hydra.main(config_path=CONF_DIR, config_name=name, version_base="1.3")(task)()
-        except Exception as exc:
-            fail(guarded(hydra_error_line, exc, sys.argv[1:]) or guarded(_raise, exc))
+            sys.argv[1:] = guarded(experiment.bare_as, bare, _readable(sys.argv[1:]),
+                                   _overrides(sys.argv[1:]))
+            if check is not None:
+                check(sys.argv[1:])
+            name = config_name(sys.argv[1:]) if callable(config_name) else config_name
+            try:
+                hydra.main(config_path=CONF_DIR, config_name=name, version_base="1.3")(task)()
+            except Exception as exc:
+                fail(guarded(hydra_error_line, exc, sys.argv[1:]) or guarded(_raise, exc))
+        except KeyboardInterrupt as exc:  # Ctrl-C, or a signal of STOP_SIGNALS (Stopped)
+            number = getattr(exc, "signal", signal.SIGINT)
+            name = signal.Signals(number).name + (" (Ctrl-C)" if number == signal.SIGINT else "")
+            fail(f"stopped by {name}: the tasks finished are kept and nothing complete was "
+                 "replaced; run the same command again to resume", status=128 + number)
+        finally:
+            for sig, handler in saved.items():
+                signal.signal(sig, handler)
     return main
+
+
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)  # a scheduler's or a closed terminal's stop
+
+
+class Stopped(KeyboardInterrupt):
+    """A stop signal, raised where the command is, as Ctrl-C's KeyboardInterrupt is: joblib
+    then stops its workers, ``guarded``'s last line of defence lets it through, and the
+    command says it in one line (exit status 128 + the signal)."""
+
+    def __init__(self, number: int):
+        super().__init__(number)
+        self.signal = number
+
+
+def _stop(number, frame):
+    raise Stopped(number)
 
 
 def _raise(exc):
@@ -71,8 +102,48 @@ def _overrides(arguments: list[str]) -> list[str]:
     return parser.parse_args(arguments).overrides
 
 
+_SYNTAX = re.compile(r"""['"\[\](){},=\s]|\$\{""")  # what makes a value more than one text
+
+
+def _readable(arguments: list[str]) -> list[str]:
+    """The arguments with each ``key=value`` whose value is one text Hydra cannot read
+    unquoted (``columns.lon=Länge``, ``input=über/journal_é.csv``, ``name=a~b``: its grammar
+    takes ASCII letters, digits and a few signs only) quoted as Hydra reads text
+    (``tma.experiment.override_text``); a value with Hydra's own syntax (a list, a sweep,
+    quotes, an interpolation) is left as written, for Hydra to read or refuse."""
+    parser = OverridesParser.create()
+    out = []
+    for argument in arguments:
+        key, eq, value = argument.partition("=")
+        if eq and value and not key.startswith("-") and not _SYNTAX.search(value):
+            try:
+                parser.parse_override(argument)
+            except hydra_errors.HydraException:  # OverrideParseException, a lexer's error
+                quoted = experiment.override_text(key, value)
+                try:
+                    parser.parse_override(quoted)
+                    argument = quoted
+                except hydra_errors.HydraException:
+                    pass  # not a value's fault (e.g. the key): Hydra says what is wrong
+        out.append(argument)
+    return out
+
+
 NOTES = {"hydra.launcher.partition": "this launcher runs the jobs on this machine, which has "
                                      "no partitions: drop it; hydra/launcher=slurm takes it"}
+
+
+def _unreadable_sign(exc) -> str | None:
+    """The character Hydra's lexer stopped at in the override of ``exc`` (its report: the
+    override, then a caret under the character), when it is no quote or bracket: one Hydra
+    reads only inside quotes (``ü``, ``~``, ``#``)."""
+    lines = str(exc).splitlines()
+    head = "LexerNoViableAltException: "
+    if len(lines) < 2 or not lines[0].startswith(head) or "^" not in lines[1]:
+        return None
+    at = lines[1].index("^") - len(head)
+    sign = exc.override[at] if 0 <= at < len(exc.override) else ""
+    return sign if sign and sign not in "'\"[]{}(),=" and not sign.isspace() else None
 
 
 def hydra_error_line(exc: Exception, arguments: list[str]) -> str | None:
@@ -84,6 +155,11 @@ def hydra_error_line(exc: Exception, arguments: list[str]) -> str | None:
         return experiment.unknown_choice_line(group, value, exc.options)
     if isinstance(exc, hydra_errors.OverrideParseException):
         why = "" if exc.override in first else f" ({first})"
+        sign = _unreadable_sign(exc)
+        if sign:
+            return (f"{exc.override}: cannot parse this override: Hydra reads '{sign}' "
+                    "only inside quotes; quote each value holding it: key='a value' (for the "
+                    "shell: \"key='a value'\")")
         return (f"{exc.override}: cannot parse this override{why}; quote a value holding "
                 "quotes, brackets, commas or spaces: key='a value' (for the shell: "
                 "\"key='a value'\")")
@@ -141,6 +217,8 @@ def guarded(fn, *args):
         return fn(*args)
     except TmaError as exc:
         fail(str(exc))
+    except Interrupted as exc:  # a worker that died: the re-run resumes
+        fail(str(exc), exc.status)
     except OSError as exc:
         fail(os_error_line(exc))
     except OmegaConfBaseException as exc:  # e.g. an interpolation that cannot be resolved

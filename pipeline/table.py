@@ -16,6 +16,7 @@ from pipeline.estimate import estimate_stage
 from pipeline.ingest import check_option_keys, ingest_arguments, with_truth_shorthand
 from pipeline.simulate import simulate_stage
 from tma.aggregate import prefetch_report
+from tma.errors import ConfigError
 from tma.experiment import log_dataset
 
 STAGES = (("simulate", simulate_stage), ("estimate", estimate_stage),
@@ -25,6 +26,10 @@ STAGES = (("simulate", simulate_stage), ("estimate", estimate_stage),
 def ingest_stage(cfg):
     """The log's dataset: ingested, or reused when ingesting it again gives the same one
     (``tma.experiment.log_dataset``); the next stages read it by name."""
+    if cfg.dataset is not None:
+        raise ConfigError(f"dataset={cfg.dataset}: input={cfg.input} makes its own dataset "
+                          "(named by name=, by default the log's stem); give input=FILE "
+                          "[name=NAME] or dataset=NAME, not both")
     root, reused = log_dataset(**ingest_arguments(cfg))
     log.info("dataset %s%s", root, " reused (ingesting the log again gives the same dataset)"
              if reused else "")

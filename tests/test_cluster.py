@@ -86,7 +86,8 @@ def test_a_worker_killed_mid_run_costs_only_its_shard(tmp_path, cluster):
     ("parallel.address='tcp://h:8786/x'", "unexpected text around host:port"),
     ("parallel.address='tcp://[::1'", "not a scheduler address"),
     ("parallel.n_workers=0", "parallel.n_workers must be >= 1, got 0"),
-    ("parallel.n_workers=1.5", "parallel.n_workers must be a whole number >= 1, got 1.5"),
+    ("parallel.n_workers=1.5", "parallel.n_workers must be a whole number >= 1, got the float "
+                                  "1.5"),
     ("parallel.retries=-1", "parallel.retries must be >= 0, got -1"),
     ("parallel.connect_timeout=0", "parallel.connect_timeout must be > 0, got 0"),
     ("parallel.connect_timeout=abc", "parallel.connect_timeout must be a number > 0, got 'abc'"),

@@ -81,6 +81,12 @@ def aggregate(data_dir, tables_dir, jobs, table=None, default_suffix="custom",
         if report is not None and report not in kinds:
             raise ConfigError(f"report={report}: {family} has no such table; its kinds: "
                               + (", ".join(kinds) or "none but its own (report=null)"))
+        recorded = [e.dataset.name for e in by_family[family]
+                    if e.dataset.manifest["source"] != "simulate"]
+        if report is not None and len(recorded) == len(by_family[family]):
+            raise ConfigError(f"report={report}: a table of simulated runs against their "
+                              f"truth; {', '.join(sorted(set(recorded)))} is a recorded log (no "
+                              "truth), whose table is the per-contact report: drop report=")
     for family, entries in by_family.items():
         module = family_of(family).report
         if table is not None:
@@ -189,8 +195,26 @@ def _constant_type(values: list) -> pa.DataType:
 def runs_without_metrics(data_dir="data", family=None, name="metrics") -> list[str]:
     """Runs (``<dataset>/<run>``) under ``<data_dir>/runs/`` that are finished (a manifest)
     but hold no ``<name>.parquet``: never aggregated, or computed again since
-    (``estimate force=true`` removes it); ``metrics_dataset`` cannot include them."""
-    missing = []
+    (``estimate force=true`` removes it); ``metrics_dataset`` cannot include them. Runs of
+    recorded logs are not among them: with no truth they never have metrics
+    (``recorded_runs``)."""
+    return [run for run, recorded, has in _finished_runs(data_dir, family, name)
+            if not has and not recorded]
+
+
+def recorded_runs(data_dir="data", family=None) -> list[str]:
+    """The finished runs under ``<data_dir>/runs/`` of recorded logs (ingested datasets):
+    no truth, so no per-track metrics; their results are the per-contact tables aggregate
+    writes."""
+    return [run for run, recorded, _ in _finished_runs(data_dir, family) if recorded]
+
+
+def _finished_runs(data_dir, family, name="metrics") -> list[tuple[str, bool, bool]]:
+    """``(<dataset>/<run>, of a recorded log?, holds <name>.parquet?)`` of every finished run
+    (of ``family``, a known family, when given)."""
+    if family is not None:
+        family_of(family)  # a ConfigError naming the families for another name
+    out = []
     for manifest_path in sorted(runs_dir(data_dir).glob(f"*/*/{MANIFEST}")):
         run_root = manifest_path.parent
         if run_root.name.startswith(".") or run_root.parent.name.startswith("."):
@@ -198,9 +222,11 @@ def runs_without_metrics(data_dir="data", family=None, name="metrics") -> list[s
         if family is not None and (_read_json(manifest_path).get("dataset") or {}).get(
                 "family") != family:
             continue
-        if not (run_root / f"{name}.parquet").exists():
-            missing.append(f"{run_root.parent.name}/{run_root.name}")
-    return missing
+        source = _read_json(datasets_dir(data_dir) / run_root.parent.name / MANIFEST).get(
+            "source")
+        out.append((f"{run_root.parent.name}/{run_root.name}",
+                    source not in (None, "simulate"), (run_root / f"{name}.parquet").exists()))
+    return out
 
 
 def metrics_dataset(data_dir="data", name="metrics", family=None) -> "pds.Dataset":
@@ -221,6 +247,8 @@ def metrics_dataset(data_dir="data", name="metrics", family=None) -> "pds.Datase
     import pyarrow.dataset as pds
     import pyarrow.fs as pafs
 
+    if family is not None:
+        family_of(family)  # a ConfigError naming the families for another name
     constants, paths = [], []
     root = runs_dir(data_dir)
     for path in sorted(root.glob(f"*/*/{name}.parquet")):
@@ -240,9 +268,14 @@ def metrics_dataset(data_dir="data", name="metrics", family=None) -> "pds.Datase
         constants[-1].pop("estimator.name", None)  # the same as estimator
         paths.append(path)
     if not paths:
+        recorded = recorded_runs(data_dir, family)
         raise InputError(f"no {name}.parquet in any run under {root}"
                          + (f" of family '{family}'" if family else "")
-                         + ": run `python -m pipeline.aggregate` first")
+                         + (f": the {len(recorded)} run(s) there are of recorded logs, which "
+                            "have no truth to measure against (their per-contact results are "
+                            "the tables aggregate writes, tables/<dataset>-<estimator>.csv)"
+                            if recorded and not runs_without_metrics(data_dir, family, name)
+                            else ": run `python -m pipeline.aggregate` first"))
     try:
         schema = pa.unify_schemas([pq.read_schema(p).remove_metadata() for p in paths],
                                   promote_options="permissive")

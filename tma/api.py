@@ -26,6 +26,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from tma.errors import ConfigError
+
 FAMILY = "bearings2d"  # the family of recorded bearing logs
 THETA = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")
 log = logging.getLogger("tma")
@@ -222,12 +224,18 @@ def _logs_of(data, sigma_deg, what="estimate"):
                 else "")
         raise TypeError(f"{what} needs a Recording, a pandas DataFrame, or a dataset of "
                         f"tma.simulate / tma.open_dataset, got {type(data).__name__}{hint}")
+    family = getattr(data, "family", FAMILY)
+    if family != FAMILY:
+        raise ConfigError(f"tma.{what} reads {FAMILY} logs (a Recording, a DataFrame, a "
+                          f"{FAMILY} simulation or dataset), got a {family} dataset: its stages "
+                          f"estimate it (python -m pipeline.table scenario={family})")
     if sigma_deg is not None:
         from dataclasses import replace
 
+        from tma.families import family as family_named
+
+        family_named(FAMILY).ingest.Settings(sigma_deg=sigma_deg)  # ingest's sigma_deg= check
         logs = [replace(lg, sigma_deg=float(sigma_deg)) for lg in logs]
-        for lg in logs:
-            lg.validate("sigma_deg")
     return logs, recorded
 
 
@@ -248,8 +256,15 @@ def estimate(data, estimator: str = "lm", sigma_deg: float | None = None,
     status and a note that says so."""
     from tma.estimation import estimate_log
     from tma.families import build_estimator, estimator_class
+    from tma.tables import plots_to_files
+
+    plots_to_files()  # the report module loads matplotlib
     from tma.families.bearings2d.report import contact_report
 
+    if "name" in options:  # as the command line's estimator.name= (tma.experiment)
+        from tma.estimator import name_set_error
+
+        raise name_set_error(f"name={options['name']!r}", repr(options["name"]))
     logs, recorded = _logs_of(data, sigma_deg)
     node = {"name": estimator, **options}
     if recorded:  # as on a recorded dataset: the estimator's defaults for a recording

@@ -16,6 +16,7 @@ ingest settings and the ``parallel`` options are declared and checked the same w
 """
 
 import copy
+import datetime
 import functools
 import json
 import math
@@ -29,7 +30,7 @@ from dataclasses import MISSING, Field, asdict, dataclass, field, fields, is_dat
 from omegaconf import DictConfig, ListConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException, ValidationError
 
-from tma.errors import ConfigError
+from tma.errors import ConfigError, ConfigTypeError, TmaError
 
 
 @functools.cache
@@ -73,6 +74,7 @@ def validate(schema, node, where: str):
     cache with a fresh copy."""
     if isinstance(node, DictConfig):
         node = OmegaConf.to_container(node, resolve=True)
+    node = _times_as_text(node)
     try:
         key = json.dumps(node, sort_keys=True)
     except (TypeError, ValueError):  # not JSON-able (e.g. a tuple key): validate uncached
@@ -85,6 +87,17 @@ def _validated(schema, key: str, where: str):
     return _validate(schema, json.loads(key), where)
 
 
+def _times_as_text(value):
+    """``value`` with every ``datetime`` (a pandas ``Timestamp`` too) as the ISO-8601 text a
+    config holds (``time.start_utc``, ``epoch_utc``): one given in Python is read as written
+    there; a time without a zone stays without one, for the key's check to name."""
+    if isinstance(value, dict):
+        return {k: _times_as_text(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_times_as_text(v) for v in value]
+    return value.isoformat() if isinstance(value, datetime.datetime) else value
+
+
 def _validate(schema, node, where: str):
     try:
         merged = OmegaConf.merge(structured(schema), node or {})
@@ -95,10 +108,11 @@ def _validate(schema, node, where: str):
         declared = _declared(schema, key) if key else None
         if isinstance(exc, ValidationError) and declared is not None:  # a value of a wrong type
             value = _given(node, key, getattr(exc, "value", None))
-            raise ConfigError(_at(where, f"{key} must be {allowed(declared)}, got "
-                                         f"{_shown(value)}")) from None
+            raise ConfigTypeError(_at(where, _wrong_type(key, declared, value))) from None
         msg = (getattr(exc, "msg", None) or str(exc)).splitlines()[0]
         raise ConfigError(_at(where, msg + (f" (key '{key}')" if key else ""))) from None
+    except TmaError:  # a check's own line (``check_params``, ``__post_init__``)
+        raise
     except (TypeError, ValueError) as exc:
         raise ConfigError(_at(where, str(exc))) from None
 
@@ -329,7 +343,7 @@ def check_params(config, where: str, prefix: str = ""):
             continue
         meta, simple = f.metadata, _simple(f.type)
         if simple is not None and not (_fits(value, simple[0]) or value is None and simple[1]):
-            raise ConfigError(_at(where, f"{key} must be {allowed(f)}, got {_shown(value)}"))
+            raise ConfigTypeError(_at(where, _wrong_type(key, f, value)))
         if value is None or isinstance(value, bool) and "form" not in meta:
             continue
         if isinstance(value, float) and not math.isfinite(value) and not meta.get("nonfinite"):
@@ -352,6 +366,16 @@ def check_params(config, where: str, prefix: str = ""):
             raise ConfigError(_at(where, f"{key}={value}: {problem}; {key} must be {form.text}"))
         if problem is not None:
             raise ConfigError(_at(where, f"{key} must be {form.text}, got {_shown(value)}"))
+
+
+def _wrong_type(key: str, f, value) -> str:
+    """``key must be <allowed>, got <value>`` for a value of the wrong type; a float where a
+    whole number is due is shown as the float it is (``1e3`` reads as 1000.0), with the
+    spelling that works."""
+    if isinstance(value, float) and _simple(f.type) is not None and _simple(f.type)[0] is int:
+        fix = f"; write {int(value)}" if value.is_integer() else ""
+        return f"{key} must be {allowed(f)}, got the float {value!r}{fix}"
+    return f"{key} must be {allowed(f)}, got {_shown(value)}"
 
 
 def _in(interval: Interval) -> str:

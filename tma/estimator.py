@@ -3,6 +3,7 @@
 from dataclasses import dataclass, field
 
 from tma.config import Params, param
+from tma.errors import ConfigError
 
 
 def module_name(module: str) -> str:
@@ -29,6 +30,13 @@ class EstimatorConfig(Params):
     @property
     def where(self) -> str:
         return f"estimator '{self.name}'"
+
+
+def name_set_error(given: str, name: str) -> ConfigError:
+    """The refusal of ``name`` given as an estimator's option (``estimator.name=lm`` on the
+    command line, ``name="lm"`` to ``tma.estimate``): an estimator is chosen, never renamed."""
+    return ConfigError(f"{given}: name is not an option of an estimator; choose the estimator "
+                       f"with estimator={name}")
 
 
 class Estimator:

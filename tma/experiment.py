@@ -36,6 +36,7 @@ from pathlib import Path
 from tma.config import to_plain
 from tma.errors import ConfigError, InputError
 from tma.estimation import dataset_config
+from tma.estimator import name_set_error
 from tma.families import build_estimator, dataset_name, load_scenario, scenario_module
 from tma.io.dataset import MANIFEST, Dataset, datasets_dir
 from tma.io.owned import plain_name
@@ -140,6 +141,9 @@ def estimator_configs(estimator: dict, grid: dict | None,
     read there."""
     grid = (grid or {}).get("estimators")
     if not grid:
+        named = [o for o in overrides if o.key == "estimator.name" and o.package is None]
+        if named:  # as tma.estimate's name=
+            raise name_set_error(named[-1].text, named[-1].text.partition("=")[2] or "NAME")
         return [estimator]
     nodes = copy.deepcopy(grid)
     chosen = [o.value for o in overrides if o.key == "estimator"
@@ -268,7 +272,7 @@ def log_dataset(input_path, *, data_dir, name=None, force=False, **options) -> t
 
 # -- the command line, outside Hydra's composition -------------------------------------------
 
-_PLAIN_VALUE = re.compile(r"[\w./@:+-]+")
+_PLAIN_VALUE = re.compile(r"[\w./@:+-]+", re.ASCII)  # Hydra reads only ASCII unquoted
 
 
 def override_text(key: str, value) -> str:
@@ -308,8 +312,24 @@ def bare_as(key: str | None, arguments: list[str], overrides: list[str]) -> list
     if key and len(bare) == 1 and not any(a.startswith(f"{key}=") for a in arguments):
         at = len(arguments) - 1 - arguments[::-1].index(bare[0])
         return [*arguments[:at], override_text(key, bare[0]), *arguments[at + 1:]]
+    if key is None and _names_a_log(bare[-1]):  # a stage that reads datasets, given a log
+        raise ConfigError(f"'{bare[-1]}' is not KEY=VALUE; this stage reads stored datasets "
+                          f"(dataset=NAME): read a log with  python -m pipeline.ingest "
+                          f"{override_text('input', bare[-1])}  or, ingest, estimate and "
+                          f"aggregate in one command,  python -m pipeline.table "
+                          f"{override_text('input', bare[-1])}")
     raise ConfigError(f"'{bare[-1]}' is not KEY=VALUE (did you mean "
                       f"{override_text(key or 'dataset', bare[-1])}?)")
+
+
+LOG_SUFFIXES = (".csv", ".tsv", ".txt", ".nmea", ".log", ".mcap")
+
+
+def _names_a_log(text: str) -> bool:
+    """Whether a bare argument names a log file rather than a dataset: a file, or a name
+    with a log's extension or a directory part (dataset names are plain names)."""
+    path = Path(text)
+    return path.is_file() or path.suffix.lower() in LOG_SUFFIXES or path.name != text
 
 
 def override_of(key: str, overrides: list[str]) -> tuple[str, str]:

@@ -19,18 +19,19 @@ complete, so a failed ingest (even with ``force=true``) leaves an existing datas
 """
 
 import logging
+import os
 from dataclasses import dataclass, fields
 from pathlib import Path
 
 from tma.config import to_plain
-from tma.errors import ConfigError, InputError
+from tma.errors import ConfigError, ConfigTypeError, InputError, MissingFileError
 from tma.families import family as family_named
 from tma.io.atomic import sha256_file
 from tma.io.dataset import MANIFEST, datasets_dir, file_record, shard_relpath, write_manifest
 from tma.io.owned import building, is_owned, plain_name
 from tma.sources import read_source, source_kind
 from tma.sources.align import align
-from tma.sources.base import groups, inapplicable, source_options, unknown_option
+from tma.sources.base import Caution, groups, inapplicable, source_options, unknown_option
 from tma.sources.labels import name_room
 
 log = logging.getLogger(__name__)
@@ -54,12 +55,29 @@ def unknown_option_of(key: str, family: str) -> str | None:
 
 
 def _file(value, option) -> Path:
-    if not isinstance(value, str | Path) or not str(value).strip():
+    """The path of an input file: a regular file (a pipe or a device cannot be read twice, as
+    the readers do); MissingFileError when there is none, ConfigTypeError for a value that is
+    no path (a DataFrame: ``tma.Recording.from_frames`` reads those)."""
+    if not isinstance(value, str | os.PathLike):
+        frames = (" (DataFrames are read by tma.Recording.from_frames(bearings, navigation))"
+                  if hasattr(value, "columns") else "")
+        raise ConfigTypeError(f"{option} must be a file path (str or pathlib.Path), got "
+                              f"{type(value).__name__}{frames}")
+    if not str(value).strip():
         raise ConfigError(f"{option} must be a file path, got '{value}'")
-    path = Path(str(value))
+    path = Path(value)
+    if not path.exists():
+        raise MissingFileError(f"{path}: no such file")
+    if path.is_dir():
+        raise InputError(f"{path}: a directory, not a log file; give {option}=<the log's path>")
     if not path.is_file():
-        raise InputError(f"{path}: no such file" + ("" if not path.exists() else
-                                                    " (a directory)"))
+        kind = next((name for test, name in ((path.is_char_device, "a character device"),
+                                             (path.is_block_device, "a block device"),
+                                             (path.is_fifo, "a pipe"),
+                                             (path.is_socket, "a socket")) if test()),
+                    "not a file")
+        raise InputError(f"{path}: not a regular file ({kind}), which tma cannot read twice "
+                         f"as its readers do; write the log to a file and give its path")
     return path
 
 
@@ -212,7 +230,7 @@ def _read(family, recordings, options, settings, config, sources, where) -> Read
     aligned = align(recordings, options, where)
     summary = aligned.summary
     for note in summary["notes"]:
-        log.info("%s", note)
+        log.log(logging.WARNING if isinstance(note, Caution) else logging.INFO, "%s", note)
     dropped = summary[f"dropped_{options.observation.plural}"]
     if dropped["count"]:
         log.warning("%s: dropped %d %s(s) (%d before, %d after the own-ship fixes): %s",

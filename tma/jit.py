@@ -43,8 +43,27 @@ def _temporary_cache_dir() -> bool:
     return True
 
 
+def numba_module():
+    """numba, imported; a ConfigError naming the ``NUMBA_*`` environment variables set when
+    numba refuses to start with them (``NUMBA_NUM_THREADS=0``: "Number of threads specified
+    must be > 0"), rather than a traceback from inside numba."""
+    try:
+        import numba
+    except Exception as exc:
+        given = {k: v for k, v in os.environ.items() if k.startswith("NUMBA_")}
+        if not given:
+            raise
+        from tma.errors import ConfigError
+
+        names = ", ".join(f"{k}={v!r}" for k, v in sorted(given.items()))
+        raise ConfigError(f"numba, which compiles the estimators' kernels, does not start "
+                          f"with the environment's {names} ({' '.join(str(exc).split())}): "
+                          f"correct or unset {', '.join(sorted(given))}") from None
+    return numba
+
+
 def _compile(function, options):
-    import numba
+    numba = numba_module()
 
     try:
         return numba.njit(cache=True, **options)(function)

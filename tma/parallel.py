@@ -15,6 +15,7 @@ import functools
 import gc
 import logging
 import os
+import re
 import socket
 import sys
 import time
@@ -25,7 +26,7 @@ from urllib.parse import urlsplit
 from threadpoolctl import threadpool_limits
 
 from tma.config import Form, Params, param
-from tma.errors import ConfigError
+from tma.errors import ConfigError, Interrupted
 
 log = logging.getLogger(__name__)
 M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc mallopt parameters
@@ -50,7 +51,8 @@ class Engine(Params):
 
     engine: str = param("joblib", "where shards run: joblib (local worker processes, or this "
                         "process) or dask (a Dask cluster)", choices=ENGINES)
-    n_jobs: int = param(1, "joblib: worker processes (1: in this process)", "[1, inf)")
+    n_jobs: int = param(1, "joblib: worker processes (1: in this process), at most one per "
+                        "task", "[1, inf)")
     address: str | None = param(None, "dask: the scheduler of an existing cluster; null: a "
                                 "LocalCluster of n_workers processes on this machine",
                                 form=Form("a Dask scheduler address such as "
@@ -175,7 +177,8 @@ def preload_workers(modules=()) -> bool:
 
     multiprocessing.set_forkserver_preload(["tma.worker_preload"])  # never imported here
     saved = {k: os.environ.get(k) for k in [*SINGLE_THREADED, FORK_SERVER, PRELOAD]}
-    os.environ.update({**SINGLE_THREADED, FORK_SERVER: "1",
+    mark_shared_memory()
+    os.environ.update({**SINGLE_THREADED, FORK_SERVER: str(os.getpid()),
                        PRELOAD: ",".join([*WORKER_MODULES, *modules])})
     try:
         forkserver.ensure_running()
@@ -190,6 +193,95 @@ def preload_workers(modules=()) -> bool:
 
 
 _server = False  # preload_workers started the fork server
+PR_SET_PDEATHSIG = 1  # prctl(2)
+
+
+def die_with_parent(parent: int = 0) -> None:
+    """Linux: have this process killed (SIGKILL) when its parent ends, and end it now if
+    that parent (pid ``parent``, when known) has already gone; elsewhere nothing. For the fork
+    server and its workers (``tma.worker_preload``), so that no worker outlives a command
+    killed outright."""
+    if sys.platform != "linux":
+        return
+    import signal
+
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    except (OSError, AttributeError):
+        return
+    if parent and os.getppid() != parent:  # the parent ended before the signal was set
+        os._exit(1)
+
+
+SHM = "/dev/shm"
+SHM_MARK = re.compile(r"tma-command-(\d+)-(\d+)")  # tma-command-<pid>-<start>: tma's marker
+# what loky and joblib create there, named by the pid of the process that created it
+SHM_OWN = ("sem.loky-{pid}-", "joblib_memmapping_folder_{pid}_")
+
+
+def _started(pid: int) -> str | None:
+    """When process ``pid`` started (clock ticks since boot, /proc), None if none runs."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            return f.read().rpartition(b")")[2].split()[19].decode()
+    except (OSError, IndexError):
+        return None
+
+
+def mark_shared_memory() -> None:
+    """Mark this command's shared memory as tma's, and free what killed commands of tma left.
+
+    joblib's workers share named semaphores (``sem.loky-<pid>-*``) and folders
+    (``joblib_memmapping_folder_<pid>_*``) in ``/dev/shm``; their resource trackers free them
+    when the command ends, even when it is killed, unless the trackers are killed with it
+    (SIGKILL to its process group). A command marks the shared memory it will create with
+    ``tma-command-<pid>-<start>`` (its pid and start time), removed when it ends; a marker
+    whose command no longer runs (no process with that pid started then) names what that
+    command left: entries of its pid created after it started, removed with the marker.
+    Nothing else is touched. Linux only."""
+    if not os.path.isdir(SHM):
+        return
+    for name in os.listdir(SHM):
+        found = SHM_MARK.fullmatch(name)
+        if found and _started(int(found.group(1))) != found.group(2):
+            _free_left_over(os.path.join(SHM, name), int(found.group(1)))
+    started = _started(os.getpid())
+    if started is None:
+        return
+    marker = os.path.join(SHM, f"tma-command-{os.getpid()}-{started}")
+    try:
+        open(marker, "x").close()
+    except OSError:  # read-only or full: the trackers still free what they can
+        return
+    atexit.register(_remove_path, marker)
+
+
+def _free_left_over(marker: str, pid: int) -> None:
+    try:
+        since = os.stat(marker).st_mtime - 1  # a second of slack for the clocks' grain
+    except OSError:
+        return  # another command freed it
+    prefixes = tuple(p.format(pid=pid) for p in SHM_OWN)
+    for name in os.listdir(SHM):
+        path = os.path.join(SHM, name)
+        try:
+            if name.startswith(prefixes) and os.lstat(path).st_mtime >= since:
+                _remove_path(path)
+        except OSError:
+            continue
+    _remove_path(marker)
+
+
+def _remove_path(path: str) -> None:
+    import shutil
+
+    try:
+        if os.path.isdir(path) and not os.path.islink(path):
+            shutil.rmtree(path, ignore_errors=True)
+        else:
+            os.unlink(path)
+    except OSError:
+        pass
 
 
 def workers_from_server() -> bool:
@@ -239,12 +331,25 @@ def iter_tasks(fn, tasks, *, engine=1, desc: str = "", progress: bool = True):
                 bar.update()
             return
         from joblib import Parallel, delayed
+        from joblib.externals.loky.process_executor import BrokenProcessPool
 
         workers_from_server()
-        parallel = Parallel(n_jobs=engine.n_jobs, return_as="generator")
-        for result in parallel(delayed(_single_threaded)(fn, t) for t in tasks):
-            bar.update()
-            yield result
+        n_jobs = min(engine.n_jobs, len(tasks))
+        if n_jobs < engine.n_jobs:
+            log.info("parallel.n_jobs=%d: %d worker(s), one per task", engine.n_jobs, n_jobs)
+        # tasks carry paths, never arrays: nothing to share through memory-mapped files
+        parallel = Parallel(n_jobs=n_jobs, return_as="generator", max_nbytes=None)
+        try:
+            for result in parallel(delayed(_single_threaded)(fn, t) for t in tasks):
+                bar.update()
+                yield result
+        except BrokenProcessPool as exc:  # loky's TerminatedWorkerError among them
+            codes = re.search(r"exit codes of the workers are \{(.*?)\}", str(exc))
+            how = f" ({codes.group(1)})" if codes else ""
+            raise Interrupted(f"a worker process died{how}: killed, or it ran out of "
+                              "memory; the tasks finished are kept and nothing complete was "
+                              "replaced: run the same command again to resume (fewer "
+                              "workers, parallel.n_jobs, need less memory)") from None
     finally:
         bar.close()
 

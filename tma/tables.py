@@ -1,10 +1,38 @@
 """Tables and plots written by the aggregate stage, one module per family."""
 
+import logging
+import os
+import sys
 from pathlib import Path
 
 import pandas as pd
 
 from tma.io.atomic import atomic_path, write_text_atomic
+
+log = logging.getLogger(__name__)
+
+
+def plots_to_files() -> None:
+    """Let matplotlib load whatever ``MPLBACKEND`` says: tma draws every plot into a file
+    (its report modules use Agg), so a backend matplotlib refuses when it is imported (a typo,
+    ``bogus``) must not stop a table. Such a value is left out of the environment, with a
+    warning; a valid one stays. Called before a family's report module is imported
+    (``tma.families.Family.report``); nothing once matplotlib is loaded."""
+    value = os.environ.get("MPLBACKEND")
+    if not value or "matplotlib" in sys.modules:
+        return
+    del os.environ["MPLBACKEND"]
+    import matplotlib
+    from matplotlib import rcsetup
+
+    try:
+        rcsetup.validate_backend(value)
+    except ValueError:
+        log.warning("MPLBACKEND=%s is no matplotlib backend: left out (tma draws its plots "
+                    "into files, with Agg)", value)
+        return
+    os.environ["MPLBACKEND"] = value
+    matplotlib.rcParams["backend"] = value
 
 
 def write_csv(df: pd.DataFrame, path: Path, float_format=None):

@@ -6,6 +6,10 @@ import (a broken plotting backend, say) is left to the worker that needs it, whi
 reports the real error, where multiprocessing's server would die of anything but an
 ImportError and leave the command only an EOFError.
 
+The server, and each worker it forks, ends with its parent (Linux's parent-death signal): a
+command killed outright (SIGKILL, the out-of-memory killer) leaves no server and no worker
+computing on, and so nothing holding the shared-memory semaphores their trackers then free.
+
 numba's compiler is not set up here, measured: it would spare each worker ~0.4 s at its first
 compiled call, but delay the server's first fork by as much, which every command pays and
 only those that estimate with compiled kernels win back."""
@@ -13,7 +17,12 @@ only those that estimate with compiled kernels win back."""
 import importlib
 import os
 
-from tma.parallel import PRELOAD
+from tma.parallel import FORK_SERVER, PRELOAD, die_with_parent
+
+die_with_parent(int(os.environ.get(FORK_SERVER) or 0))  # the command that started the server
+_forking = [0]  # the pid of the process that forks (the server; a worker, for its children)
+os.register_at_fork(before=lambda: _forking.__setitem__(0, os.getpid()),
+                    after_in_child=lambda: die_with_parent(_forking[0]))
 
 for _name in filter(None, os.environ.get(PRELOAD, "").split(",")):
     try:

@@ -44,6 +44,9 @@ class Family:
 
     @property
     def report(self):
+        from tma.tables import plots_to_files
+
+        plots_to_files()  # a bad MPLBACKEND would fail matplotlib's import
         return importlib.import_module(f"tma.families.{self.name}.report")
 
     @property

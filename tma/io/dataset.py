@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from tma import __version__
-from tma.errors import InputError, IntegrityError
+from tma.errors import InputError, IntegrityError, MissingFileError
 from tma.io import arrow
 from tma.io.atomic import VerifiedPath, sha256_file, sha256_json, write_json_atomic
 
@@ -101,7 +101,7 @@ class Dataset:
         path = root / MANIFEST
         if not path.exists():
             hint = " (incomplete: re-run the stage that writes it)" if root.exists() else ""
-            raise InputError(f"no dataset at {root}{hint}")
+            raise MissingFileError(f"no dataset at {root}{hint}")
         manifest = read_sealed_manifest(path, "dataset", FORMAT, FORMAT_VERSION, _RECREATE)
         missing = [k for k in _REQUIRED if k not in manifest]
         if missing:

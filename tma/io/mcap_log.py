@@ -37,7 +37,7 @@ from mcap.reader import NonSeekingReader, SeekingReader
 from mcap_protobuf.schema import build_file_descriptor_set
 
 from tma import __version__
-from tma.errors import InputError, TmaError
+from tma.errors import InputError, MissingFileError, TmaError
 from tma.io.atomic import VerifiedPath, atomic_path
 from tma.io.mcap_writer import CHUNK_SIZE, MAGIC, Encoded, McapWriter, Ragged, interleave
 from tma.io.proto_columns import (
@@ -83,6 +83,8 @@ def schema_errors(where: str, what: str = "a message"):
     integer out of range) into one InputError naming the file, not a traceback."""
     try:
         yield
+    except TmaError:  # already one line naming its cause (a ValueError too)
+        raise
     except KeyError as exc:
         raise InputError(f"{where}: {what} lacks the field {exc}") from None
     except (TypeError, ValueError, IndexError, AttributeError, OverflowError) as exc:
@@ -514,7 +516,7 @@ class McapFile:
         try:
             self._data = Path(path).read_bytes() if self._crcs else path.data
         except FileNotFoundError:
-            raise InputError(f"{path}: no such file") from None
+            raise MissingFileError(f"{path}: no such file") from None
         except OSError as exc:
             raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
         problem = check_integrity(self._data, self._crcs)

@@ -14,7 +14,7 @@ declares its ``Observation`` and makes its logs from the aligned arrays (``tma.i
 
 from pathlib import Path
 
-from tma.errors import ConfigError, InputError
+from tma.errors import ConfigError, InputError, MissingFileError
 from tma.sources.base import Recording
 
 KINDS = ("csv", "nmea", "mcap")
@@ -36,7 +36,7 @@ def source_kind(path, fmt="auto", option: str | None = "format") -> str:
         with open(path, "rb") as f:
             head = f.read(4096)
     except FileNotFoundError:
-        raise InputError(f"{path}: no such file") from None
+        raise MissingFileError(f"{path}: no such file") from None
     except IsADirectoryError:
         raise InputError(f"{path}: a directory, not a log file") from None
     if head.startswith(MCAP_MAGIC):

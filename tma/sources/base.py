@@ -80,10 +80,34 @@ class Observation:
     def unit(self, name: str) -> Unit:
         return next(u for u in self.units if u.name == name)
 
+    def check_range(self, values, unit: Unit, where: str, place=None) -> None:
+        """InputError when a value lies outside ``unit``'s range: the first such value (at
+        ``where``, ``place(k)`` saying where value k is, e.g. its line) and the
+        ``<role>.units`` setting that would read it, for every reader alike."""
+        outside = np.abs(values) > unit.limit
+        if not outside.any():
+            return
+        k = int(np.argmax(outside))
+        if unit is self.units[0]:
+            others = ", ".join(f"{self.role}.units={u.name}" for u in self.units[1:])
+            why = f"{self.plural} must be in {unit.words} (or set {others})"
+        else:
+            why = (f"{self.plural} in {unit.words} were stated ({self.role}.units={unit.name}"
+                   f" or the name), but this is no value in {unit.words}: set "
+                   f"{self.role}.units={self.units[0].name} if they are in "
+                   f"{self.units[0].words}")
+        raise InputError(f"{where} {values[k]:g}{place(k) if place else ''} is outside "
+                         f"{unit.range_text}; {why}")
+
     def unit_of_name(self, name: str) -> Unit | None:
         """The unit a column or field name ends in (``bearing_rad``), other than the first
         (a name saying the first unit states nothing: a mislabelled column says it too)."""
         return next((u for u in self.units[1:] if name.lower().endswith(f"_{u.name}")), None)
+
+
+class Caution(str):
+    """A note that may be a mistake in the log (ids alike but written differently): the log
+    shows it as a warning; the manifest keeps it with the other notes."""
 
 
 BAD_ROWS = ("drop", "fail")

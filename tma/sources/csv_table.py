@@ -18,7 +18,11 @@ noted for the log):
   numbers are written ``12,5``); a units row under the header (``s,deg,deg`` or ``[s]``) is
   skipped; extra columns are ignored; CRLF line ends and a UTF-8 byte-order mark are fine;
 - tracks: ids as written: integers (``12``) stay the ids, any other text (``T1``, ``007``,
-  ``NA``) is a label, never re-read as a number.
+  ``NA``) is a label, never re-read as a number. Spaces around an id are padding
+  (``a, b`` tables) unless they tell ids apart: `` 7`` and ``7`` in one table are two
+  contacts, as written. A DataFrame's ids are written as Python writes them (``str``): ``7``
+  and ``7.0`` are two contacts. Ids alike but written differently (`` 7`` and ``7``, ``7``
+  and ``7.0``, ``007`` and ``7``) are kept apart and named in a warning (``Caution``).
 
 Everything is vectorised over the rows (pandas' C parser, numpy sorts): a million rows take
 about a second. A row with a missing or unreadable time, value, track id or own-ship position
@@ -37,8 +41,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from tma.errors import InputError
-from tma.sources.base import Contacts, Navigation, Recording, line_places
+from tma.errors import InputError, MissingFileError
+from tma.sources.base import Caution, Contacts, Navigation, Recording, line_places
 from tma.utc import MAX_SPAN_S, UNIX_FROM_S, UNIX_MAGNITUDE, UNIX_SCALE_NS, UTC_FROM_NS, ZONED
 
 DOCUMENTED = {"time": "time_s", "x": "own_x_m", "y": "own_y_m", "track": "track_id"}
@@ -60,6 +64,7 @@ SNIFFED = (",", ";", "\t")
 SAMPLE_BYTES = 1 << 16
 SAMPLE_LINES = 50
 MAX_TRACK_ID = 2**53  # an id written as a larger integer is kept as text
+NAMED_ALIKE = 3  # groups of alike ids named in the warning
 INTEGER_ID = re.compile(r"-?(?:0|[1-9][0-9]{0,15})")  # an id written as a plain integer
 SAME_FIX = {"x": 1e-6, "lat": 1e-9}  # m, deg (0.1 mm): rows at one time share one own-ship
 UTC_WORD = r"(?i)(?<=\d)\s*(?:UTC|GMT)$"  # a time of day ending in the word UTC: zone Z
@@ -139,7 +144,8 @@ def read_table(table, options, *, navigation: bool, contacts: bool) -> list[Reco
     track = None
     if role in cols:
         b, stated = _values(b_raw[keep], cols[role], options, table, path, line, notes)
-        track = _tracks(None if track_raw is None else track_raw[keep], len(t))
+        track = _tracks(None if track_raw is None else track_raw[keep], len(t), notes,
+                        f"{path}: {cols.get('track')}")
         _check_increasing(t, track, tcol, path, line)
     if not navigation:
         return [Recording(None, Contacts(t, epoch, track, b, str(path), stated), notes=notes,
@@ -182,7 +188,7 @@ class _Table:
             with open(path, "rb") as f:
                 raw = f.read(SAMPLE_BYTES)
         except FileNotFoundError:
-            raise InputError(f"{path}: no such file") from None
+            raise MissingFileError(f"{path}: no such file") from None
         except IsADirectoryError:
             raise InputError(f"{path}: a directory, not a CSV file") from None
         try:
@@ -346,6 +352,12 @@ class _Table:
                         self.path, sep=self.delimiter, usecols=[track], dtype=str,
                         keep_default_na=False, skipinitialspace=True, encoding="utf-8-sig",
                         skiprows=[1] if self.units is not None else None).iloc[:, 0]
+                if track is not None and _space_after(self.path, self.delimiter):
+                    # skipinitialspace took the spaces before the ids: ' 7' is not '7'
+                    df.iloc[:, track] = _with_leading_space(df.iloc[:, track], pd.read_csv(
+                        self.path, sep=self.delimiter, usecols=[track], dtype=str,
+                        keep_default_na=False, encoding="utf-8-sig",
+                        skiprows=[1] if self.units is not None else None).iloc[:, 0])
         except (pd.errors.ParserError, pd.errors.ParserWarning, pd.errors.EmptyDataError,
                 UnicodeDecodeError, ValueError) as exc:
             raise InputError(f"{self.path}: not a readable CSV "
@@ -359,6 +371,29 @@ class _Table:
     def lines(self, n: int) -> np.ndarray:
         """File line number of each data row (1 = the header)."""
         return np.arange(n) + (3 if self.units is not None else 2)
+
+
+def _space_after(path: Path, delimiter: str) -> bool:
+    """Whether the file holds a space or tab right after a delimiter anywhere (a field that
+    pandas' ``skipinitialspace`` shortens); a file without spaces is told at memchr speed."""
+    import mmap
+
+    with open(path, "rb") as f:
+        if f.seek(0, 2) == 0:
+            return False
+        with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
+            if data.find(b" ") < 0 and data.find(b"\t") < 0:
+                return False
+            sep = re.escape(delimiter.encode())
+            return re.search(sep + rb"[ \t]", data) is not None
+
+
+def _with_leading_space(kept: pd.Series, raw: pd.Series) -> pd.Series:
+    """The ids as written: ``raw`` (read without ``skipinitialspace``) where it is ``kept``
+    with spaces before it; ``kept`` elsewhere (a quoted id after a space, which only
+    ``skipinitialspace`` reads as its text)."""
+    kept = kept.astype(object)
+    return raw.where(raw.str.lstrip(" \t") == kept.fillna(""), kept)
 
 
 class _Frame(_Table):
@@ -429,6 +464,15 @@ def _time_column(df, col, fmt, path, line, notes):
     series = df[col]
     numeric = pd.api.types.is_numeric_dtype(series)  # true/false too: refused as numbers
     ns = None
+    if pd.api.types.is_timedelta64_dtype(series):  # a DataFrame's durations: relative times
+        if fmt not in ("auto", "s"):
+            raise InputError(f"{path}: {col} holds durations (timedelta64: times relative to "
+                             f"a start), not time.format={fmt} times; leave time.format=auto "
+                             "(time.start_utc=... dates them)")
+        ok = series.notna().to_numpy()
+        notes.append(f"{path.name}: {col} read as relative times (durations)")
+        return (np.where(ok, series.dt.as_unit("ns").array.asi8, 0), "rel_ns", ok,
+                np.zeros_like(ok))
     if pd.api.types.is_datetime64_any_dtype(series) and fmt in ("auto", "iso", "iso_utc"):
         ok = series.notna().to_numpy()  # a DataFrame's UTC times (``_Frame``), exact to the ns
         ns = np.where(ok, series.dt.as_unit("ns").array.asi8, 0)
@@ -554,7 +598,7 @@ def _values(values, col, options, table, path, line, notes):
     column's name. A name or units row saying the first unit is what a column in another unit
     mislabelled would say too, so the family's guard still checks it."""
     observation = options.observation
-    role, plural = observation.role, observation.plural
+    plural = observation.plural
     units, stated = options.contact.units, options.contact.units is not None
     if units is None:
         in_row = table.unit_of(col)
@@ -567,37 +611,75 @@ def _values(values, col, options, table, path, line, notes):
             units, stated = by_name.name, True
             notes.append(f"{path.name}: {plural} in {by_name.words} (column name {col})")
     unit = observation.unit(units or observation.units[0].name)
-    outside = np.abs(values) > unit.limit
-    if outside.any():
-        k = int(np.argmax(outside))
-        if unit is observation.units[0]:
-            others = ", ".join(f"{role}.units={u.name}" for u in observation.units[1:])
-            why = f"{plural} must be in {unit.words} (or set {others})"
-        else:
-            why = f"{plural} in {unit.words} were stated ({role}.units)"
-        raise InputError(f"{path}: {col} {values[k]:g} on line {line[k]} is outside "
-                         f"{unit.range_text}; {why}")
+    observation.check_range(values, unit, f"{path}: {col}", lambda k: f" on line {line[k]}")
     return unit.to_first(values), stated
 
 
 def _track_text(df, col):
-    """The track ids as written (stripped text; empty where missing), or None without a
-    track column."""
-    return None if col is None else df[col].fillna("").astype(str).str.strip()
+    """The track ids as written (text, spaces included; empty where missing), or None
+    without a track column. An id of spaces only is missing."""
+    if col is None:
+        return None
+    text = df[col].fillna("").astype(str)
+    return text.where(text.str.strip() != "", "")
 
 
-def _tracks(text, n: int) -> np.ndarray:
+def _tracks(text, n: int, notes: list, where: str) -> np.ndarray:
     """Track ids as written: int64 when every id is written as a plain integer (``12``,
     ``-3``: the ids themselves), else the texts (object array), kept as labels: ``007`` and
-    ``7``, ``1e3`` and ``1000`` are different contacts, ``NA`` is a name. No track column:
+    ``7``, ``1e3`` and ``1000`` are different contacts, ``NA`` is a name. Spaces around the
+    ids are dropped unless they tell ids apart (`` 7`` and ``7``: two contacts, kept as
+    written); ids alike but written differently are noted (``_alike_ids``). No track column:
     one contact, 0."""
     if text is None:
         return np.zeros(n, dtype=np.int64)
+    text = _unpadded(text)
+    _alike_ids(text, notes, where)
     if text.str.fullmatch(INTEGER_ID.pattern).all():
         ids = text.astype(np.int64).to_numpy()
         if np.all(np.abs(ids) <= MAX_TRACK_ID):
             return ids
     return text.to_numpy(dtype=object)
+
+
+def _unpadded(text: pd.Series) -> pd.Series:
+    """The ids without the spaces around them, except the ids that only those spaces tell
+    apart (`` 7`` beside ``7``), kept as written."""
+    stripped = text.str.strip()
+    if (stripped == text).all():
+        return text
+    codes, written = pd.factorize(text)
+    padded_alike = pd.Series(written).str.strip().duplicated(keep=False).to_numpy()
+    return stripped.where(~padded_alike[codes], text)
+
+
+def _alike(text: str):
+    """What two ids written differently may both mean: the number they write, else the text
+    without its spaces."""
+    stripped = text.strip()
+    try:
+        return float(stripped)
+    except ValueError:
+        return stripped
+
+
+def _alike_ids(text: pd.Series, notes: list, where: str) -> None:
+    """Note (as a warning) the ids alike but written differently (`` 7`` and ``7``, ``7``
+    and ``7.0``, ``007`` and ``7``): they are kept apart, as written."""
+    written = pd.unique(text)
+    if len(written) < 2 or len(written) > 100_000:  # ids by the row: nothing to tell apart
+        return
+    groups: dict = {}
+    for w in written:
+        groups.setdefault(_alike(w), []).append(w)
+    alike = [sorted(g) for g in groups.values() if len(g) > 1]
+    if alike:
+        shown = "; ".join(" and ".join(repr(w) for w in g) for g in alike[:NAMED_ALIKE])
+        notes.append(Caution(
+            f"{where}: {len(alike)} group(s) of contact ids alike but written differently "
+            f"({shown}{' ...' if len(alike) > NAMED_ALIKE else ''}) are kept as different "
+            "contacts (ids are kept as written): write each contact's id alike if they are "
+            "one"))
 
 
 def _codes(track: np.ndarray) -> np.ndarray:

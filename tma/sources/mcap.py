@@ -229,6 +229,7 @@ def _to_first_unit(values, units: str | None, field: str, topic: str, notes: lis
                      "says which")
     else:
         unit = observation.unit(units)
+    observation.check_range(values[np.isfinite(values)], unit, f"{topic}: '{field}'")
     return unit.to_first(values), stated
 
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pynmea2
 
-from tma.errors import InputError
+from tma.errors import InputError, MissingFileError
 from tma.sources.base import NAMED, Navigation, Recording, line_places
 
 DAY_NS = 86_400 * 10**9
@@ -52,7 +52,7 @@ def read_nmea(path, options, date_hint_ns: int | None = None) -> Recording:
     try:
         text = path.read_bytes().decode("ascii", errors="replace")
     except FileNotFoundError:
-        raise InputError(f"{path}: no such file") from None
+        raise MissingFileError(f"{path}: no such file") from None
     fixes = []  # (kind, line, time of day ns, date or None, lat, lon)
     skipped = {"not NMEA": [], "bad or missing checksum": [], "unparsable": [],
                "no valid fix": []}  # line numbers

@@ -239,7 +239,7 @@ def _one_line(proc, expected):
     ("origin.lat=59.9", "origin.lat and origin.lon go together"),
     ("nmea.date=1.6.2025", "nmea.date must be a date YYYY-MM-DD, got '1.6.2025'"),
     ("columns.time=[a,b]", "columns.time must be null or text, got ['a', 'b']"),
-    ("sigma_deg=abc", "sigma_deg must be null or a number in (0, 90), got 'abc'"),
+    ("sigma_deg=abc", "sigma_deg must be null or a number in [0.001, 90), got 'abc'"),
     ("min_bearings=4", "min_bearings must be >= 5, got 4"),
 ])
 def test_cli_bad_reading_options_are_one_line(tmp_path, override, expected):

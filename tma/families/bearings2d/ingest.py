@@ -63,7 +63,9 @@ class Settings(Params):
 
     sigma_deg: float | None = param(None, "nominal bearing noise (deg) for covariances, over "
                                     "what an MCAP log declares; null: the log's, else "
-                                    "estimated from the residuals", "(0, 90)")
+                                    "estimated from the residuals; at least 0.001 deg, "
+                                    "finer than any bearing sensor, the least noise the "
+                                    "motion fit assumes (ncv.MIN_SIGMA_RAD)", "[0.001, 90)")
     min_bearings: int = param(5, "bearings each track needs (4 unknowns and one degree of "
                               "freedom for the noise)", "[5, inf)")
 
