@@ -153,7 +153,8 @@ def test_the_mixture_averages_its_components_by_prior_and_likelihood():
     w /= w.sum()
     means = np.array([c[1] for c in comps])
     mean = w @ means
-    cov = sum(wi * (c[2] + np.outer(m - mean, m - mean)) for wi, c, m in zip(w, comps, means))
+    cov = sum(wi * (c[2] + np.outer(m - mean, m - mean))
+              for wi, c, m in zip(w, comps, means, strict=True))
     sd = np.sqrt(np.diag(cov))
     assert np.all(np.abs(mixed["state"][0] - mean) <= 0.1 * sd), (mixed["state"][0], mean)
     np.testing.assert_allclose(np.sqrt(np.diag(mixed["cov"][0])), sd, rtol=0.1)

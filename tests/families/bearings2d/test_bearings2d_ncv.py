@@ -164,10 +164,11 @@ def test_model_innovations_are_white_and_the_errors_honest(q):
 
 def test_a_wandering_target_fitted_at_constant_velocity_is_caught_or_honest():
     """Targets wandering at q = 1e-3 in a log that declares nothing: lm assuming real-ship
-    wander (RECORDED_ACCEL_PSD) and no manoeuvres has its ok tracks consistent (measured 0.937 of 398,
-    sd 0.012: the band is about +-2.5 sd, a false failure in ~1 % of seeds, and an assumed q
-    three times too large gives 0.99); assuming constant velocity without the test (the old
-    behaviour) is not (0.02)."""
+    wander (RECORDED_ACCEL_PSD) and no manoeuvres has its ok tracks consistent (measured
+    0.937 of 398, sd 0.012: the band is about +-2.5 sd, a false failure in ~1 % of seeds,
+    and an assumed q three times too large gives 0.99); with a recording's manoeuvres in the
+    prior too (the default), wider still; assuming constant velocity without the test (the
+    old behaviour) is not (0.02)."""
     cfg = Config(n_tracks=400, shard_size=400, sigma_deg=0.5, seed=13,
                  target=TargetConfig(accel_psd_m2_s3=1e-3, declared=False))
     log, truth = simulate(cfg, 0)

@@ -269,8 +269,9 @@ def assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t_now_s,
     few innovations); ``motion_tested``: whether the trend test was due (then a NaN, a
     motion the bearings cannot check, is ``unobservable``); ``approximate``: bool per
     track; ``undetermined``: tracks whose range the geometry does not determine, whatever
-    their errors say (bool per track: ``unobservable`` before any test); ``cfg`` holds ``singular_rcond``, ``fit_alpha``,
-    ``motion_alpha``, ``max_range_rel_sd``, ``max_speed_rel_sd``. Returns output columns."""
+    their errors say (bool per track: ``unobservable`` before any test); ``cfg`` holds
+    ``singular_rcond``, ``fit_alpha``, ``motion_alpha``, ``max_range_rel_sd``,
+    ``max_speed_rel_sd``. Returns output columns."""
     finite = np.isfinite(theta).all(axis=1)
     cov, singular = scaled_inverse(np.where(finite[:, None, None], jtj, np.nan),
                                    cfg.singular_rcond)
