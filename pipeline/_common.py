@@ -23,6 +23,7 @@ from omegaconf.errors import ConfigAttributeError, ConfigKeyError, OmegaConfBase
 from pipeline import SWEEP_ENV  # set while a multirun runs
 from tma import experiment
 from tma.errors import Interrupted, TmaError
+from tma.families import NAMES, ingest_defaults, reads_logs
 from tma.io.atomic import write_json_atomic
 from tma.parallel import Engine, engine_from, keep_freed_memory, quick_exit
 
@@ -31,10 +32,12 @@ log = logging.getLogger("tma")
 _stage_hydra = None  # Hydra's config of the stage run_stage is running (else None)
 SWEEP_RECORD = "tma-aggregate.json"  # what an aggregate job of a multirun read
 PROBE_BYTES = 1 << 16  # more than Hydra writes of its own before the stage starts
-# the top-level keys of conf/config.yaml and conf/ingest.yaml and their groups (+key adds none)
+# the top-level keys of conf/config.yaml and conf/ingest.yaml, their groups and the ingest
+# options they take from the families (+key adds none)
 KNOWN_KEYS = {key for conf in ("config", "ingest")
               for key in OmegaConf.load(Path(CONF_DIR) / f"{conf}.yaml")} - {"defaults", "hydra"} \
-    | {"scenario", "estimator", "parallel"}
+    | {"scenario", "estimator", "parallel"} \
+    | {key for name in NAMES if reads_logs(name) for key in ingest_defaults(name)}
 
 
 # -- the entry point and the error policy -----------------------------------------------------

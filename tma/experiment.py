@@ -322,14 +322,14 @@ def bare_as(key: str | None, arguments: list[str], overrides: list[str]) -> list
                       f"{override_text(key or 'dataset', bare[-1])}?)")
 
 
-LOG_SUFFIXES = (".csv", ".tsv", ".txt", ".nmea", ".log", ".mcap")
-
-
 def _names_a_log(text: str) -> bool:
     """Whether a bare argument names a log file rather than a dataset: a file, or a name
-    with a log's extension or a directory part (dataset names are plain names)."""
+    with the extension of a kind of log (``tma.sources.extensions``) or a directory part
+    (dataset names are plain names)."""
+    from tma.sources import extensions
+
     path = Path(text)
-    return path.is_file() or path.suffix.lower() in LOG_SUFFIXES or path.name != text
+    return path.is_file() or path.suffix.lower() in extensions() or path.name != text
 
 
 def override_of(key: str, overrides: list[str]) -> tuple[str, str]:

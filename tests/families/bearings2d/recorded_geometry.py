@@ -15,7 +15,7 @@ from tma.families.bearings2d.estimators.lm import LevenbergMarquardt
 from tma.families.bearings2d.ingest import OBSERVATION
 from tma.families.bearings2d.log import read_bearings_log
 from tma.io.dataset import Dataset
-from tma.sources.base import source_options as reading_options
+from tma.sources.options import source_options as reading_options
 
 ORIGIN = (59.9, 10.7)  # deg
 START_UTC = "2025-06-01T08:00:00Z"
