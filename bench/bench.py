@@ -51,7 +51,7 @@ from tma.families.bearings2d.estimators.lm import initial_theta
 from tma.families.bearings2d.model import bearing_jacobian, bearing_residuals
 from tma.families.bearings2d.scenario import Config, simulate_shard
 from tma.io.mcap_writer import Ragged
-from tma.parallel import keep_freed_memory
+from tma.runtime.forkserver import keep_freed_memory
 
 REPO = Path(__file__).resolve().parents[1]
 THETA = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")
@@ -216,7 +216,7 @@ print(f"{{time.perf_counter() - start:.0f}}")
 """
         train = f"""
 import resource, time, numpy as np
-from tma.parallel import keep_freed_memory
+from tma.runtime.forkserver import keep_freed_memory
 from tma.families.bearing_doppler3d.estimators.cmnf import train, model_functions
 from tma.families.bearing_doppler3d.model import AuvModel, model_record
 from tma.families.bearing_doppler3d.scenario import Config

@@ -239,7 +239,7 @@ def test_the_options_of_everything_are_listed(capsys):
 def _option_schemas():
     """``(what, schema, check)`` of every declared group of ingest and parallel options:
     ``check(key, value)`` builds it from one value as a command line would give it."""
-    from tma.parallel import Engine, engine_from
+    from tma.runtime.parallel import Engine, engine_from
     from tma.sources.options import options_schema, source_options
 
     out = []
@@ -316,9 +316,9 @@ def test_the_ingest_and_parallel_options_are_listed_with_their_declared_defaults
     takes every ingest option from its declaration (``conf/ingest.yaml`` restates none: the
     ConfigStore's ``reading`` group), and the ``parallel`` presets set only declared keys."""
     from tma.ais.options import TruthOptions
-    from tma.ingest import option_groups, setting_names
-    from tma.parallel import Engine
+    from tma.runtime.parallel import Engine
     from tma.sources.options import options_schema
+    from tma.stages.ingest import option_groups, setting_names
 
     assert options.main(["ingest", "parallel"]) == 0
     text = capsys.readouterr().out

@@ -391,7 +391,7 @@ def test_every_path_and_name_the_docs_cite_exists(doc):
         for path in _expand(cited):
             module, attribute = path, None
             if re.search(r"/\w+\.[A-Za-z_]\w*$", path) and not path.endswith(
-                    (".py", ".md", ".yaml", ".json", ".toml")):  # tma/io/mcap_log.McapFile
+                    (".py", ".md", ".yaml", ".json", ".toml")):  # tma/io/mcap_read.McapFile
                 module, attribute = path.rsplit(".", 1)
                 module += ".py"
             matches = list(REPO.glob(module)) if "*" in module else [REPO / module]

@@ -1,7 +1,7 @@
 """The one grid scatter (``tma.io.grid``): values that arrive one by one put on the (tracks x
 epochs) grid, against a plain loop; a track with two values at one epoch refused naming it
 and the time, in the MCAP readers of ``bearings2d``, ``radar2d`` and ``ranges2d`` and at
-ingest; and the own-ship-off-the-map rule (``tma.geo.check_mapped``), one for ingest and the
+ingest; and the own-ship-off-the-map rule (``tma.maths.geo.check_mapped``), one for ingest and the
 log writer."""
 
 import numpy as np
@@ -21,9 +21,10 @@ from tma.families.radar2d.log import PLOTS_TOPIC, read_radar_log
 from tma.families.radar2d.log import channels as radar_channels
 from tma.families.ranges2d.log import RANGES_TOPIC, read_ranges_log
 from tma.families.ranges2d.log import channels as ranges_channels
-from tma.geo import check_mapped
 from tma.io.grid import epochs, scatter
-from tma.io.mcap_log import LogWriter, json_record
+from tma.io.mcap_log import LogWriter
+from tma.io.mcap_values import json_record
+from tma.maths.geo import check_mapped
 
 
 def test_scatter_puts_each_value_in_its_cell():

@@ -21,10 +21,10 @@ from tma.config import describe
 from tma.errors import ConfigError
 from tma.families.bearings2d.ingest import OBSERVATION
 from tma.families.bearings2d.log import read_bearings_log
-from tma.ingest import ingest
 from tma.io.dataset import Dataset
 from tma.sources import extensions, kinds, reader, readers, source_kind
 from tma.sources.options import groups, inapplicable, options_schema, source_options
+from tma.stages.ingest import ingest
 
 # the whole of a new format: this file, and its module's name added to READERS
 BRG_READER = '''

@@ -5,8 +5,8 @@ command line sets it (``scenario.KEY=``, ``estimator.KEY=``, ingest's ``csv.deli
 ``sigma_deg=``, ``parallel.KEY=``), its default, the values it allows and what it means.
 ``ingest``: the reading options (``tma.sources.options``, with those each reader declares) and
 the family's own settings (its ``ingest.Settings``), for each family that reads recorded logs;
-``parallel``: where shards run (``tma.parallel.Engine``; ``conf/parallel/*.yaml`` are presets of
-these keys)."""
+``parallel``: where shards run (``tma.runtime.parallel.Engine``; ``conf/parallel/*.yaml`` are
+presets of these keys)."""
 
 import sys
 from pathlib import Path
@@ -57,7 +57,7 @@ def ingest_tables() -> list[str]:
 
 
 def parallel_rows() -> list[tuple[str, str, str, str]]:
-    from tma.parallel import Engine
+    from tma.runtime.parallel import Engine
 
     return describe(Engine, "parallel.")
 

@@ -9,7 +9,7 @@ table or None)``, ``write_log(path, log, metadata) -> n_messages`` and ``read_lo
 optionally ``simulation_key``/``simulate_raw``/``from_raw`` when datasets of different
 configs share their random draws. Its report module provides ``aggregate_runs(entries,
 tables_dir, table_name)``; an ``ingest`` module, when the family reads recorded logs,
-``OBSERVATION``, ``Settings`` and ``logs`` (``tma.ingest``).
+``OBSERVATION``, ``Settings`` and ``logs`` (``tma.stages.ingest``).
 """
 
 import functools
@@ -44,14 +44,14 @@ class Family:
 
     @property
     def report(self):
-        from tma.tables import plots_to_files
+        from tma.report.tables import plots_to_files
 
         plots_to_files()  # a bad MPLBACKEND would fail matplotlib's import
         return importlib.import_module(f"tma.families.{self.name}.report")
 
     @property
     def ingest(self):
-        """What the family reads from a recorded log (``tma.ingest``): its ``ingest`` module,
+        """What the family reads from a recorded log (``tma.stages.ingest``): its ``ingest`` module,
         with ``OBSERVATION``, ``Settings`` and ``logs``."""
         try:
             return importlib.import_module(f"tma.families.{self.name}.ingest")
@@ -133,7 +133,7 @@ def register_configs():
     Also the group ``estimator_keys``, one option per family: every key of the family's
     estimators (their defaults, ``name`` left out). An experiment merges it into
     ``estimator`` (``- /estimator_keys@estimator: <family>``) so that Hydra lets the command
-    line set any of them with ``estimator.KEY=VALUE``; ``tma.experiment.estimator_configs``
+    line set any of them with ``estimator.KEY=VALUE``; ``tma.plan.grid.estimator_configs``
     then copies the value into the experiment's estimators that have KEY. These values are
     never run.
 

@@ -11,7 +11,7 @@ then its extension), the reading options' groups and which kinds read each
 every command imports them: each reader imports its heavy libraries (pandas, the MCAP stack)
 when a file of its kind is read. ``align.py`` puts what the readers return on one clock and
 one plane; a family's ``ingest`` module declares its ``Observation`` and makes its logs from
-the aligned arrays (``tma.ingest``).
+the aligned arrays (``tma.stages.ingest``).
 """
 
 import functools

@@ -288,8 +288,6 @@ class CsvFile:
         The track column is text as written (``007`` is not ``7``, ``NA`` is a name)."""
         import pandas as pd
 
-        from tma.sources.table import with_leading_space
-
         index = sorted({self.header.index(name) for name in cols.values()})
         track = self.header.index(cols["track"]) if "track" in cols else None
         try:
@@ -342,6 +340,54 @@ def _space_after(path: Path, delimiter: str) -> bool:
             return re.search(sep + rb"[ \t]", data) is not None
 
 
+def with_leading_space(kept, raw):
+    """The ids as written: ``raw`` (read without ``skipinitialspace``) where it is ``kept``
+    with spaces before it; ``kept`` elsewhere (a quoted id after a space, which only
+    ``skipinitialspace`` reads as its text)."""
+    kept = kept.astype(object)
+    return raw.where(raw.str.lstrip(" \t") == kept.fillna(""), kept)
+
+
+class Frame(CsvFile):
+    """A pandas DataFrame as a table: its columns are the header, its rows the lines."""
+
+    def __init__(self, frame, name: str, options):
+        import pandas as pd
+
+        if not isinstance(frame, pd.DataFrame):
+            raise InputError(f"{name}: a pandas DataFrame is needed, got {type(frame).__name__}")
+        if frame.empty:
+            raise InputError(f"{name}: no rows")
+        self.path, self.options, self.notes = Path(name), options, []
+        self.frame = frame.reset_index(drop=True)
+        self.header = [str(c) for c in frame.columns]
+        if len(set(self.header)) != len(self.header):
+            raise InputError(f"{name}: two columns share a name: {', '.join(self.header)}")
+        self.units, self.delimiter, self.decimal = None, ",", "."
+
+    def read(self, cols: dict[str, str]):
+        """The chosen columns; datetime64 ones in UTC (``tma.utc.time_column`` takes their
+        nanoseconds as they are), the track column as text as written (numbers as Python
+        prints them: ``7``, ``7.5``)."""
+        import pandas as pd
+
+        out = {}
+        for role, name in cols.items():
+            series = self.frame.iloc[:, self.header.index(name)]
+            if pd.api.types.is_datetime64_any_dtype(series):
+                if getattr(series.dt, "tz", None) is None:
+                    self.notes.append(f"{self.path}: {name} without time zone read as UTC")
+                    series = series.dt.tz_localize("UTC")
+                series = series.dt.tz_convert("UTC")
+            elif role == "track":
+                series = series.astype(str).where(series.notna(), "").astype(object)
+            out[name] = series
+        return pd.DataFrame(out)
+
+    def lines(self, n: int) -> np.ndarray:
+        return np.arange(n)
+
+
 def is_number(text: str, decimal: str = ".") -> bool:
     try:
         float(text.replace(decimal, ".") if decimal != "." else text)
@@ -362,6 +408,18 @@ def read_csv_table(path, options, *, navigation: bool, contacts: bool,
     from tma.sources.table import read_table
 
     return read_table(CsvFile(Path(path), options), options, navigation=navigation,
+                      contacts=contacts)
+
+
+def read_frame(frame, name: str, options, *, navigation: bool,
+               contacts: bool) -> list[Recording]:
+    """``read_csv_table`` of a pandas DataFrame (``name``: what messages
+    call it), read as the same table written to a file would be: the same columns found, the
+    same checks and notes; a datetime64 column is UTC times (a zone-less one is taken as UTC and
+    noted), and a row's "line" is its position in the frame, from 0."""
+    from tma.sources.table import read_table
+
+    return read_table(Frame(frame, name, options), options, navigation=navigation,
                       contacts=contacts)
 
 

@@ -2,7 +2,7 @@
 Recording`` (kind ``mcap``: the MCAP magic, or ``.mcap``; options ``ownship.topic``,
 ``<role>.topic``, ``<role>.field``). The topics are read by ``tma.sources.mcap_topics``.
 
-The file is read and checked once by tma's one MCAP reader (``tma.io.mcap_log.McapFile``:
+The file is read and checked once by tma's one MCAP reader (``tma.io.mcap_read.McapFile``:
 magic, footer, summary and data-section CRCs before anything is decoded; then each chunk's CRC
 as it is read and the message and metadata counts against the summary's statistics). Each
 channel is taken by what it holds, never refused for its topic name: its message encoding

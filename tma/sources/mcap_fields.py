@@ -11,7 +11,7 @@ import numpy as np
 from google.protobuf.message import Message as ProtobufMessage
 
 from tma.errors import ConfigError, InputError
-from tma.io.mcap_log import float_array, int_array, schema_errors
+from tma.io.mcap_values import float_array, int_array, schema_errors
 from tma.sources import tma_log
 
 TRACK_FIELDS = ("track_id", "track", "contact_id", "contact", "target_id")

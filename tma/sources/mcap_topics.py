@@ -11,7 +11,8 @@ from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
 from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
 
 from tma.errors import InputError
-from tma.io.mcap_log import McapFile, TmaDecoderFactory, schema_errors
+from tma.io.mcap_read import McapFile, TmaDecoderFactory
+from tma.io.mcap_values import schema_errors
 from tma.sources import foxglove, ros2, tma_log
 from tma.sources.base import NAMED, Contacts, Dropped, Navigation, Recording
 from tma.sources.mcap_fields import field_values, own_values

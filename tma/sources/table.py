@@ -1,5 +1,6 @@
-"""A table's columns -> ``Recording``s: the rows of a CSV file (``tma.sources.csv_table``, which
-finds its layout and columns) or of a pandas DataFrame (``read_frame``), read alike.
+"""A table's columns -> ``Recording``s: the rows of a CSV file or of a pandas DataFrame
+(``tma.sources.csv_table``: ``CsvFile``, ``Frame``, which find its layout and columns), read
+alike (``read_table``).
 
 Times are read by ``tma.utc`` (``time_column``); values in the observation's first unit, or
 another when ``<role>.units``, the column's name or the units row says so; own-ship as
@@ -20,14 +21,12 @@ always one ``InputError``.
 """
 
 import re
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from tma.errors import InputError
 from tma.sources.base import Caution, Contacts, Navigation, Recording, line_places
-from tma.sources.csv_table import CsvFile
 from tma.utc import table_seconds, time_column
 
 MAX_TRACK_ID = 2**53  # an id written as a larger integer is kept as text
@@ -36,19 +35,9 @@ INTEGER_ID = re.compile(r"-?(?:0|[1-9][0-9]{0,15})")  # an id written as a plain
 SAME_FIX = {"x": 1e-6, "lat": 1e-9}  # m, deg (0.1 mm): rows at one time share one own-ship
 
 
-def read_frame(frame: pd.DataFrame, name: str, options, *, navigation: bool,
-               contacts: bool) -> list[Recording]:
-    """``tma.sources.csv_table.read_csv_table`` of a pandas DataFrame (``name``: what messages
-    call it), read as the same table written to a file would be: the same columns found, the
-    same checks and notes; a datetime64 column is UTC times (a zone-less one is taken as UTC and
-    noted), and a row's "line" is its position in the frame, from 0."""
-    return read_table(Frame(frame, name, options), options, navigation=navigation,
-                      contacts=contacts)
-
-
 def read_table(table, options, *, navigation: bool, contacts: bool) -> list[Recording]:
     """The Recordings of a table: a file's (``tma.sources.csv_table.CsvFile``: its layout)
-    or a DataFrame (``Frame``); arguments as ``read_csv_table``'s."""
+    or a DataFrame (``Frame``); arguments as ``tma.sources.csv_table.read_csv_table``'s."""
     path = table.path
     role = options.observation.role
     cols = table.columns(navigation=navigation, contacts=contacts)
@@ -129,50 +118,6 @@ def read_table(table, options, *, navigation: bool, contacts: bool) -> list[Reco
                                                   str(path), stated), notes=notes,
                                     dropped=rows if k == 0 else options.dropped()))
     return recordings
-
-
-class Frame(CsvFile):
-    """A pandas DataFrame as a table: its columns are the header, its rows the lines."""
-
-    def __init__(self, frame: pd.DataFrame, name: str, options):
-        if not isinstance(frame, pd.DataFrame):
-            raise InputError(f"{name}: a pandas DataFrame is needed, got {type(frame).__name__}")
-        if frame.empty:
-            raise InputError(f"{name}: no rows")
-        self.path, self.options, self.notes = Path(name), options, []
-        self.frame = frame.reset_index(drop=True)
-        self.header = [str(c) for c in frame.columns]
-        if len(set(self.header)) != len(self.header):
-            raise InputError(f"{name}: two columns share a name: {', '.join(self.header)}")
-        self.units, self.delimiter, self.decimal = None, ",", "."
-
-    def read(self, cols: dict[str, str]) -> pd.DataFrame:
-        """The chosen columns; datetime64 ones in UTC (``tma.utc.time_column`` takes their
-        nanoseconds as they are), the track column as text as written (numbers as Python
-        prints them: ``7``, ``7.5``)."""
-        out = {}
-        for role, name in cols.items():
-            series = self.frame.iloc[:, self.header.index(name)]
-            if pd.api.types.is_datetime64_any_dtype(series):
-                if getattr(series.dt, "tz", None) is None:
-                    self.notes.append(f"{self.path}: {name} without time zone read as UTC")
-                    series = series.dt.tz_localize("UTC")
-                series = series.dt.tz_convert("UTC")
-            elif role == "track":
-                series = series.astype(str).where(series.notna(), "").astype(object)
-            out[name] = series
-        return pd.DataFrame(out)
-
-    def lines(self, n: int) -> np.ndarray:
-        return np.arange(n)
-
-
-def with_leading_space(kept: pd.Series, raw: pd.Series) -> pd.Series:
-    """The ids as written: ``raw`` (read without ``skipinitialspace``) where it is ``kept``
-    with spaces before it; ``kept`` elsewhere (a quoted id after a space, which only
-    ``skipinitialspace`` reads as its text)."""
-    kept = kept.astype(object)
-    return raw.where(raw.str.lstrip(" \t") == kept.fillna(""), kept)
 
 
 def _number_column(df, col, path) -> np.ndarray:

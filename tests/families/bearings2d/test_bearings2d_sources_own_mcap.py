@@ -31,7 +31,8 @@ from tma.families.bearings2d.log import (
     write_bearings_log,
 )
 from tma.io.dataset import Dataset
-from tma.io.mcap_log import Channel, LogWriter, json_record
+from tma.io.mcap_log import Channel, LogWriter
+from tma.io.mcap_values import json_record
 from tma.sources.mcap import read_mcap
 
 NO_OPTIONS = source_options({})

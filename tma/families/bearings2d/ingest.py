@@ -1,6 +1,6 @@
 """What ``bearings2d`` reads from a recorded log, and the logs it makes of it.
 
-The readers and the stage are the core's (``tma.sources``, ``tma.ingest``); this family
+The readers and the stage are the core's (``tma.sources``, ``tma.stages.ingest``); this family
 declares its observation, the bearing (``OBSERVATION``: degrees clockwise from north or
 radians, a direction vector as ``atan2(x, y)``, tma's own ``tma.BearingBatch`` on
 ``/sonar/bearings``), guards it against radians read as degrees (``radians_guard``), checks
@@ -18,8 +18,8 @@ import numpy as np
 from tma.config import Params, param
 from tma.errors import InputError
 from tma.families.bearings2d.log import BEARINGS_TOPIC, SCHEMAS, BearingsLog, nominal_sigma
-from tma.geo import check_mapped
 from tma.io.grid import epochs, scatter
+from tma.maths.geo import check_mapped
 from tma.sources.base import Observation, Unit
 from tma.utc import MAX_SPAN_S
 
@@ -172,8 +172,8 @@ def _grid(t, x, y, track, bearing, ids, sigma, where) -> BearingsLog:
 
 
 def ingest(input_path, **kwargs):
-    """``tma.ingest.ingest`` of a bearing log into a ``bearings2d`` dataset."""
-    from tma.ingest import ingest as ingest_log
+    """``tma.stages.ingest.ingest`` of a bearing log into a ``bearings2d`` dataset."""
+    from tma.stages.ingest import ingest as ingest_log
 
     return ingest_log(input_path, family="bearings2d", **kwargs)
 

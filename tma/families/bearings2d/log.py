@@ -29,7 +29,6 @@ import numpy as np
 
 from tma.errors import InputError
 from tma.families.bearings2d.manoeuvres import ManoeuvrePrior
-from tma.geo import LocationFix, check_mapped, local_to_geodetic, location_fix
 from tma.io.grid import epochs, scatter
 from tma.io.mcap_log import (
     COMPRESSION,
@@ -37,18 +36,21 @@ from tma.io.mcap_log import (
     TRACKS,
     Channel,
     LogWriter,
-    float_array,
     geo_origin,
+    read_epoch,
+    track_labels,
+)
+from tma.io.mcap_read import read_log
+from tma.io.mcap_values import (
+    float_array,
     int_array,
     json_record,
     number,
-    read_epoch,
     read_json_record,
-    read_log,
     schema_errors,
-    track_labels,
 )
 from tma.io.mcap_writer import Encoded, Ragged
+from tma.maths.geo import LocationFix, check_mapped, local_to_geodetic, location_fix
 from tma.utc import MAX_EPOCH_NS
 
 OWNSHIP_TOPIC = "/ownship/navigation"

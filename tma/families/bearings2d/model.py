@@ -12,8 +12,8 @@ import math
 
 import numpy as np
 
-from tma.angles import TWO_PI, bearing_from_north
-from tma.jit import njit
+from tma.maths.angles import TWO_PI, bearing_from_north
+from tma.runtime.jit import njit
 
 THETA_COLUMNS = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")
 

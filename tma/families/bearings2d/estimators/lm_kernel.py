@@ -11,9 +11,9 @@ import math
 
 import numpy as np
 
-from tma.angles import TWO_PI
 from tma.families.bearings2d.model import atan2, track_terms
-from tma.jit import njit
+from tma.maths.angles import TWO_PI
+from tma.runtime.jit import njit
 
 # Stop reasons recorded per track.
 STOP_F_TOL, STOP_MAX_ITER, STOP_LAMBDA_MAX = 0, 1, 2

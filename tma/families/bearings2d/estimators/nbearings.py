@@ -18,7 +18,7 @@ import numpy as np
 
 from tma.config import param
 from tma.families.bearings2d.estimators.base import BearingsConfig, BearingsEstimator
-from tma.linalg import jacobi_scaled_eigh, solve_shifted
+from tma.maths.linalg import jacobi_scaled_eigh, solve_shifted
 
 
 @dataclass

@@ -202,8 +202,8 @@ def with_truth(read: Read, truth, where: str) -> Read:
 def read_frames(bearings, navigation=None, *, family: str, options=None, **settings) -> Read:
     """``read_log`` of pandas DataFrames: ``bearings`` (time, the observation and, unless
     ``navigation`` gives them, own-ship fixes: the columns a CSV table would have), read by
-    the CSV reader (``tma.sources.table.read_frame``)."""
-    from tma.sources.table import read_frame
+    the CSV reader (``tma.sources.csv_table.read_frame``)."""
+    from tma.sources.csv_table import read_frame
 
     reader = family_named(family).ingest
     settings = reader.Settings(**settings)
