@@ -18,8 +18,8 @@ import functools
 import importlib
 from pathlib import Path
 
-from tma.errors import ConfigError, InputError, MissingFileError
-from tma.sources.base import SNIFF_BYTES, Reader, Recording
+from tma.errors import ConfigError
+from tma.sources.base import SNIFF_BYTES, Reader, Recording, file_head
 
 READERS = (  # one line per format: its reader file's module
     "tma.sources.csv_table",
@@ -69,13 +69,7 @@ def source_kind(path, fmt="auto", option: str | None = "format") -> str:
             raise ConfigError(f"{option} must be auto, {', '.join(known[:-1])} or {known[-1]}, "
                               f"got '{fmt}'")
         return fmt
-    try:
-        with open(path, "rb") as f:
-            head = f.read(SNIFF_BYTES)
-    except FileNotFoundError:
-        raise MissingFileError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise InputError(f"{path}: a directory, not a log file") from None
+    head = file_head(path, SNIFF_BYTES, "a log file")
     sniffed = next((r.kind for r in readers() if r.sniff is not None and r.sniff(head)), None)
     kind = sniffed or extensions().get(path.suffix.lower())
     if kind is None:

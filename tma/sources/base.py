@@ -23,10 +23,11 @@ local (x east, y north, metres) or geographic (latitude, longitude in degrees, W
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
-from tma.errors import InputError
+from tma.errors import InputError, MissingFileError
 
 
 @dataclass(frozen=True)
@@ -253,3 +254,15 @@ class Reader:
 
 
 SNIFF_BYTES = 4096  # the head of a file a reader's sniff sees
+
+
+def file_head(path: Path, size: int, what: str) -> bytes:
+    """The first ``size`` bytes of the file at ``path``; MissingFileError when there is none,
+    InputError for a directory (``what``: what it should have been, ``a log file``)."""
+    try:
+        with open(path, "rb") as f:
+            return f.read(size)
+    except FileNotFoundError:
+        raise MissingFileError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise InputError(f"{path}: a directory, not {what}") from None

@@ -32,8 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from tma.config import Form, param
-from tma.errors import ConfigError, InputError, MissingFileError
-from tma.sources.base import Reader, Recording
+from tma.errors import ConfigError, InputError
+from tma.sources.base import Reader, Recording, file_head
 
 DOCUMENTED = {"time": "time_s", "x": "own_x_m", "y": "own_y_m", "track": "track_id"}
 COMMON = {  # candidates per role, in order of preference (lower case)
@@ -134,13 +134,7 @@ class CsvFile:
 
     def __init__(self, path: Path, options):
         self.path, self.options, self.notes = path, options, []
-        try:
-            with open(path, "rb") as f:
-                raw = f.read(SAMPLE_BYTES)
-        except FileNotFoundError:
-            raise MissingFileError(f"{path}: no such file") from None
-        except IsADirectoryError:
-            raise InputError(f"{path}: a directory, not a CSV file") from None
+        raw = file_head(path, SAMPLE_BYTES, "a CSV file")
         try:
             text = raw.decode("utf-8-sig")
         except UnicodeDecodeError as exc:

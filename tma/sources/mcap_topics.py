@@ -250,15 +250,7 @@ def _epoch(parts: dict[str, np.ndarray], where: str) -> int | None:
 
 def read_recorded(path, options, need: tuple[str, ...] = (),
                   navigation: bool = True) -> Recording:
-    """Own-ship fixes and contacts from an MCAP file of any source kind (``tma.sources.mcap``),
-    with a family's reading ``options``.
-
-    ``need``: the parts the caller requires (``"navigation"``, ``"contacts"``): a missing one
-    raises an InputError listing the file's topics and the option that selects one. A part
-    not needed and not found is None (noted); a file with neither always raises.
-    ``navigation`` False: own-ship comes from elsewhere (``navigation=FILE``), so the file's
-    own-ship topic is neither decoded nor checked, and its rows count nowhere (noted).
-    """
+    """``tma.sources.mcap.read_mcap`` (its arguments, its Recording)."""
     file = RecordedLog(path, options.dropped())
     role = options.observation.role
     nav_topic = _select_navigation(file, options)
