@@ -15,11 +15,11 @@ from tests.families.bearings2d.recorded_geometry import (
     ORIGIN,
     check_against_truth,
     estimate,
+    ingest,
     recorded,
     source_options,
 )
 from tma.errors import ConfigError, InputError
-from tma.families.bearings2d.ingest import ingest
 from tma.families.bearings2d.log import (
     BEARINGS_TOPIC,
     CHANNELS,

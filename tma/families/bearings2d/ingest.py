@@ -171,13 +171,6 @@ def _grid(t, x, y, track, bearing, ids, sigma, where) -> BearingsLog:
                        bearing_deg=grid, sigma_deg=sigma)
 
 
-def ingest(input_path, **kwargs):
-    """``tma.stages.ingest.ingest`` of a bearing log into a ``bearings2d`` dataset."""
-    from tma.stages.ingest import ingest as ingest_log
-
-    return ingest_log(input_path, family="bearings2d", **kwargs)
-
-
 def contacts(logs: list[BearingsLog]):
     """Each track of ``logs`` as a ``tma.ais.match.Contact`` (its bearings, own-ship there,
     its label and the log's nominal sigma): what ``ingest truth=FILE`` matches to the AIS."""
