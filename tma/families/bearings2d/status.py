@@ -351,7 +351,8 @@ def not_an_answer(range_m, range_sd_m, speed_m_s, max_range_rel_sd=COLLAPSED_REL
         ]
     reasons = [
         "there is no finite estimate",
-        "J^T J is singular, so no one-sigma error can be given",
+        "no one-sigma error can be given (J^T J is singular, or own-ship's motion cannot "
+        "give the range of a target that may manoeuvre)",
         "its one-sigma range error exceeds the range itself (own-ship within one sigma: a "
         "collapsed or runaway estimate, whose linearised error means nothing)",
         f"it collapsed onto own-ship (nearer than {MIN_RANGE_M:g} m: within the error of "

@@ -55,8 +55,11 @@ import numpy as np
 from tma.config import param
 from tma.errors import InputError
 from tma.families.bearings2d.estimators.base import (
+    Bearings,
     BearingsConfig,
     BearingsEstimator,
+    Solution,
+    TargetMotion,
     evaluate_in_blocks,
 )
 from tma.families.bearings2d.model import BearingTerms, wrap_residual
@@ -265,8 +268,11 @@ class ModifiedPolarEKF(BearingsEstimator):
     Config = Config
     outputs = ("n_gated",)  # bearings the innovation gate skipped (0 without a gate)
 
-    def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
-        sigma = self.config.sigma_deg if self.config.sigma_deg is not None else self.log_sigma_deg
+    def solve(self, bearings: Bearings, motion: TargetMotion) -> Solution:
+        t, own_x, own_y, measured_rad, valid, first = (
+            bearings.t, bearings.own_x, bearings.own_y, bearings.measured, bearings.valid,
+            bearings.first)
+        sigma = self.config.sigma_deg if self.config.sigma_deg is not None else bearings.sigma_deg
         if sigma is None:
             raise InputError("mpekf: the log declares no bearing noise; give the noise the "
                              "filter should assume with estimator.sigma_deg=<deg>")
@@ -293,13 +299,7 @@ class ModifiedPolarEKF(BearingsEstimator):
         good &= np.isfinite(info).all(axis=(1, 2))
         info[~good] = np.nan
         theta[~good] = np.nan
-        return {
-            "theta": theta,
-            "cost_rad2": cost,
-            "jtj": info,
-            "n_f_evals": np.full(n, np.nan),
-            "n_iter": np.full(n, np.nan),
-            "converged": good,
-            "stop_reason": np.where(good, 0, -1).astype(np.int64),
-            "n_gated": gated,
-        }
+        return Solution(theta=theta, converged=good,
+                        stop_reason=np.where(good, 0, -1).astype(np.int64),
+                        n_f_evals=np.full(n, np.nan), n_iter=np.full(n, np.nan),
+                        cost_rad2=cost, jtj=info, columns={"n_gated": gated})
