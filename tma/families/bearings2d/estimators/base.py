@@ -297,7 +297,8 @@ class BearingsEstimator(Estimator):
         approximate |= motion.moving and not self.models_motion
         trust = assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t[last],
                        ox[last], oy[last], cfg, motion_tested=tested,
-                       undetermined=undetermined)
+                       undetermined=undetermined,
+                       may_manoeuvre=prior is not None and self.models_motion)
         columns = {
             "x0_m": theta[:, 0], "y0_m": theta[:, 1], "vx_m_s": theta[:, 2], "vy_m_s": theta[:, 3],
             "n_f_evals": solution.n_f_evals, "n_iter": solution.n_iter,
