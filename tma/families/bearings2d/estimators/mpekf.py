@@ -225,7 +225,9 @@ def run_filter(t, own_x, own_y, measured_rad, valid, first, last, cfg, sigma_rad
                 innovation = wrap_residual(measured_rad[update, k] - y[update, 2])
                 y[update] += gain * innovation[:, None]
                 IKH = np.broadcast_to(np.eye(4), Pu.shape).copy()
-                IKH[:, :, 2] -= gain  # Joseph form: (I - K H) P (I - K H)^T + K R K^T
+                # Joseph form: (I - K H) P (I - K H)^T + K R K^T, H the bearing component
+                # e_2 (a column of P, not a product: imm's matrix update would cost more)
+                IKH[:, :, 2] -= gain
                 P[update] = (IKH @ Pu @ IKH.transpose(0, 2, 1)
                              + R * gain[:, :, None] * gain[:, None, :])
         if start.any():  # a gate's restart starts afresh, without the prior
