@@ -5,9 +5,9 @@ Each estimator builds from its defaults, refuses a bad value naming the key, is
 deterministic, gives per-track results that do not depend on which other tracks share the
 shard (nor on their order), handles a one-track shard, gives the columns it declares, has
 its name written once, and runs through the stages a user runs, estimate and aggregate (a
-field the metrics or the report need and it forgot fails there). It runs on the small scenario and with the fast settings it declares
-itself (``conformance_scenario``, ``conformance_config``): a new family or estimator needs no
-edit here.
+field the metrics or the report need and it forgot fails there). It runs on the small
+scenario and with the fast settings it declares itself (``conformance_scenario``,
+``conformance_config``): a new family or estimator needs no edit here.
 """
 
 import dataclasses
