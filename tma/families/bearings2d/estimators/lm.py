@@ -8,9 +8,9 @@ definite, multiplies lambda by ``lambda_up``; an accepted step multiplies it by
 Every pass makes one fused evaluation of F, J^T J and J^T r at the trial point (accepted and
 rejected alike; n_f_evals counts it once).
 
-``loss=huber|cauchy`` fits robustly (``lm_kernel.marquardt_robust``): F_rho = sum s^2
-rho(r/s), iteratively reweighted inside the same Marquardt loop (H = J^T Omega J, g = J^T
-Omega r, omega = rho'(u) / (2u), a step accepted when F_rho falls; c = 1.345 s for Huber,
+``loss=huber|cauchy`` fits robustly (the same ``lm_kernel.marquardt``, its loss a parameter):
+F_rho = sum s^2 rho(r/s), iteratively reweighted inside the Marquardt loop (H = J^T Omega J,
+g = J^T Omega r, omega = rho'(u) / (2u), a step accepted when F_rho falls; c = 1.345 s for Huber,
 2.385 s for Cauchy). The scale s is the log's nominal sigma (``scale=sigma``), or with
 ``scale=mad`` (or no nominal sigma > 0) 1.4826 median |r| at the first start, re-estimated
 twice at the robust solution (each a new pass from there). The covariance is the sandwich
@@ -35,15 +35,17 @@ import numpy as np
 from tma.config import param, require
 from tma.families.bearings2d.estimators.base import (
     GROSS_SIGMAS,
+    Bearings,
     BearingsConfig,
     BearingsEstimator,
+    Solution,
+    TargetMotion,
 )
 from tma.families.bearings2d.estimators.lm_kernel import (
     LOSSES,
     STOP_F_TOL,
     TUNING,
     marquardt,
-    marquardt_robust,
 )
 from tma.families.bearings2d.model import BearingTerms, bearing_jacobian, bearing_residuals
 from tma.families.bearings2d.status import noiseless_fit_p, robust_fit_p, runs_test_p
@@ -176,12 +178,22 @@ class LevenbergMarquardt(BearingsEstimator):
     # from each track's first bearing unless the command line says otherwise
     recorded_defaults = {"initial_bearing_deg": None}
 
-    def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
+    def solve(self, bearings: Bearings, motion: TargetMotion) -> Solution:
+        t, own_x, own_y, measured_rad, valid, first = (
+            bearings.t, bearings.own_x, bearings.own_y, bearings.measured, bearings.valid,
+            bearings.first)
+        out = self.fit(t, own_x, own_y, measured_rad, valid, first, bearings.sigma_deg)
+        columns = {k: out.pop(k) for k in self.outputs if k in out}
+        return Solution(**out, columns=columns)
+
+    def fit(self, t, own_x, own_y, measured_rad, valid, first, sigma) -> dict:
+        """The Marquardt fit of every track from its starts (``valid``: mask or None;
+        ``first``: each track's first bearing; ``sigma``: the nominal noise, deg, None where
+        unknown): the ``Solution``'s fields and the outputs, by name."""
         cfg = self.config
         terms = BearingTerms(t, own_x, own_y, measured_rad, valid)
         starts = np.concatenate([initial_theta(cfg, t, own_x, own_y, measured_rad, first, d)
                                  for d in start_distances(cfg)])
-        sigma = self.log_sigma_deg
         if cfg.loss != "squared" and cfg.scale == "sigma" and sigma is not None and sigma > 0:
             scale = np.full(measured_rad.shape[0], np.deg2rad(sigma))
             out = self._robust(terms, starts, scale)
@@ -235,13 +247,12 @@ class LevenbergMarquardt(BearingsEstimator):
             "stop_reason": np.full(m, -1, dtype=np.int64),
             "cost_robust_rad2": np.zeros(m),
         }
-        marquardt_robust(out["theta"], terms.t, terms.ox, terms.oy, _tiled(terms.measured, k),
-                         _tiled(terms.weight, k), terms.weighted, LOSSES[cfg.loss],
-                         TUNING[cfg.loss], np.tile(scale, k), float(cfg.lambda0),
-                         float(cfg.lambda_up), float(cfg.lambda_down), float(cfg.f_tol_rad2),
-                         min(int(cfg.max_iter), MAX_INT), float(cfg.lambda_max),
-                         float(cfg.pd_rtol), out["n_f_evals"], out["n_iter"],
-                         out["stop_reason"], out["cost_robust_rad2"])
+        marquardt(out["theta"], terms.t, terms.ox, terms.oy, _tiled(terms.measured, k),
+                  _tiled(terms.weight, k), terms.weighted, float(cfg.lambda0),
+                  float(cfg.lambda_up), float(cfg.lambda_down), float(cfg.f_tol_rad2),
+                  min(int(cfg.max_iter), MAX_INT), float(cfg.lambda_max), float(cfg.pd_rtol),
+                  out["n_f_evals"], out["n_iter"], out["stop_reason"], out["cost_robust_rad2"],
+                  None, LOSSES[cfg.loss], TUNING[cfg.loss], np.tile(scale, k))
         return self._winners(out, k, "cost_robust_rad2")
 
     def _winners(self, out, k, cost):
@@ -257,7 +268,8 @@ class LevenbergMarquardt(BearingsEstimator):
 
     def _robust_columns(self, out, t, own_x, own_y, measured_rad, valid, scale, sigma):
         """At the robust solution: the plain F, the sandwich information as ``jtj``, the
-        bearings beyond c, and (private, for ``estimate``) sigma^2 = s^2 and the fit test."""
+        bearings beyond c, the bearings kept, and sigma^2 = s^2 and the fit test (the
+        ``Solution``'s own noise scale and test)."""
         loss = self.config.loss
         theta = out["theta"]
         r = bearing_residuals(theta, t, own_x, own_y, measured_rad, valid)
