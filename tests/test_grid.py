@@ -61,18 +61,22 @@ def test_a_track_twice_at_one_time_is_named():
 
 
 def _bearing_messages(path, ids):
-    """A bearing log whose epoch t = 1 s comes as several messages of one bearing each."""
+    """A bearing log whose epoch t = 1 s comes as several messages of one bearing each, and
+    whose epoch t = 1.5 s holds no bearing."""
     with LogWriter(path, CHANNELS) as w:
         for t in (0.0, 1.0, 2.0):
             w.write(OWNSHIP_TOPIC, t, {"t_s": t, "x_m": 0.0, "y_m": 0.0})
-        for t, i in [(0.0, 1), *((1.0, i) for i in ids), (2.0, 1)]:
-            w.write(BEARINGS_TOPIC, t, {"t_s": t, "track_id": i, "bearing_deg": 10.0 + i})
+        for t, i in [(0.0, 1), *((1.0, i) for i in ids), (1.5, None), (2.0, 1)]:
+            ids = np.array([] if i is None else [i], dtype=np.int64)
+            w.write(BEARINGS_TOPIC, t, {"t_s": t, "track_id": ids, "bearing_deg": 10.0 + ids})
     return path
 
 
 def test_the_readers_put_messages_on_the_grid_and_refuse_a_track_twice(tmp_path):
     log = read_bearings_log(_bearing_messages(tmp_path / "ok.mcap", [2, 1]))
-    np.testing.assert_array_equal(log.bearing_deg, [[11, 11, 11], [np.nan, 12, np.nan]])
+    np.testing.assert_array_equal(log.t_s, [0, 1, 1.5, 2])  # an empty epoch is an epoch
+    np.testing.assert_array_equal(log.bearing_deg, [[11, 11, np.nan, 11],
+                                                    [np.nan, 12, np.nan, np.nan]])
     with pytest.raises(InputError, match=r"twice.mcap: track 2 has two bearings at one time "
                                          r"\(t = 1 s\)"):
         read_bearings_log(_bearing_messages(tmp_path / "twice.mcap", [2, 1, 2]))

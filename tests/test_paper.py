@@ -14,7 +14,7 @@ from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
 from pipeline.simulate import simulate_stage
 from tests.conftest import REPO, compose_cfg
-from tma import paper
+from tma.report import paper
 from tma.families.bearing_doppler3d import paper as bd3d_paper
 from tma.families.bearings2d import paper as b2d_paper
 from tma.families.radar2d import paper as radar_paper

@@ -297,8 +297,9 @@ def read_bearings_log(path) -> BearingsLog:
         # the common case: every contact at every epoch, one message each
         t, track_id = t_msg, first.copy()
         bearing = np.stack(vals_per_msg, axis=1)
-    else:  # equal t_s: one epoch sent as several messages
-        t, cols, _ = epochs(np.repeat(t_msg, [i.size for i in ids_per_msg]))
+    else:  # equal t_s: one epoch sent as several messages (an epoch may hold no bearing)
+        t, msg_col, _ = epochs(t_msg)
+        cols = np.repeat(msg_col, [i.size for i in ids_per_msg])
         track_id, bearing = scatter(np.concatenate(ids_per_msg), cols,
                                     np.concatenate(vals_per_msg), t.size, where, "bearings",
                                     t.__getitem__)
