@@ -14,12 +14,12 @@ from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
 from pipeline.simulate import simulate_stage
 from tests.conftest import REPO, compose_cfg
-from tma.report import paper
 from tma.families.bearing_doppler3d import paper as bd3d_paper
 from tma.families.bearings2d import paper as b2d_paper
 from tma.families.radar2d import paper as radar_paper
 from tma.families.radar2d.metrics import Segments
 from tma.families.ranges2d import paper as ranges_paper
+from tma.report import paper
 from tma.report.tables import write_table
 
 PAPERS = REPO.parent / "shared" / "specs" / "papers.md"
