@@ -28,9 +28,12 @@
     must be the same); the protobuf column encoder (``encode_columns``, ``encode_message``)
     against protobuf's serializer; and reading, by protobuf's parser (a hand-made parser was
     measured no more than 1.2x faster on both logs, and removed).
+(i) The files and layers one bearing passes from a CSV to its table (``bench/trace.py``: a
+    trace of ``python -m pipeline.table input=LOG``, in a fresh process), per stage.
 
 Options: ``--tracks N`` (2000), ``--sigma DEG`` (0.5), ``--runs N`` (30), ``--skip-tables``,
-``--only SECTION`` (lm, tables, ranges2d, filters3d, cmnf, compile, real_motion, cluster, io),
+``--only SECTION`` (lm, tables, ranges2d, filters3d, cmnf, compile, real_motion, cluster, io,
+trace),
 ``--paths3d N`` (2500), ``--cmnf-paths N`` (100000), ``--repeat N`` (3).
 """
 
@@ -51,12 +54,12 @@ from tma.families.bearings2d.estimators.lm import initial_theta
 from tma.families.bearings2d.model import bearing_jacobian, bearing_residuals
 from tma.families.bearings2d.scenario import Config, simulate_shard
 from tma.io.mcap_writer import Ragged
-from tma.parallel import keep_freed_memory
+from tma.runtime.forkserver import keep_freed_memory
 
 REPO = Path(__file__).resolve().parents[1]
 THETA = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")
 SECTIONS = ("lm", "tables", "ranges2d", "filters3d", "cmnf", "compile", "real_motion", "cluster",
-            "io")
+            "io", "trace")
 
 
 def timed(function, *args):
@@ -216,7 +219,7 @@ print(f"{{time.perf_counter() - start:.0f}}")
 """
         train = f"""
 import resource, time, numpy as np
-from tma.parallel import keep_freed_memory
+from tma.runtime.forkserver import keep_freed_memory
 from tma.families.bearing_doppler3d.estimators.cmnf import train, model_functions
 from tma.families.bearing_doppler3d.model import AuvModel, model_record
 from tma.families.bearing_doppler3d.scenario import Config
@@ -475,6 +478,8 @@ def main():
         bench_cluster()
     if wanted("io"):
         bench_io(args.repeat)
+    if wanted("trace"):
+        subprocess.run([sys.executable, str(REPO / "bench" / "trace.py")], cwd=REPO, check=True)
 
 
 if __name__ == "__main__":

@@ -20,10 +20,11 @@ sys.path.insert(0, str(REPO))
 from floors import compose  # noqa: E402 (bench/floors.py, beside this script)
 
 from pipeline._common import estimator_nodes, scenario_nodes  # noqa: E402
-from tma.estimation import estimate_runs  # noqa: E402
 from tma.io.dataset import Dataset  # noqa: E402
-from tma.parallel import Engine, close_dask_clients, dask_client, run_tasks  # noqa: E402
-from tma.simulation import simulate_datasets  # noqa: E402
+from tma.runtime.cluster import close_dask_clients, dask_client  # noqa: E402
+from tma.runtime.parallel import Engine, run_tasks  # noqa: E402
+from tma.stages.estimate import estimate_runs  # noqa: E402
+from tma.stages.simulate import simulate_datasets  # noqa: E402
 
 
 def _nothing(task):

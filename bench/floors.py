@@ -14,7 +14,7 @@ The in-memory work is measured with the library's own functions on the command's
 configs: the scenario's ``simulate_shard`` (``simulate_raw`` once for the datasets that share
 their random draws, as ``pipeline.simulate`` does), each estimator's ``prepare`` (artefacts
 such as a training bundle and trained gains, built into a scratch directory in memory) and
-``estimate`` over every shard (``tma.estimation.estimate_log``).
+``estimate`` over every shard (``tma.stages.estimate.estimate_log``).
 """
 
 import logging
@@ -133,11 +133,11 @@ def in_memory_work(job_overrides, data_dir: Path) -> Work:
     from threadpoolctl import threadpool_limits
 
     from pipeline._common import jobs, scenario_nodes
-    from tma.estimation import estimate_log, full_config, run_path
     from tma.families import build_estimator, dataset_name, estimator_class, load_scenario
     from tma.io.atomic import sha256_json
-    from tma.parallel import keep_freed_memory
-    from tma.sharding import n_shards
+    from tma.runtime.forkserver import keep_freed_memory
+    from tma.runtime.sharding import n_shards
+    from tma.stages.estimate import estimate_log, full_config, run_path
 
     keep_freed_memory()  # as in the workers
     work, handler = Work(), _Artefacts()

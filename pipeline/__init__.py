@@ -1,12 +1,16 @@
-"""Thin Hydra entry points, one verb each: ``python -m pipeline.<verb>``."""
+"""Thin Hydra entry points, one verb each: ``python -m pipeline.<verb>``, or ``tma <verb>``
+once installed (``pipeline.cli``)."""
 
 import os
 import sys
 import uuid
 
-from tma.parallel import preload_workers, workers_from_server
+from tma.runtime.forkserver import preload_workers, workers_from_server
 
 SWEEP_ENV = "TMA_SWEEP_ID"  # the multirun's id, seen by its jobs (pipeline._common.SweepTable)
+
+
+VERBS = ("simulate", "ingest", "estimate", "aggregate", "table")  # pipeline.<verb>, tma <verb>
 
 
 def _command() -> str | None:
@@ -20,7 +24,14 @@ def _command() -> str | None:
     return argv[i + 1] if argv[i + 1].startswith("pipeline.") else None
 
 
-if _command():
+def _tma_command() -> bool:
+    """Whether this process is the command ``tma <verb>`` (the script pip installs, which
+    runs ``pipeline.cli``)."""
+    return (os.path.basename(sys.argv[0]) == "tma" and len(sys.argv) > 1
+            and sys.argv[1] in VERBS)
+
+
+if _command() or _tma_command():
     try:
         os.getcwd()
     except FileNotFoundError:  # every relative path (data/, the log) would be relative to it
@@ -29,14 +40,16 @@ if _command():
               file=sys.stderr)
         sys.exit(2)
     # the command's local workers start from a server that imports what they need meanwhile
-    # (tma.parallel.preload_workers); they see the environment as it is now, sweep id included
+    # (tma.runtime.forkserver.preload_workers); they see the environment as it is now, sweep
+    # id included
     multirun = "-m" in sys.argv[1:] or "--multirun" in sys.argv[1:]  # argv[0] is "-m" here
     if multirun:
         os.environ[SWEEP_ENV] = uuid.uuid4().hex  # a new sweep, whatever the shell exported
     # the command's module is what forked workers re-import as their __main__; its imports are
-    # the other verbs' (runpy warns when the module itself is already imported)
+    # the other verbs' (runpy warns when the module itself is already imported); the tma
+    # command's __main__ is its script, which imports pipeline.cli
     verbs = ["pipeline._common", "pipeline.simulate", "pipeline.estimate", "pipeline.aggregate",
-             "pipeline.ingest"]
+             "pipeline.ingest", "pipeline.cli"]
     preload_workers([v for v in verbs if v != _command()]
                     + (["matplotlib.pyplot"] if multirun else []))  # jobs aggregate there
     if multirun:

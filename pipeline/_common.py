@@ -1,5 +1,6 @@
 """What the entry points share: the error policy (one ``error:`` line, exit status 2), Hydra's
-callbacks, and the hand-over of the composed config to the core (``tma.experiment``)."""
+callbacks, and the hand-over of the composed config to the core (``command``: a
+``tma.plan.command.Command``)."""
 
 import logging
 import os
@@ -21,20 +22,26 @@ from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import ConfigAttributeError, ConfigKeyError, OmegaConfBaseException
 
 from pipeline import SWEEP_ENV  # set while a multirun runs
-from tma import experiment
+from pipeline._checks import check_launcher, check_output_dir, check_stage_options, job_logs
+from pipeline._messages import bare_as, override_of, unknown_choice_line, unknown_key_line
 from tma.errors import Interrupted, TmaError
-from tma.io.atomic import write_json_atomic
-from tma.parallel import Engine, engine_from, keep_freed_memory, quick_exit
+from tma.families import NAMES, ingest_defaults, reads_logs
+from tma.plan.command import Command, SweepRecord
+from tma.plan.grid import Override, override_text
+from tma.runtime.forkserver import keep_freed_memory, quick_exit
+from tma.runtime.parallel import Engine, engine_from
 
 CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
 log = logging.getLogger("tma")
 _stage_hydra = None  # Hydra's config of the stage run_stage is running (else None)
 SWEEP_RECORD = "tma-aggregate.json"  # what an aggregate job of a multirun read
 PROBE_BYTES = 1 << 16  # more than Hydra writes of its own before the stage starts
-# the top-level keys of conf/config.yaml and conf/ingest.yaml and their groups (+key adds none)
+# the top-level keys of conf/config.yaml and conf/ingest.yaml, their groups and the ingest
+# options they take from the families (+key adds none)
 KNOWN_KEYS = {key for conf in ("config", "ingest")
               for key in OmegaConf.load(Path(CONF_DIR) / f"{conf}.yaml")} - {"defaults", "hydra"} \
-    | {"scenario", "estimator", "parallel"}
+    | {"scenario", "estimator", "parallel"} \
+    | {key for name in NAMES if reads_logs(name) for key in ingest_defaults(name)}
 
 
 # -- the entry point and the error policy -----------------------------------------------------
@@ -43,14 +50,14 @@ def stage_main(task, config_name="config", bare=None, check=None):
     """``main`` of ``python -m pipeline.<verb>``: Hydra's app running ``task`` on the config
     ``config_name`` (or ``config_name(arguments)``). Hydra is told to raise its own errors
     (``HYDRA_FULL_ERROR``) instead of printing them, and each becomes one ``error:`` line
-    (``hydra_error_line``); a bare argument is ``<bare>=ARG`` (``tma.experiment.bare_as``);
+    (``hydra_error_line``); a bare argument is ``<bare>=ARG`` (``pipeline._messages.bare_as``);
     ``check(arguments)`` runs before Hydra starts."""
     def main():
         os.environ["HYDRA_FULL_ERROR"] = "1"  # this process's Hydra: raise, we say it
         main_thread = threading.current_thread() is threading.main_thread()
         saved = {sig: signal.signal(sig, _stop) for sig in STOP_SIGNALS} if main_thread else {}
         try:
-            sys.argv[1:] = guarded(experiment.bare_as, bare, _readable(sys.argv[1:]),
+            sys.argv[1:] = guarded(bare_as, bare, _readable(sys.argv[1:]),
                                    _overrides(sys.argv[1:]))
             if check is not None:
                 check(sys.argv[1:])
@@ -109,7 +116,7 @@ def _readable(arguments: list[str]) -> list[str]:
     """The arguments with each ``key=value`` whose value is one text Hydra cannot read
     unquoted (``columns.lon=Länge``, ``input=über/journal_é.csv``, ``name=a~b``: its grammar
     takes ASCII letters, digits and a few signs only) quoted as Hydra reads text
-    (``tma.experiment.override_text``); a value with Hydra's own syntax (a list, a sweep,
+    (``tma.plan.grid.override_text``); a value with Hydra's own syntax (a list, a sweep,
     quotes, an interpolation) is left as written, for Hydra to read or refuse."""
     parser = OverridesParser.create()
     out = []
@@ -119,7 +126,7 @@ def _readable(arguments: list[str]) -> list[str]:
             try:
                 parser.parse_override(argument)
             except hydra_errors.HydraException:  # OverrideParseException, a lexer's error
-                quoted = experiment.override_text(key, value)
+                quoted = override_text(key, value)
                 try:
                     parser.parse_override(quoted)
                     argument = quoted
@@ -152,7 +159,7 @@ def hydra_error_line(exc: Exception, arguments: list[str]) -> str | None:
     cause, first = exc.__cause__, (str(exc).strip().splitlines() or [""])[0]
     group, _, value = str(getattr(exc, "missing_cfg_file", "")).rpartition("/")
     if isinstance(exc, hydra_errors.MissingConfigException) and group and exc.options:
-        return experiment.unknown_choice_line(group, value, exc.options)
+        return unknown_choice_line(group, value, exc.options)
     if isinstance(exc, hydra_errors.OverrideParseException):
         why = "" if exc.override in first else f" ({first})"
         sign = _unreadable_sign(exc)
@@ -164,11 +171,11 @@ def hydra_error_line(exc: Exception, arguments: list[str]) -> str | None:
                 "quotes, brackets, commas or spaces: key='a value' (for the shell: "
                 "\"key='a value'\")")
     key = getattr(cause, "full_key", None) or next(iter(re.findall(r"'([^']+)'", first)), "")
-    dotted, override = experiment.override_of(key, _overrides(arguments))
+    dotted, override = override_of(key, _overrides(arguments))
     if isinstance(exc, hydra_errors.ConfigCompositionException) and isinstance(
             cause, OmegaConfBaseException):
         if isinstance(cause, ConfigAttributeError | ConfigKeyError) and cause.parent_node:
-            return experiment.unknown_key_line(OmegaConf.to_container(cause.parent_node),
+            return unknown_key_line(OmegaConf.to_container(cause.parent_node),
                                                key, override, dotted, NOTES.get(dotted))
         return f"{override}: {str(cause).splitlines()[0]}"
     if isinstance(exc, hydra_errors.HydraException):
@@ -206,7 +213,7 @@ def run_stage(fn, cfg: DictConfig):
 
 
 def _checked_stage(fn, cfg):
-    experiment.check_stage_options(plain(cfg), KNOWN_KEYS)
+    check_stage_options(plain(cfg), KNOWN_KEYS)
     engine_from(plain_value(cfg, "parallel"))  # checked; the stage's engine(cfg) logs its choice
     return fn(cfg)
 
@@ -248,7 +255,7 @@ class CheckOutputDir(Callback):
     @staticmethod
     def _check(config, directory):
         try:  # room for Hydra's own files (resolved configs, the log): a full disk fails here
-            experiment.check_output_dir({"paths": plain_value(config, "paths")}, directory,
+            check_output_dir({"paths": plain_value(config, "paths")}, directory,
                                         PROBE_BYTES)
         except OSError as exc:
             fail(f"cannot write the output directory: {os_error_line(exc)}")
@@ -257,12 +264,12 @@ class CheckOutputDir(Callback):
         guarded(self._check, config, config.hydra.run.dir)
 
     def on_multirun_start(self, config, **kwargs):
-        guarded(experiment.check_launcher, str(config.hydra.launcher.get("_target_")))
+        guarded(check_launcher, str(config.hydra.launcher.get("_target_")))
         guarded(self._check, config, config.hydra.sweep.dir)
 
     def on_multirun_end(self, config, **kwargs):
         if "submitit" in str(config.hydra.launcher.get("_target_")):
-            for line in experiment.job_logs(str(config.hydra.sweep.dir),
+            for line in job_logs(str(config.hydra.sweep.dir),
                                             f"{config.hydra.job.name}.log"):
                 print(line)
 
@@ -275,8 +282,8 @@ class SweepTable(Callback):
 
     Each aggregate job of the sweep records the runs it read (``SWEEP_RECORD`` in its Hydra
     output dir, tagged with this sweep's id); the union of those runs is aggregated once more
-    into ``tables/<table>.*`` (default ``<family>-sweep``, ``tma.aggregate.aggregate_sweep``),
-    beside the jobs' own tables."""
+    into ``tables/<table>.*`` (default ``<family>-sweep``,
+    ``tma.stages.aggregate.aggregate_sweep``), beside the jobs' own tables."""
 
     sweep_id = None
 
@@ -286,7 +293,7 @@ class SweepTable(Callback):
         self.sweep_id = os.environ.get(SWEEP_ENV) or uuid.uuid4().hex
         os.environ[SWEEP_ENV] = self.sweep_id
         if config.hydra.job.name in ("aggregate", "table"):  # while this process waits
-            from tma.aggregate import prefetch_report
+            from tma.stages.aggregate import prefetch_report
 
             # not an attribute: Hydra sends its callbacks to the jobs, and a thread does not
             # pickle
@@ -317,21 +324,19 @@ def sweep_job(cfg: DictConfig):
     return int(hydra_cfg.job.num)
 
 
-def record_sweep_job(cfg: DictConfig, jobs) -> None:
-    """Record, for ``SweepTable``, the runs this aggregate job read (a multirun job only)."""
-    from tma.aggregate import sweep_record
-
+def sweep_record(cfg: DictConfig) -> SweepRecord | None:
+    """Where this aggregate job records the runs it read, for ``SweepTable`` (a job of a
+    multirun only)."""
     number, hydra_cfg = sweep_job(cfg), stage_hydra(cfg)
     if number is None or not hydra_cfg.runtime.get("output_dir"):
-        return
-    write_json_atomic(Path(hydra_cfg.runtime.output_dir) / SWEEP_RECORD, sweep_record(
-        os.environ.get(SWEEP_ENV), number, cfg.paths.data_dir, cfg.paths.tables_dir, jobs,
-        cfg.get("report")))
+        return None
+    return SweepRecord(Path(hydra_cfg.runtime.output_dir) / SWEEP_RECORD,
+                       os.environ.get(SWEEP_ENV), number)
 
 
 def write_sweep_table(config: DictConfig, sweep_id: str) -> None:
     """The combined table of the aggregate jobs of sweep ``sweep_id`` (see ``SweepTable``)."""
-    from tma.aggregate import sweep_table
+    from tma.stages.aggregate import sweep_table
 
     for path in sweep_table(str(config.hydra.sweep.dir), sweep_id, SWEEP_RECORD,
                             config.get("table")):
@@ -350,44 +355,47 @@ def plain_value(cfg: DictConfig, key: str):
     return OmegaConf.to_container(value, resolve=True) if OmegaConf.is_config(value) else value
 
 
-def engine(cfg: DictConfig) -> Engine:
-    """Where shards run (``tma.parallel.engine_from``: in this process inside a job of a
-    parallel launcher)."""
+def command(cfg: DictConfig) -> Command:
+    """The command as the core takes it (``tma.plan.command.Command``): the config as plain
+    values, the command line's overrides, the sweep's launcher (a parallel launcher runs each
+    job's shards in the job) and the overrides as text."""
     hydra_cfg = stage_hydra(cfg)
-    launcher = "" if hydra_cfg is None else str(hydra_cfg.launcher.get("_target_", ""))
-    return engine_from(plain_value(cfg, "parallel"), launcher)
+    if hydra_cfg is None:
+        return Command(plain(cfg))
+    return Command(plain(cfg), tuple(overrides(cfg)),
+                   str(hydra_cfg.launcher.get("_target_", "")),
+                   " ".join(hydra_cfg.overrides.task))
 
 
-def overrides(cfg: DictConfig) -> list[experiment.Override]:
+def overrides(cfg: DictConfig) -> list[Override]:
     """The command line's overrides of the app config, as Hydra records them
     (``hydra.overrides.task``; from ``cfg.hydra`` when composed with it, else from the
     running stage's Hydra config; none for a bare ``compose``), for the grid language."""
     hydra_cfg = stage_hydra(cfg)
     task = [] if hydra_cfg is None else list(hydra_cfg.overrides.task)
     parsed = OverridesParser.create().parse_overrides(task) if task else []
-    return [experiment.Override(o.key_or_group, o.input_line,
-                                o.value() if o.key_or_group == "estimator" else None,
-                                o.is_delete(), o.package) for o in parsed]
+    return [Override(o.key_or_group, o.input_line,
+                     o.value() if o.key_or_group == "estimator" else None,
+                     o.is_delete(), o.package) for o in parsed]
+
+
+# what tests and benchmarks ask of a composed config (``Command``'s, for a DictConfig)
+
+def engine(cfg: DictConfig) -> Engine:
+    return command(cfg).engine()
 
 
 def scenario_nodes(cfg: DictConfig) -> list[dict]:
-    return experiment.scenario_points(plain_value(cfg, "scenario"), plain_value(cfg, "grid"))
+    return command(cfg).scenarios()
 
 
 def estimator_nodes(cfg: DictConfig, checked: bool = False) -> list[dict]:
-    make = experiment.checked_estimator_configs if checked else experiment.estimator_configs
-    return make(plain_value(cfg, "estimator"), plain_value(cfg, "grid"), overrides(cfg))
+    return command(cfg).estimators(checked)
 
 
 def jobs(cfg: DictConfig) -> list:
-    """The command's ``(dataset, estimator config)`` pairs (``tma.experiment.dataset_jobs``);
-    a bad estimator config fails before any I/O."""
-    estimators = estimator_nodes(cfg, checked=True)
-    return experiment.dataset_jobs(open_datasets(cfg), estimators, overrides(cfg))
+    return command(cfg).jobs()
 
 
 def open_datasets(cfg: DictConfig):
-    scenarios = [] if cfg.dataset else scenario_nodes(cfg)
-    hydra_cfg = stage_hydra(cfg)
-    simulate = "" if hydra_cfg is None else " ".join(hydra_cfg.overrides.task)
-    return experiment.open_datasets(cfg.paths.data_dir, cfg.dataset, scenarios, simulate)
+    return command(cfg).datasets()

@@ -5,21 +5,18 @@ name of several runs, gets the job number: ``<table>-<N>``), and when the sweep 
 ``pipeline._common.SweepTable`` writes one table of all its jobs: ``<table>`` (default
 ``<family>-sweep``)."""
 
-from pipeline._common import jobs, log, record_sweep_job, run_stage, stage_main, sweep_job
-from tma.aggregate import aggregate
+from pipeline._common import command, log, run_stage, stage_main, sweep_job, sweep_record
+from tma.plan.command import run_aggregate
 
 
 def aggregate_stage(cfg):
-    pairs = jobs(cfg)
     table, suffix = cfg.table, "custom"
     number = sweep_job(cfg)
     if number is not None:  # a job of a multirun: its table is one of several
         table = f"{cfg.table}-{number}" if cfg.table else None
         suffix = f"custom-{number}"
-    for path in aggregate(cfg.paths.data_dir, cfg.paths.tables_dir, pairs, table=table,
-                          default_suffix=suffix, progress=cfg.progress, report=cfg.report):
+    for path in run_aggregate(command(cfg), table, suffix, sweep_record(cfg)):
         log.info("wrote %s", path)
-    record_sweep_job(cfg, pairs)
 
 
 main = stage_main(lambda cfg: run_stage(aggregate_stage, cfg))

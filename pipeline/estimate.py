@@ -1,13 +1,11 @@
 """Run estimators over stored datasets: ``python -m pipeline.estimate [overrides]``."""
 
-from pipeline._common import engine, jobs, log, run_stage, stage_main
-from tma.estimation import estimate_runs
+from pipeline._common import command, log, run_stage, stage_main
+from tma.plan.command import run_estimate
 
 
 def estimate_stage(cfg):
-    runs = estimate_runs(cfg.paths.data_dir, jobs(cfg), engine=engine(cfg),
-                         progress=cfg.progress, force=cfg.force)
-    for root, reused in runs:
+    for root, reused in run_estimate(command(cfg)):
         if reused:
             log.info("run %s reused (finished before and verified; force=true recomputes it)",
                      root)

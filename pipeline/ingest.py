@@ -5,24 +5,15 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-from pipeline._common import CONF_DIR, guarded, log, run_stage, stage_main
-from tma.experiment import check_ingest_options
-from tma.ingest import ingest, option_groups, setting_names
+from pipeline._common import CONF_DIR, guarded, log, plain, run_stage, stage_main
+from pipeline._messages import check_ingest_options
+from tma.plan.command import run_ingest
 
 INGEST_YAML = Path(CONF_DIR) / "ingest.yaml"
 
 
-def ingest_arguments(cfg) -> dict:
-    """``tma.ingest.ingest``'s arguments from the composed config."""
-    return dict(input_path=cfg.input, data_dir=cfg.paths.data_dir, family=cfg.family,
-                name=cfg.name, fmt=cfg.format, force=cfg.force, navigation=cfg.navigation,
-                options={group: cfg[group] for group in option_groups(cfg.family)},
-                truth=cfg.get("truth"),
-                **{key: cfg[key] for key in setting_names(cfg.family)})
-
-
 def ingest_stage(cfg):
-    root = ingest(**ingest_arguments(cfg))
+    root = run_ingest(plain(cfg))
     log.info("dataset %s", root)
     print(f"dataset {root.name}: estimate and aggregate it with  python -m pipeline.table "
           f"dataset={root.name}  (estimator=lm; estimator=NAME for another)")

@@ -10,14 +10,13 @@ from time import perf_counter
 
 from omegaconf import open_dict
 
-from pipeline._common import log, run_stage, stage_main
+from pipeline._common import log, plain, run_stage, stage_main
 from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
-from pipeline.ingest import check_option_keys, ingest_arguments, with_truth_shorthand
+from pipeline.ingest import check_option_keys, with_truth_shorthand
 from pipeline.simulate import simulate_stage
-from tma.aggregate import prefetch_report
-from tma.errors import ConfigError
-from tma.experiment import log_dataset
+from tma.plan.command import run_log_dataset
+from tma.stages.aggregate import prefetch_report
 
 STAGES = (("simulate", simulate_stage), ("estimate", estimate_stage),
           ("aggregate", aggregate_stage))
@@ -25,12 +24,8 @@ STAGES = (("simulate", simulate_stage), ("estimate", estimate_stage),
 
 def ingest_stage(cfg):
     """The log's dataset: ingested, or reused when ingesting it again gives the same one
-    (``tma.experiment.log_dataset``); the next stages read it by name."""
-    if cfg.dataset is not None:
-        raise ConfigError(f"dataset={cfg.dataset}: input={cfg.input} makes its own dataset "
-                          "(named by name=, by default the log's stem); give input=FILE "
-                          "[name=NAME] or dataset=NAME, not both")
-    root, reused = log_dataset(**ingest_arguments(cfg))
+    (``tma.plan.command.run_log_dataset``); the next stages read it by name."""
+    root, reused = run_log_dataset(plain(cfg))
     log.info("dataset %s%s", root, " reused (ingesting the log again gives the same dataset)"
              if reused else "")
     with open_dict(cfg):

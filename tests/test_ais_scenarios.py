@@ -57,7 +57,7 @@ def test_the_bearings_are_the_vessels_geodesic_geometry(reference):
     meridian convergence at own-ship ((lon - lon0) sin(lat)); the log is dated by the
     window's start, carries the origin and declares no motion model."""
     from tma.families.bearings2d.scenario import simulate_shard
-    from tma.geo import local_to_geodetic
+    from tma.maths.geo import local_to_geodetic
 
     bc, tracks = reference
     cfg = _bearings2d()
@@ -120,7 +120,7 @@ def test_the_radar_windows_meet_their_rules_and_the_plots_are_the_vessels(refere
     """Each window's vessel is underway within reach of the radar with no long AIS gap (as
     build_cases' tracks say), and the noise-free plots are its positions."""
     from tma.families.radar2d.scenario import Config, simulate_shard
-    from tma.geo import local_to_geodetic
+    from tma.maths.geo import local_to_geodetic
 
     bc, tracks = reference
     real = RealWindows(file=RECORDING)

@@ -22,8 +22,9 @@ from pipeline._common import engine, scenario_nodes
 from tests.conftest import REPO, compose_cfg, run_cli, run_stage_here
 from tests.test_pipeline import GRID, _all_stages, _files
 from tma.errors import ConfigError, InputError
-from tma.parallel import Engine, close_dask_clients, dask_client, run_tasks
-from tma.simulation import simulate_datasets
+from tma.runtime.cluster import close_dask_clients, dask_client
+from tma.runtime.parallel import Engine, run_tasks
+from tma.stages.simulate import simulate_datasets
 
 pytest.importorskip("distributed")
 DASK = Engine(engine="dask", n_workers=2)

@@ -239,8 +239,8 @@ def test_the_options_of_everything_are_listed(capsys):
 def _option_schemas():
     """``(what, schema, check)`` of every declared group of ingest and parallel options:
     ``check(key, value)`` builds it from one value as a command line would give it."""
-    from tma.parallel import Engine, engine_from
-    from tma.sources.base import options_schema, source_options
+    from tma.runtime.parallel import Engine, engine_from
+    from tma.sources.options import options_schema, source_options
 
     out = []
     for name in options.ingest_families():
@@ -312,12 +312,13 @@ def test_every_ingest_and_parallel_option_says_what_it_is_and_refuses_bad_values
 
 
 def test_the_ingest_and_parallel_options_are_listed_with_their_declared_defaults(capsys):
-    """``python -m tma.options ingest parallel`` lists every key; ``conf/ingest.yaml`` and
-    the ``parallel`` presets set only declared keys, and ingest's YAML the declared defaults
-    (for its default family)."""
-    from tma.ingest import option_groups, setting_names
-    from tma.parallel import Engine
-    from tma.sources.base import options_schema
+    """``python -m tma.options ingest parallel`` lists every key; the ingest stage's config
+    takes every ingest option from its declaration (``conf/ingest.yaml`` restates none: the
+    ConfigStore's ``reading`` group), and the ``parallel`` presets set only declared keys."""
+    from tma.ais.options import TruthOptions
+    from tma.runtime.parallel import Engine
+    from tma.sources.options import options_schema
+    from tma.stages.ingest import option_groups, setting_names
 
     assert options.main(["ingest", "parallel"]) == 0
     text = capsys.readouterr().out
@@ -325,11 +326,15 @@ def test_the_ingest_and_parallel_options_are_listed_with_their_declared_defaults
         for key, *_ in describe(schema):
             shown = {"parallel": "parallel.", "truth options": "truth."}.get(what, "") + key
             assert re.search(rf"^  {re.escape(shown)} ", text, re.M), (what, key)
-    conf = OmegaConf.to_container(OmegaConf.load(CONF / "ingest.yaml"))
-    reader = family(conf["family"]).ingest
-    declared = to_plain(options_schema(reader.OBSERVATION)())
-    assert {g: conf[g] for g in option_groups(conf["family"])} == declared
-    assert {k: conf[k] for k in setting_names(conf["family"])} == to_plain(reader.Settings())
+    conf = OmegaConf.load(CONF / "ingest.yaml")
+    reader = family(conf.family).ingest
+    declared = {**to_plain(reader.Settings()), **to_plain(options_schema(reader.OBSERVATION)()),
+                "truth": to_plain(TruthOptions())}
+    assert not set(conf) & set(declared), "conf/ingest.yaml restates ingest options"
+    composed = compose_cfg(["input=log.csv"], config_name="ingest")
+    assert {k: OmegaConf.to_container(composed)[k] for k in declared} == declared
+    assert set(option_groups(conf.family)) | set(setting_names(conf.family)) | {"truth"} \
+        == set(declared)
     for name in _options("parallel"):
         preset = OmegaConf.to_container(OmegaConf.load(CONF / "parallel" / f"{name}.yaml"))
         assert set(preset) <= {f.name for f in fields(Engine)}, name

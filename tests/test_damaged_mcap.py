@@ -7,11 +7,11 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
+from tests.families.bearings2d.recorded_geometry import ingest
 from tma.errors import InputError
 from tma.families.bearing_doppler3d import scenario as bearing_doppler3d
 from tma.families.bearing_doppler3d.log import read_hydrophone_log, write_hydrophone_log
 from tma.families.bearings2d import scenario as bearings2d
-from tma.families.bearings2d.ingest import ingest
 from tma.families.bearings2d.log import (
     BEARINGS_TOPIC,
     CHANNELS,

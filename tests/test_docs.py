@@ -26,6 +26,7 @@ import pandas as pd
 import pytest
 from omegaconf import OmegaConf
 
+from pipeline import cli
 from pipeline._common import estimator_nodes
 from tests.conftest import REPO, compose_cfg, run_cli, run_stage_here
 from tma import options
@@ -64,7 +65,7 @@ def inline_commands(doc: Path) -> list[str]:
     """Commands quoted inline in the prose (``make ...``, ``python -m ...``, ...)."""
     prose = re.sub(r"```.*?```", "", doc.read_text(), flags=re.S)
     return [" ".join(m.group(1).split())
-            for m in re.finditer(r"`((?:python -m|make|pytest|pip install) [^`]*)`", prose)]
+            for m in re.finditer(r"`((?:python -m|make|pytest|pip install|tma) [^`]*)`", prose)]
 
 
 def is_syntax(command: str) -> bool:
@@ -179,6 +180,10 @@ class Session:
             assert options.main(tokens[3:]) == 0
         elif tokens[0] == "make":
             self.make(tokens[1], dict(t.split("=", 1) for t in tokens[2:]))
+        elif tokens == ["tma", "--help"]:
+            assert cli.main(["--help"]) == 0
+        elif tokens[0] == "tma":  # the app of python -m pipeline.<verb> (the installed script
+            self.stage(tokens[1], tokens[2:])  # itself: tests/test_tma_command.py)
         else:
             raise AssertionError(f"no rule runs the documented command {command!r}")
         self.ran.append(tokens)
@@ -310,6 +315,8 @@ def test_every_documented_command_runs(command, logs, tmp_path, monkeypatch):
         assert names and all(importlib.util.find_spec(n) for n in names), command
     elif command.startswith("make "):
         assert re.search(rf"^{tokens[1]}:", (REPO / "Makefile").read_text(), re.M), command
+    elif command.startswith("tma "):  # a form of the installed command: its verbs exist
+        assert tokens[1] == "<verb>" or tokens[1] in STAGES, command
     elif command.startswith("pytest "):  # a test file of the suite, and the marker it uses
         assert (REPO / tokens[-1]).is_file() and "slow:" in (REPO / "pyproject.toml").read_text()
     elif command.startswith("pip install "):
@@ -391,7 +398,7 @@ def test_every_path_and_name_the_docs_cite_exists(doc):
         for path in _expand(cited):
             module, attribute = path, None
             if re.search(r"/\w+\.[A-Za-z_]\w*$", path) and not path.endswith(
-                    (".py", ".md", ".yaml", ".json", ".toml")):  # tma/io/mcap_log.McapFile
+                    (".py", ".md", ".yaml", ".json", ".toml")):  # tma/io/mcap_read.McapFile
                 module, attribute = path.rsplit(".", 1)
                 module += ".py"
             matches = list(REPO.glob(module)) if "*" in module else [REPO / module]
@@ -405,6 +412,25 @@ def test_every_path_and_name_the_docs_cite_exists(doc):
     for name in names:
         if not _resolves(name):
             missing.append(name)
+    assert not missing, missing
+
+
+FILE_NAME = re.compile(r"(?<![\w/.<>*-])((?:[\w.-]+/)*[\w-]+\.(?:py|yaml))(?![\w.])")
+
+
+@pytest.mark.parametrize("doc", DOCS, ids=_rel)
+def test_every_file_name_the_docs_mention_exists(doc):
+    """Every code file a doc names (``.py``, ``.yaml``), even without its directory
+    (``csv_table.py``, ``sources/align.py``, ``estimators/lm.py``), is a file of the
+    repository: the whole path, or its end (placeholders such as ``<name>.py`` aside)."""
+    ours = {p.relative_to(REPO).as_posix() for root in ("tma", "pipeline", "conf", "tests",
+                                                          "bench", "examples", "docs")
+            for p in (REPO / root).rglob("*") if p.is_file()}
+    text = re.sub(r"```.*?```", "", doc.read_text(), flags=re.S)
+    named = {name for code in re.findall(r"`([^`\n]+)`", text)
+             for name in FILE_NAME.findall(code) if not name.startswith("../")}
+    missing = sorted(n for n in named if n not in ours
+                     and not any(path.endswith("/" + n) for path in ours))
     assert not missing, missing
 
 

@@ -1,22 +1,18 @@
-"""The grid language and dataset resolution of ``tma.experiment``, on plain configs: no Hydra
+"""What a command covers (``tma.plan``: the grid language, dataset resolution) and the
+checks the entry points make before a stage (``pipeline._checks``), on plain configs: no Hydra
 is composed or started here (the command line's behaviour is ``tests/test_sweeps.py``)."""
 
 import json
 
 import pytest
 
+from pipeline._checks import check_stage_options
 from tma.config import defaults
 from tma.errors import ConfigError, IntegrityError
-from tma.experiment import (
-    Override,
-    check_stage_options,
-    dataset_roots,
-    estimator_configs,
-    open_datasets,
-    scenario_points,
-)
 from tma.families import dataset_name, estimator_class, load_scenario, scenario_module
-from tma.simulation import simulate_datasets
+from tma.plan.datasets import dataset_roots, open_datasets
+from tma.plan.grid import Override, estimator_configs, scenario_points
+from tma.stages.simulate import simulate_datasets
 
 
 def _scenario(family="bearings2d", **values):

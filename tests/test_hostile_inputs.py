@@ -281,7 +281,7 @@ def test_any_text_survives_the_command_line(value):
     from hydra.errors import HydraException
 
     from pipeline._common import _SYNTAX, _readable
-    from tma.experiment import override_text
+    from tma.plan.grid import override_text
 
     assert PARSER.parse_override(override_text("name", value)).value() == value
     arguments = _readable([f"name={value}"])

@@ -122,14 +122,14 @@ def test_a_value_written_as_an_override_reads_back_as_itself(value):
     from hydra.core.override_parser.overrides_parser import OverridesParser
     from omegaconf import OmegaConf
 
-    from tma.experiment import override_text
+    from tma.plan.grid import override_text
 
     parsed = OverridesParser.create().parse_override(override_text("input", value))
     assert OmegaConf.create({"v": parsed.value()}).v == value
 
 
 def test_an_unknown_key_names_the_nearest_or_the_keys_there():
-    from tma.experiment import unknown_choice_line, unknown_key_line
+    from pipeline._messages import unknown_choice_line, unknown_key_line
 
     root = {"columns": {"time": None, "x": None}, "csv": {"delimiter": None}}
     assert unknown_key_line(root, "colums", "colums.time=x", "colums.time") == (

@@ -26,7 +26,8 @@ from tma.families.bearings2d.log import (
 )
 from tma.families.bearings2d.scenario import Config, simulate_shard
 from tma.io.atomic import atomic_path, write_parquet_atomic
-from tma.io.mcap_log import LogWriter, json_record
+from tma.io.mcap_log import LogWriter
+from tma.io.mcap_values import json_record
 from tma.utc import format_utc, parse_utc
 
 EPOCH = "2026-01-01T00:00:00Z"
@@ -111,7 +112,7 @@ def test_verified_bytes_are_read_as_the_file_is(tmp_path):
     read) and without its own CRCs, which that sha256 already covers; the log is the same."""
     from tma.io.atomic import VerifiedPath, sha256_file
     from tma.io.dataset import Dataset, write_manifest
-    from tma.io.mcap_log import check_integrity
+    from tma.io.mcap_read import check_integrity
 
     log, _ = _small_log()
     shard = tmp_path / "log" / "shard-00000.mcap"

@@ -1,5 +1,5 @@
-"""``tma.jit``: a cached kernel is recompiled when a kernel it calls from another file changes,
-and a read-only install with a read-only home still imports and runs (real numba, fresh
+"""``tma.runtime.jit``: a cached kernel is recompiled when a kernel it calls from another file
+changes, and a read-only install with a read-only home still imports and runs (real numba, fresh
 processes)."""
 
 import os
@@ -14,14 +14,14 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 
 CALLEE = """
-from tma.jit import njit
+from tma.runtime.jit import njit
 
 @njit()
 def scale(x):
     return {factor} * x
 """
 KERNEL = """
-from tma.jit import njit
+from tma.runtime.jit import njit
 from callee import scale
 
 @njit(depends=(scale,))

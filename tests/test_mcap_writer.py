@@ -32,10 +32,12 @@ from tma.families.bearings2d.log import (
     write_bearings_log,
 )
 from tma.families.bearings2d.scenario import Config, simulate_shard
-from tma.geo import local_to_geodetic, location_fix
-from tma.io.mcap_log import LogWriter, check_integrity, json_record, read_log, schema_bytes
+from tma.io.mcap_log import LogWriter, schema_bytes
+from tma.io.mcap_read import check_integrity, read_log
+from tma.io.mcap_values import json_record
 from tma.io.mcap_writer import Encoded, McapWriter
 from tma.io.proto_columns import proto_schema
+from tma.maths.geo import local_to_geodetic, location_fix
 
 EPOCH_NS = 1_767_225_600 * 10**9  # 2026-01-01T00:00:00Z
 NUMPY = orjson.OPT_SERIALIZE_NUMPY

@@ -1,4 +1,4 @@
-"""Our tables beside the published studies (``tma.paper`` and each family's ``paper.py``):
+"""Our tables beside the published studies (``tma.report.paper`` and each family's ``paper.py``):
 the verdict logic, the intervals' coverage, the CSV and the section, every published number
 transcribed, each family's claims on known inputs, and the section after small pipelines."""
 
@@ -14,13 +14,13 @@ from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
 from pipeline.simulate import simulate_stage
 from tests.conftest import REPO, compose_cfg
-from tma import paper
 from tma.families.bearing_doppler3d import paper as bd3d_paper
 from tma.families.bearings2d import paper as b2d_paper
 from tma.families.radar2d import paper as radar_paper
 from tma.families.radar2d.metrics import Segments
 from tma.families.ranges2d import paper as ranges_paper
-from tma.tables import write_table
+from tma.report import paper
+from tma.report.tables import write_table
 
 PAPERS = REPO.parent / "shared" / "specs" / "papers.md"
 

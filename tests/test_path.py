@@ -5,7 +5,7 @@ import pytest
 
 from tma.errors import ConfigError
 from tma.families.bearings2d.scenario import Config, epochs, observer_path
-from tma.path import LegPath
+from tma.maths.path import LegPath
 
 
 def test_default_path_timing_and_courses():

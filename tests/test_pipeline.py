@@ -202,7 +202,7 @@ def test_each_stage_checks_the_sha256_of_what_it_reads(paths, tmp_path):
 def test_the_table_command_loads_the_report_while_the_workers_estimate():
     import sys
 
-    from tma.aggregate import prefetch_report
+    from tma.stages.aggregate import prefetch_report
 
     thread = prefetch_report("ranges2d")
     thread.join()

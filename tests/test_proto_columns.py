@@ -18,7 +18,7 @@ from mcap.writer import Writer
 from tests.conftest import proto_message_class
 from tma.errors import InputError
 from tma.families.bearings2d.log import BEARINGS_TOPIC, OWNSHIP_TOPIC, SCHEMAS
-from tma.io.mcap_log import read_log
+from tma.io.mcap_read import read_log
 from tma.io.mcap_writer import Ragged
 from tma.io.proto_columns import decode_message, encode_columns, encode_message, proto_schema
 

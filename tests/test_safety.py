@@ -18,8 +18,8 @@ from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
 from pipeline.simulate import simulate_stage
 from tests.conftest import REPO, SMALL, compose_cfg, run_stage_here
+from tests.families.bearings2d.recorded_geometry import ingest
 from tma.errors import ConfigError, InputError, IntegrityError
-from tma.families.bearings2d.ingest import ingest
 from tma.families.bearings2d.scenario import Config, simulate_shard
 from tma.io.owned import MARKER, building
 

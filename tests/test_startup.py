@@ -45,8 +45,8 @@ from tma.config import to_plain
 from tma.families import build_estimator
 from tma.families.bearings2d.scenario import Config
 from tma.io.dataset import write_manifest
-from tma.estimation import ShardTask, estimate_shard_group
-from tma.simulation import ShardTask as SimulateTask, simulate_group
+from tma.stages.estimate import ShardTask, estimate_shard_group
+from tma.stages.simulate import ShardTask as SimulateTask, simulate_group
 
 root = r"{tmp_path}"
 config = to_plain(Config(n_tracks=20, shard_size=20))
@@ -103,7 +103,7 @@ def test_a_process_skips_the_collections_of_its_shutdown():
     code = """
 import atexit, gc
 atexit.register(lambda: print("frozen", gc.get_freeze_count() > 0, flush=True))
-from tma.parallel import quick_exit
+from tma.runtime.forkserver import quick_exit
 quick_exit()
 quick_exit()  # once per process
 print("done")
@@ -144,7 +144,7 @@ def test_the_scipy_special_stand_ins_are_scipy_stats_exactly():
 
 
 KERNELS = """
-from tma.jit import njit
+from tma.runtime.jit import njit
 
 @njit()
 def twice(x):
@@ -182,7 +182,7 @@ def test_in_threads_keeps_item_order_and_raises_the_first_failure_in_item_order(
     results and the error must be those of the plain loop."""
     import time
 
-    from tma.parallel import in_threads
+    from tma.runtime.parallel import in_threads
 
     def check(i):
         time.sleep(0.02 * (5 - i))  # later items finish first

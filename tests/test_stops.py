@@ -19,7 +19,8 @@ from hypothesis import strategies as st
 
 from tests.conftest import REPO, run_cli
 from tests.test_docs import write_logs
-from tma.parallel import SHM, Engine, run_tasks
+from tma.runtime.forkserver import SHM
+from tma.runtime.parallel import Engine, run_tasks
 
 pytestmark = pytest.mark.signals
 ESTIMATE = ["scenario.n_tracks=24000", "scenario.shard_size=250", "progress=false"]
@@ -174,7 +175,7 @@ def test_never_more_workers_than_tasks(caplog):
     from joblib.externals.loky import get_reusable_executor
 
     get_reusable_executor().shutdown(wait=True, kill_workers=True)  # none from before
-    with caplog.at_level(logging.INFO, logger="tma.parallel"):
+    with caplog.at_level(logging.INFO, logger="tma.runtime.parallel"):
         pids = run_tasks(_pid, [0, 1], engine=Engine(n_jobs=12), progress=False)
     assert len(set(pids)) <= 2 and os.getpid() not in pids
     assert len(_loky_workers()) <= 2
@@ -196,7 +197,7 @@ def test_a_deleted_working_directory_is_one_line(tmp_path):
 
 # -- the environment ---------------------------------------------------------------------------
 
-DRAW = ("import sys; from tma.tables import plots_to_files; plots_to_files(); "
+DRAW = ("import sys; from tma.report.tables import plots_to_files; plots_to_files(); "
         "import matplotlib; matplotlib.use('Agg'); import matplotlib.pyplot as plt; "
         "plt.figure().savefig(sys.argv[1])")
 ENV_TEXT = st.text(st.characters(blacklist_characters="\x00", blacklist_categories=("Cs",)),
@@ -214,7 +215,8 @@ def test_any_mplbackend_lets_tma_draw_into_files(backend, tmp_path):
     assert proc.returncode == 0 and out.stat().st_size > 0, proc.stderr
 
 
-NUMBA = ("from tma.jit import numba_module\ntry:\n    numba_module()\nexcept ValueError as e:\n"
+NUMBA = ("from tma.runtime.jit import numba_module\ntry:\n    numba_module()\n"
+         "except ValueError as e:\n"
          "    print('error:', e); raise SystemExit(2)")
 
 

@@ -122,7 +122,7 @@ def test_cli_aggregate_sweep_writes_one_table_of_all_jobs(data):
     assert len(jobs) == 4 and all(len(pd.read_csv(p)) == 1 for p in jobs)  # one per job
     assert len(list(tables.glob("*_paper.csv"))) == 5  # each table beside the paper, sweep too
     # the metrics of every run: one dataset, with the run's config values as columns
-    from tma.aggregate import metrics_dataset  # (imported here: new in this change)
+    from tma.stages.aggregate import metrics_dataset  # (imported here: new in this change)
 
     metrics = metrics_dataset(root / "data")
     assert metrics.count_rows() == 4 * 30

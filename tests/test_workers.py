@@ -1,7 +1,7 @@
 """Local workers of a command fork from a server that imported what they need
-(``tma.parallel.preload_workers``): no thread runs in it when it forks, Python sessions keep
-loky's own start, and a sweep's jobs (the joblib Hydra launcher's workers) see the sweep and
-write what the same points give as one command's grid, byte for byte."""
+(``tma.runtime.forkserver.preload_workers``): no thread runs in it when it forks, Python
+sessions keep loky's own start, and a sweep's jobs (the joblib Hydra launcher's workers) see the
+sweep and write what the same points give as one command's grid, byte for byte."""
 
 import hashlib
 import json
@@ -19,13 +19,15 @@ LINUX = pytest.mark.skipif(sys.platform != "linux", reason="the fork server is L
 
 PROBE = """
 import json, os, sys
-from tma.parallel import preload_workers, run_tasks
+from tma.runtime.forkserver import preload_workers
+from tma.runtime.parallel import run_tasks
 
 def probe(_):
     ppid = os.getppid()
     with open(f"/proc/{ppid}/status") as f:
         threads = next(int(line.split()[1]) for line in f if line.startswith("Threads:"))
-    return {"ppid": ppid, "parent_threads": threads, "preloaded": "tma.estimation" in sys.modules}
+    return {"ppid": ppid, "parent_threads": threads,
+            "preloaded": "tma.stages.estimate" in sys.modules}
 
 if __name__ == "__main__":
     server = preload_workers(["pipeline._common", "matplotlib.pyplot"])  # as a sweep does
@@ -83,7 +85,7 @@ def test_a_command_is_recognised_by_how_python_was_started(monkeypatch, argv, co
 def test_a_command_runs_its_shards_in_forked_workers_and_says_nothing_else(tmp_path):
     """The command line itself, with warnings shown: its workers fork from the server."""
     proc = run_cli("simulate", "scenario.n_tracks=40", "scenario.shard_size=20",
-                   "progress=false", "parallel.n_jobs=2", "hydra.verbose=tma.parallel",
+                   "progress=false", "parallel.n_jobs=2", "hydra.verbose=tma.runtime.forkserver",
                    f"paths.data_dir={tmp_path}", warnings=True)
     output = proc.stdout + proc.stderr
     assert "local workers fork from the server that preloaded their modules" in output

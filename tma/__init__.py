@@ -10,12 +10,7 @@ From Python (``docs/api.md``): ``tma.read_log``, ``tma.Recording.from_frames``,
 tma`` stays light.
 """
 
-from importlib.metadata import PackageNotFoundError, version
-
-try:
-    __version__ = version("tma")
-except PackageNotFoundError:  # running from a checkout without installation
-    __version__ = "0.0.0+checkout"
+from tma.version import __version__
 
 API = ("Recording", "read_log", "estimate", "plot_contact", "write_map", "open_dataset",
        "runs", "simulate")

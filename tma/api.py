@@ -75,7 +75,7 @@ class Recording:
         the own-ship (latitude/longitude or x/y, as a navigation export has them) unless
         ``navigation`` gives it; columns are found as in a CSV file, and named with
         ``columns={...}`` where they are not. Options as ``read_log``'s."""
-        from tma.ingest import read_frames
+        from tma.stages.ingest import read_frames
 
         settings, reading = _split(_nested(options, groups))
         return cls(read_frames(bearings, navigation, family=FAMILY, options=reading,
@@ -127,7 +127,7 @@ class Recording:
         """Own-ship at each bearing epoch: ``log`` (which own-ship), ``t_s`` (from the log's
         time 0), ``time_utc``, ``x_m``/``y_m`` (east, north of ``origin_deg``), and with an
         origin ``lat_deg``/``lon_deg``."""
-        from tma.geo import local_to_geodetic
+        from tma.maths.geo import local_to_geodetic
 
         frames = []
         for k, lg in enumerate(self.logs):
@@ -191,7 +191,7 @@ def read_log(path, *, navigation=None, format: str = "auto", sigma_deg: float | 
     ``options``; ``sigma_deg``: the sensor's nominal bearing noise, when known; ``truth``: the
     AIS of the trial, a path or the ``truth.*`` options (``{"file": ..., "match": {"T1":
     235031617}}``): ``estimate`` then scores each contact against it."""
-    from tma.ingest import read_log as read
+    from tma.stages.ingest import read_log as read
 
     return Recording(read(path, family=FAMILY, fmt=format, navigation=navigation,
                           options=_nested(options, groups), sigma_deg=sigma_deg,
@@ -254,9 +254,9 @@ def estimate(data, estimator: str = "lm", sigma_deg: float | None = None,
     draw from). An estimate that is no answer (diverged, collapsed, or without a one-sigma
     error: ``bearings2d.status.not_an_answer``) is blank there, ``x0_m``.. included, with its
     status and a note that says so."""
-    from tma.estimation import estimate_log
     from tma.families import build_estimator, estimator_class
-    from tma.tables import plots_to_files
+    from tma.report.tables import plots_to_files
+    from tma.stages.estimate import estimate_log
 
     plots_to_files()  # the report module loads matplotlib
     from tma.families.bearings2d.report import contact_report
@@ -439,7 +439,7 @@ def runs(data_dir="data", family: str | None = None, as_dataset: bool = False):
     ``tma.aggregate.metrics_dataset``), or the pyarrow dataset itself (``as_dataset``). Runs
     that hold no ``metrics.parquet`` (never aggregated, or recomputed since) are named in a
     warning and in ``attrs["without_metrics"]``, not left out silently."""
-    from tma.aggregate import metrics_dataset, runs_without_metrics
+    from tma.stages.aggregate import metrics_dataset, runs_without_metrics
 
     missing = runs_without_metrics(data_dir, family)
     if missing:
@@ -477,7 +477,7 @@ def simulate(family: str = FAMILY, options: dict | None = None, **overrides
     ``options``) in memory, shard by shard as ``pipeline.simulate`` does (the same random
     streams, so the same numbers as its dataset of that config)."""
     from tma.families import load_scenario
-    from tma.sharding import n_shards
+    from tma.runtime.sharding import n_shards
 
     module, config = load_scenario({"family": family, **_nested(options, overrides)})
     logs, truths = [], []

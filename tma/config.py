@@ -11,7 +11,7 @@ configs too (``check_params``: one line naming the key, the value and what is al
 the class's own ``__post_init__`` checks what relates several fields. A field of text may
 declare its ``form`` instead (a date, an address: ``Form``), and a value of the wrong type,
 caught here or by OmegaConf's typed merge, is the same one line. ``describe`` lists them
-(``python -m tma.options``). The ingest reading options (``tma.sources.base``), the family's
+(``python -m tma.options``). The ingest reading options (``tma.sources.options``), the family's
 ingest settings and the ``parallel`` options are declared and checked the same way.
 """
 

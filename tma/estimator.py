@@ -57,8 +57,9 @@ class Estimator:
     - ``prepare(config, dataset, data_dir, engine, progress)``: a step run once before the
       shards (e.g. training an artefact), returning the config the run records;
     - ``recorded_defaults``: config values that replace its defaults on a recorded log (a
-      dataset not simulated) where the command line sets none (``tma.estimation.dataset_config``),
-      e.g. a start from the first bearing instead of the simulated scenario's prior.
+      dataset not simulated) where the command line sets none
+      (``tma.stages.estimate.dataset_config``), e.g. a start from the first bearing instead of
+      the simulated scenario's prior.
     """
 
     family = ""

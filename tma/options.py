@@ -3,16 +3,17 @@ declarations (``tma.config.param``): ``python -m tma.options [NAME ...]`` (``mak
 ``make options ARGS=lm``, ``make options ARGS="ingest parallel"``) prints each key as the
 command line sets it (``scenario.KEY=``, ``estimator.KEY=``, ingest's ``csv.delimiter=`` or
 ``sigma_deg=``, ``parallel.KEY=``), its default, the values it allows and what it means.
-``ingest``: the reading options (``tma.sources.base``) and the family's own settings (its
-``ingest.Settings``), for each family that reads recorded logs; ``parallel``: where shards run
-(``tma.parallel.Engine``; ``conf/parallel/*.yaml`` are presets of these keys)."""
+``ingest``: the reading options (``tma.sources.options``, with those each reader declares) and
+the family's own settings (its ``ingest.Settings``), for each family that reads recorded logs;
+``parallel``: where shards run (``tma.runtime.parallel.Engine``; ``conf/parallel/*.yaml`` are
+presets of these keys)."""
 
 import sys
 from pathlib import Path
 
 from tma.config import describe
 from tma.errors import ConfigError
-from tma.families import NAMES, estimator_class, estimator_names, family
+from tma.families import NAMES, estimator_class, estimator_names, family, reads_logs
 
 GROUPS = ("ingest", "parallel")
 PRESETS = Path(__file__).resolve().parents[1] / "conf" / "parallel"  # in a checkout
@@ -36,14 +37,6 @@ def table(kind: str, name: str, schema) -> str:
     return block(header, rows)
 
 
-def reads_logs(name: str) -> bool:
-    """Family ``name`` reads recorded logs (it has an ``ingest`` module)."""
-    try:
-        return family(name).ingest is not None
-    except ConfigError:
-        return False
-
-
 def ingest_families() -> list[str]:
     return [name for name in NAMES if reads_logs(name)]
 
@@ -51,7 +44,7 @@ def ingest_families() -> list[str]:
 def ingest_rows(name: str) -> list[tuple[str, str, str, str]]:
     """The ingest options of family ``name``: its settings, then the reading options."""
     from tma.ais.options import TruthOptions
-    from tma.sources.base import options_schema
+    from tma.sources.options import options_schema
 
     reader = family(name).ingest
     return (describe(reader.Settings) + describe(options_schema(reader.OBSERVATION))
@@ -64,7 +57,7 @@ def ingest_tables() -> list[str]:
 
 
 def parallel_rows() -> list[tuple[str, str, str, str]]:
-    from tma.parallel import Engine
+    from tma.runtime.parallel import Engine
 
     return describe(Engine, "parallel.")
 

@@ -13,7 +13,7 @@ class ScenarioConfig(Params):
     family: str = param("", "the scenario family (its one allowed value)")
     n_tracks: int = param(1, "tracks in the dataset (targets, Monte Carlo runs, paths)",
                           "[1, inf)")
-    seed: int = param(0, "seed of every random draw (tma.sharding)", "[0, inf)")
+    seed: int = param(0, "seed of every random draw (tma.runtime.sharding)", "[0, inf)")
     shard_size: int = param(1, "tracks per log shard and per estimation task", "[1, inf)")
     epoch_utc: str = param("2026-01-01T00:00:00Z", "UTC of t = 0 (ISO-8601 with a zone): the "
                            "logs' absolute times")

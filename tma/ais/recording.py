@@ -160,7 +160,7 @@ def windows_of(real: RealWindows, scan_period_s: float) -> tuple[AisRecording, l
 
 @functools.lru_cache(maxsize=8)
 def _windows(path, sha256, window_s, lat, lon, max_range_m, max_gap_s, min_speed, scan_period_s):
-    from tma.geo import geodetic_to_local
+    from tma.maths.geo import geodetic_to_local
 
     rec = _load(path, sha256)
     sensor = (np.zeros(2) if lat is None else

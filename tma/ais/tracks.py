@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.ais.reports import Reports
-from tma.geo import geodetic_to_local
+from tma.maths.geo import geodetic_to_local
 
 SPIKE_M = 300.0  # a report this far off the line between its neighbours is dropped
 

@@ -32,8 +32,8 @@ from tma.ais.match import Contact, Match, bearings_from, match_contacts
 from tma.ais.options import TruthError, TruthOptions
 from tma.ais.reports import read_reports
 from tma.ais.tracks import vessel_tracks
-from tma.geo import local_to_geodetic
 from tma.io.atomic import sha256_file
+from tma.maths.geo import local_to_geodetic
 from tma.utc import format_utc
 
 log = logging.getLogger(__name__)

@@ -9,7 +9,7 @@ table or None)``, ``write_log(path, log, metadata) -> n_messages`` and ``read_lo
 optionally ``simulation_key``/``simulate_raw``/``from_raw`` when datasets of different
 configs share their random draws. Its report module provides ``aggregate_runs(entries,
 tables_dir, table_name)``; an ``ingest`` module, when the family reads recorded logs,
-``OBSERVATION``, ``Settings`` and ``logs`` (``tma.ingest``).
+``OBSERVATION``, ``Settings`` and ``logs`` (``tma.stages.ingest``).
 """
 
 import functools
@@ -44,14 +44,14 @@ class Family:
 
     @property
     def report(self):
-        from tma.tables import plots_to_files
+        from tma.report.tables import plots_to_files
 
         plots_to_files()  # a bad MPLBACKEND would fail matplotlib's import
         return importlib.import_module(f"tma.families.{self.name}.report")
 
     @property
     def ingest(self):
-        """What the family reads from a recorded log (``tma.ingest``): its ``ingest`` module,
+        """What the family reads from a recorded log (``tma.stages.ingest``): its ``ingest`` module,
         with ``OBSERVATION``, ``Settings`` and ``logs``."""
         try:
             return importlib.import_module(f"tma.families.{self.name}.ingest")
@@ -133,15 +133,21 @@ def register_configs():
     Also the group ``estimator_keys``, one option per family: every key of the family's
     estimators (their defaults, ``name`` left out). An experiment merges it into
     ``estimator`` (``- /estimator_keys@estimator: <family>``) so that Hydra lets the command
-    line set any of them with ``estimator.KEY=VALUE``; ``tma.experiment.estimator_configs``
+    line set any of them with ``estimator.KEY=VALUE``; ``tma.plan.grid.estimator_configs``
     then copies the value into the experiment's estimators that have KEY. These values are
-    never run."""
+    never run.
+
+    And the group ``reading``, one option per family that reads recorded logs: its ingest
+    options (``ingest_defaults``), which ``conf/ingest.yaml`` takes as its own keys
+    (``- reading@_here_: <family>``)."""
     from hydra.core.config_store import ConfigStore
 
     store = ConfigStore.instance()
     for name in NAMES:
         fam = family(name)
         store.store(group="scenario", name=name, node=defaults(fam.scenario.Config))
+        if reads_logs(name):
+            store.store(group="reading", name=name, node=ingest_defaults(name))
         keys = {}
         for estimator in fam.estimators:
             node = defaults(fam.estimator_class(estimator).Config)
@@ -149,6 +155,27 @@ def register_configs():
             keys.update(node)
         keys.pop("name", None)
         store.store(group="estimator_keys", name=name, node=keys)
+
+
+def reads_logs(name: str) -> bool:
+    """Family ``name`` reads recorded logs (it has an ``ingest`` module)."""
+    try:
+        return family(name).ingest is not None
+    except ConfigError:
+        return False
+
+
+def ingest_defaults(name: str) -> dict:
+    """Every ingest option of family ``name`` with its default, as the command line sets it:
+    its own settings (its ``ingest.Settings``: ``sigma_deg``, ``min_bearings``), the reading
+    options (``tma.sources.options``: ``columns.*``, ``bearing.*``, ..., ``bad_rows``) and the
+    truth options (``truth.*``, ``tma.ais.options``); declared there, written nowhere else."""
+    from tma.ais.options import TruthOptions
+    from tma.sources.options import options_schema
+
+    reader = family(name).ingest
+    return {**defaults(reader.Settings), **defaults(options_schema(reader.OBSERVATION)),
+            "truth": defaults(TruthOptions)}
 
 
 def dataset_name(module, cfg) -> str:

@@ -15,10 +15,10 @@ from time import perf_counter
 
 import numpy as np
 
-from tma import __version__
 from tma.errors import IntegrityError
 from tma.io.atomic import atomic_path, sha256_file, sha256_json, write_json_atomic
 from tma.io.owned import locked, remove_stale_temporaries
+from tma.version import __version__
 
 ARRAYS = "arrays.npz"
 log = logging.getLogger(__name__)

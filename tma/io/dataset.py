@@ -19,10 +19,10 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from tma import __version__
 from tma.errors import InputError, IntegrityError, MissingFileError
 from tma.io import arrow
 from tma.io.atomic import VerifiedPath, sha256_file, sha256_json, write_json_atomic
+from tma.version import __version__
 
 FORMAT = "tma-dataset"
 FORMAT_VERSION = 2

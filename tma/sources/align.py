@@ -4,7 +4,7 @@
   them is refused: nothing relates the two clocks), unless ``time.start_utc`` gives the UTC of
   the relative times' 0, which makes them absolute. The dataset starts at t = 0 at the first
   value kept; ``epoch_utc_ns`` is the UTC time of that t = 0 (None for relative times).
-- One plane: latitude/longitude go to east/north metres (``tma.geo.geodetic_to_local``, WGS84,
+- One plane: latitude/longitude go to east/north metres (``tma.maths.geo.geodetic_to_local``, WGS84,
   h = 0) at the origin ``origin.lat``/``origin.lon`` or the first own-ship fix. The plane is
   tangent at the origin, so bearings (clockwise from its north) stay true to within the
   meridian convergence, about 0.015 deg per km east-west at 60 deg latitude. Own-ship given
@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.errors import ConfigError, InputError
-from tma.geo import geodetic_to_local
+from tma.maths.geo import geodetic_to_local
 from tma.sources.base import Dropped, Navigation, Recording
 from tma.sources.labels import shown_labels
 from tma.utc import format_utc, stamp_text

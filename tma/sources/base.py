@@ -1,11 +1,12 @@
-"""What every log reader returns, what a family asks of it, and the reading options.
+"""What every log reader returns and declares, and what a family asks of it.
 
 A reader turns one file of one source kind (CSV, NMEA, ROS 2 MCAP, Foxglove MCAP, tma's own
 MCAP) into flat arrays: own-platform fixes (``Navigation``) and/or per-contact values
 (``Contacts``). Which value a contact carries is the family's to say, as an ``Observation``
 (``bearings2d``: the bearing, in deg or rad, guarded against radians read as degrees);
 ``tma.sources.align`` then puts fixes and values on one time base and one local east-north
-plane, and the family makes its logs from them.
+plane, and the family makes its logs from them. Each reader file declares its format
+(``Reader``); the reading options are assembled from the declarations (``tma.sources.options``).
 
 Bad rows (``bad_rows=drop|fail``): a row whose time, value or own-ship position is missing or
 unreadable, a stamp not absolute among absolute ones, a fix flagged "no fix" or far off the
@@ -20,19 +21,13 @@ convert the others, and direction vectors when the observation takes them); posi
 local (x east, y north, metres) or geographic (latitude, longitude in degrees, WGS84).
 """
 
-import datetime
-import functools
 from collections.abc import Callable
-from dataclasses import MISSING as MISSING_FACTORY
-from dataclasses import dataclass, field, fields, is_dataclass, make_dataclass
-from typing import Any
+from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
-from omegaconf import DictConfig, OmegaConf
 
-from tma.config import Form, Params, describe, param, validate
-from tma.errors import ConfigError, InputError
-from tma.utc import parse_utc
+from tma.errors import InputError, MissingFileError
 
 
 @dataclass(frozen=True)
@@ -215,319 +210,59 @@ class Recording:
     dropped: Dropped = field(default_factory=Dropped)
 
 
-# -- the reading options (conf/ingest.yaml) ----------------------------------------------------
-# Each option is a ``param``: its default, its doc (with units) and what it allows, in one
-# place; ``check_params`` checks them all (one line naming the key, the value and what is
-# allowed) and ``python -m tma.options ingest`` lists them. The rules between options stay as
-# code (``ReadingOptions.__post_init__``).
-
-POSITION_ROLES = ("time", "x", "y", "lat", "lon")  # table columns besides value and track
-COLUMN_DOCS = {  # what each column of a table holds (the observation's is the family's)
-    "time": "the times (relative s, Unix time or ISO-8601: time.format)",
-    "x": "own-ship's position east (m)", "y": "own-ship's position north (m)",
-    "lat": "own-ship's latitude (deg, WGS84)", "lon": "own-ship's longitude (deg, WGS84)",
-    "track": "the contact of each row (an integer id, or a label kept as written; a table "
-             "without one holds one contact)"}
-FOUND = "; null: tma's name or a common one, found automatically (any case)"
 
 
-def _topics_problem(value) -> str | None:
-    entries = list(value) if isinstance(value, list | tuple) else [value]
-    fine = entries and all(isinstance(e, str | int | float) and not isinstance(e, bool)
-                           and str(e).strip() for e in entries)
-    return None if fine else ""
+def _no_options(observation: Observation) -> dict:
+    return {}
 
 
-TOPICS = Form("a topic, a pattern or a list of them", _topics_problem)
+@dataclass(frozen=True)
+class Reader:
+    """A log format, as its reader file declares it (``READER`` in
+    ``tma/sources/<file>.py``, the file listed once in ``tma.sources.READERS``). Everything
+    else about formats is derived from these declarations: the ``format`` option's values,
+    which reader reads a file, the reading options' groups, which options a kind of input
+    reads, and the messages that name them.
+
+    - ``kind``: the format's name (``format=<kind>``; the manifest's ``kind``);
+    - ``name``: a file of it as messages call it (``a CSV table``);
+    - ``extensions``: the endings of a file name that say the kind (``.csv``), lower case;
+    - ``sniff(head)``: True when a file's first ``SNIFF_BYTES`` bytes are of this kind
+      whatever its name (the MCAP magic, an NMEA sentence); None: the extension says it;
+    - ``options(observation)``: the options only this kind reads, ``{group: dataclass}`` of
+      ``tma.config.param`` fields (``csv``: ``{"csv": CsvFormat, ...}``); fields of one group
+      declared by several readers are one group (``bearing.topic`` by MCAP,
+      ``bearing.units`` by every kind, ``tma.sources.options``); a group's
+      ``rules(self)``, if it has one, checks what relates its options;
+    - ``read(path, options, *, navigation, contacts, date_hint_ns) -> list[Recording]``: the
+      file read with a family's reading options (``navigation`` / ``contacts``: what is
+      wanted from it; ``date_hint_ns``: UTC ns of the first contact value, for navigation
+      that carries no date), one Recording per own-ship; heavy libraries imported inside it,
+      since every command imports the declarations (``tests/test_startup.py``);
+    - ``selects_contacts`` / ``selects_navigation``: the options that name where the values
+      and the own-ship are, for the message when none is found (``{role}``: the
+      observation's role)."""
+
+    kind: str
+    name: str
+    extensions: tuple[str, ...]
+    read: Callable
+    sniff: Callable[[bytes], bool] | None = None
+    options: Callable[[Observation], dict] = _no_options
+    selects_contacts: str = ""
+    selects_navigation: str = ""
 
 
-class ContactSource:
-    """Where the values are in an MCAP log: ``topic`` (a topic, a pattern or a list of them),
-    ``field`` and ``units``; a family's options declare them in its observation's words
-    (``options_schema``)."""
-
-    topic: Any
-    field: str | None
-    units: str | None
-
-    @property
-    def topics(self) -> list[str] | None:
-        """The topics or patterns given, as a list; None when none is."""
-        return None if self.topic is None else (
-            list(self.topic) if isinstance(self.topic, list) else [self.topic])
+SNIFF_BYTES = 4096  # the head of a file a reader's sniff sees
 
 
-@dataclass
-class OwnshipSource:
-    """Where the own-ship's fixes are in an MCAP log (``ownship.*``)."""
-
-    topic: str | None = param(None, "MCAP topic of the own-ship's fixes; null: found by its "
-                              "schema (NavSatFix, LocationFix, Odometry, PoseStamped...)")
-
-
-DELIMITER_NAMES = {"comma": ",", "semicolon": ";", "tab": "\t", "\\t": "\t", "pipe": "|",
-                   "space": " "}
-DECIMAL_NAMES = {"dot": ".", "comma": ","}
-
-
-def _delimiter_problem(value) -> str | None:
-    fine = value in DELIMITER_NAMES or len(value) == 1 and value not in "\"\r\n"
-    return None if fine else ""
-
-
-@dataclass
-class CsvFormat:
-    """How a table is written (``csv.*``)."""
-
-    delimiter: str | None = param(
-        None, "the separator of a table's fields: one character or its name; null: sniffed "
-        "among , ; and tab", form=Form(f"one character or one of {', '.join(DELIMITER_NAMES)}",
-                                       _delimiter_problem))
-    decimal: str | None = param(None, "the decimal mark: . or , (or dot, comma); null: ., or , "
-                                "when the delimiter is not a comma and the numbers are written "
-                                "12,5", choices=(None, ".", ",", *DECIMAL_NAMES))
-
-
-TIME_FORMATS = ("auto", "s", "unix_s", "unix_ms", "unix_us", "unix_ns", "iso", "iso_utc")
-
-
-def _utc_problem(value) -> str | None:
+def file_head(path: Path, size: int, what: str) -> bytes:
+    """The first ``size`` bytes of the file at ``path``; MissingFileError when there is none,
+    InputError for a directory (``what``: what it should have been, ``a log file``)."""
     try:
-        parse_utc(str(value))
-    except ValueError as exc:  # "'...' is not a valid time (...)": what is wrong, if more
-        return "" if "ISO-8601" in str(exc) else str(exc).rpartition("' is ")[2]
-    return None
-
-
-def _date_problem(value) -> str | None:
-    try:
-        datetime.date.fromisoformat(str(value))
-    except ValueError:
-        return ""
-    return None if len(str(value)) == 10 else ""
-
-
-@dataclass
-class TimeFormat:
-    """How a table's times are written, and when a relative log starts (``time.*``)."""
-
-    format: str = param("auto", "how the times are written: auto: numbers by magnitude (Unix "
-                        "s from 1e8, ms from 1e11, us from 1e14, ns from 1e17; smaller: relative "
-                        "s), text as ISO-8601 with a zone; s: relative seconds; unix_s|ms|us|ns: "
-                        "Unix time; iso: ISO-8601 with a zone (Z, +01:00); iso_utc: ISO-8601, a "
-                        "time without zone taken as UTC", choices=TIME_FORMATS)
-    start_utc: str | None = param(
-        None, "the UTC of time 0 of a log of relative times, which makes it absolute; null: "
-        "such a log stays undated",
-        form=Form("an ISO-8601 time with a zone (e.g. 2026-01-01T08:00:00Z or "
-                  "2026-01-01T09:00:00+01:00)", _utc_problem))
-
-    @property
-    def start_ns(self) -> int | None:
-        return None if self.start_utc is None else parse_utc(str(self.start_utc))
-
-
-@dataclass
-class NmeaOptions:
-    """What NMEA navigation does not say (``nmea.*``)."""
-
-    date: str | None = param(None, "the UTC date of NMEA GGA fixes that no RMC sentence dates; "
-                             "null: from RMC, else from the values' absolute times",
-                             form=Form("a date YYYY-MM-DD", _date_problem))
-
-
-@dataclass
-class NavLimits:
-    """What own-ship's navigation may do (``nav.*``)."""
-
-    max_extrapolation_s: float = param(1.0, "a value further than this (s) outside the "
-                                       "own-ship's fixes is dropped", "[0, 1e9)")
-    max_gap_s: float = param(10.0, "a gap between own-ship's fixes longer than this (s) is "
-                             "reported", "(0, 1e9)")
-    max_speed_m_s: float = param(50.0, "own-ship never moves faster (m/s): a fix farther off "
-                                 "its neighbours is an outlier", "(0, 1e5)")
-
-
-@dataclass
-class Origin:
-    """The local east-north plane's origin (``origin.*``)."""
-
-    lat: float | None = param(None, "latitude (deg, WGS84) of the local east-north plane's "
-                              "origin; null: the first own-ship fix", "(-90, 90)")
-    lon: float | None = param(None, "longitude (deg, WGS84) of the origin (with lat)",
-                              "[-180, 360]")
-    max_distance_km: float = param(100.0, "a given origin lies at most this far (km) from an "
-                                   "own-ship fix", "(0, 20000)")
-
-
-class ReadingOptions(Params):
-    """Base of a family's ``SourceOptions`` (``options_schema``): the groups ``columns``,
-    ``<role>`` (the observation's ``ContactSource``), ``ownship``, ``csv``, ``time``, ``nmea``,
-    ``nav``, ``origin`` and the option ``bad_rows``. ``observation`` is the family's;
-    ``contact`` its group. Every option's declared type and values are checked first
-    (``Params``, keys as the command line writes them), then the rules between options; the
-    names of delimiters and decimal marks become the characters, a topic's number its text."""
-
-    observation: Observation
-
-    @property
-    def where(self) -> str:
-        return ""  # the keys say it: csv.delimiter, nav.max_gap_s
-
-    @property
-    def contact(self) -> ContactSource:
-        return getattr(self, self.observation.role)
-
-    def column(self, role: str) -> str | None:
-        return getattr(self.columns, role)
-
-    def __post_init__(self):
-        super().__post_init__()
-        topic = self.contact.topic
-        if topic is not None:
-            self.contact.topic = ([str(e) for e in topic] if isinstance(topic, list | tuple)
-                                  else str(topic))
-        csv = self.csv
-        csv.delimiter = DELIMITER_NAMES.get(csv.delimiter, csv.delimiter)
-        csv.decimal = DECIMAL_NAMES.get(csv.decimal, csv.decimal)
-        if csv.decimal is not None and csv.decimal == csv.delimiter:
-            raise ConfigError(f"csv.decimal and csv.delimiter are both '{csv.decimal}'")
-        if (self.origin.lat is None) != (self.origin.lon is None):
-            raise ConfigError("origin.lat and origin.lon go together: give both or neither")
-
-    def dropped(self) -> Dropped:
-        """A new count of the rows left out, under this policy."""
-        return Dropped(self.bad_rows)
-
-
-@functools.cache
-def options_schema(observation: Observation) -> type:
-    """The reading options (a dataclass) of a family reading ``observation``: its column
-    under ``columns`` and its group named by its role (``bearing.topic|field|units``), their
-    docs in its words."""
-    role, plural, units = observation.role, observation.plural, observation.units
-    docs = {**COLUMN_DOCS, role: f"the {plural} ({' or '.join(u.name for u in units)}: "
-                                 f"{role}.units)"}
-    columns = make_dataclass("Columns", [(r, str | None, param(None, f"column of {docs[r]}"
-                                                              f"{FOUND}"))
-                                         for r in (*POSITION_ROLES, role, "track")])
-    columns.__doc__ = ("Table column names; None = tma's name or a common one found "
-                       "automatically.")
-    source = make_dataclass(f"{role.title()}Source", [
-        ("topic", Any, param(None, f"MCAP topic(s) of the {plural}: a topic, a pattern "
-                                   "(fnmatch: /sonar/contact/*) or a list of them; each topic "
-                                   "is a contact (named by its topic) unless its messages "
-                                   f"name contacts (track_id); null: {observation.topic} or "
-                                   "the family's schema", form=TOPICS)),
-        ("field", str | None, param(None, f"dotted field path of the {role} in its messages; "
-                                          f"null: the first of {', '.join(observation.fields)} "
-                                          "found")),
-        ("units", str | None, param(None, f"units of the {plural}: "
-                                          f"{', '.join(f'{u.name} ({u.words})' for u in units)};"
-                                          f" null: {units[0].name} unless a column's or field's "
-                                          "name or a units row says another",
-                                    choices=(None, *(u.name for u in units))))],
-        bases=(ContactSource,))
-    groups = [("columns", columns, field(default_factory=columns)),
-              (role, source, field(default_factory=source)),
-              ("ownship", OwnshipSource, field(default_factory=OwnshipSource)),
-              ("csv", CsvFormat, field(default_factory=CsvFormat)),
-              ("time", TimeFormat, field(default_factory=TimeFormat)),
-              ("nmea", NmeaOptions, field(default_factory=NmeaOptions)),
-              ("nav", NavLimits, field(default_factory=NavLimits)),
-              ("origin", Origin, field(default_factory=Origin)),
-              ("bad_rows", str, param("drop", "drop: a row with a missing or unreadable value, "
-                                      "time or fix, or a fix off the track, is left out and "
-                                      "counted (log line, manifest); fail: the first such row "
-                                      "refuses the file", choices=BAD_ROWS))]  # a value
-    return make_dataclass("SourceOptions", groups, bases=(ReadingOptions,),
-                          namespace={"observation": observation})
-
-
-KIND_NAMES = {"csv": "a CSV table", "nmea": "an NMEA file", "mcap": "an MCAP log"}
-KIND_OPTIONS = {  # options (or groups) that only some kinds of input read
-    "columns": ("csv",), "csv": ("csv",), "time.format": ("csv",), "ownship.topic": ("mcap",),
-    "nmea": ("nmea",)}
-
-
-def inapplicable(options, kinds: dict[str, str]) -> str | None:
-    """A one-line complaint if an option is set that no file of ``kinds`` (``{path: kind}``)
-    reads (``bearing.topic`` on a CSV table, ``nmea.date`` without NMEA); None otherwise."""
-    role = options.observation.role
-    only = {**KIND_OPTIONS, f"{role}.topic": ("mcap",), f"{role}.field": ("mcap",)}
-    given = _set_options(options)
-    for key, value in given.items():
-        scope = only.get(key) or only.get(key.split(".")[0])
-        if scope is None or any(kind in scope for kind in kinds.values()):
-            continue
-        path, kind = next(iter(kinds.items()))
-        shown = ", ".join(map(str, value)) if isinstance(value, list) else value
-        readers = " or ".join(k.upper() for k in scope)
-        return (f"{key}={shown} does not apply to {path} ({KIND_NAMES[kind]}): it is an "
-                f"option of {readers} input; leave it unset")
-    return None
-
-
-def _set_options(options) -> dict:
-    """The dotted options whose value is not the default."""
-    out = {}
-    for f in fields(options):
-        value = getattr(options, f.name)
-        if not is_dataclass(value):
-            continue
-        default = type(value)()
-        for g in fields(value):
-            if getattr(value, g.name) != getattr(default, g.name):
-                out[f"{f.name}.{g.name}"] = getattr(value, g.name)
-    return out
-
-
-def groups(observation: Observation) -> tuple[str, ...]:
-    """The reading options' top-level keys of the ingest config: the groups (``columns``,
-    ``bearing``, ``ownship``...) and the options of their own (``bad_rows``)."""
-    return tuple(f.name for f in fields(options_schema(observation)))
-
-
-def _scalar(observation: Observation, key: str) -> bool:
-    """True for a top-level option that is a value, not a group (``bad_rows``)."""
-    f = next(f for f in fields(options_schema(observation)) if f.name == key)
-    return f.default_factory is MISSING_FACTORY
-
-
-def unknown_option(key: str, observation: Observation) -> str | None:
-    """A one-line complaint if the dotted ``key`` (``columns.foo``) is under one of the
-    reading groups but is not an option; None if it is one (or not under a group)."""
-    keys = [row[0] for row in describe(options_schema(observation))]  # dotted keys
-    group = key.split(".")[0]
-    if group not in groups(observation) or key in keys or key == group:
-        return None
-    if _scalar(observation, group):
-        return f"unknown option {key}: {group} is one value ({group}=...)"
-    known = [k for k in keys if k.startswith(group + ".")]
-    return f"unknown option {key} (the {group} options: {', '.join(known)})"
-
-
-def source_options(node, observation: Observation):
-    """The reading options from a config node (DictConfig, dict or None) holding some of the
-    groups; an unknown key or a bad value is a ConfigError naming the key."""
-    schema = options_schema(observation)
-    if isinstance(node, schema):
-        return node
-    if isinstance(node, DictConfig):
-        node = OmegaConf.to_container(node, resolve=True)
-    node = {group: OmegaConf.to_container(values, resolve=True)
-            if isinstance(values, DictConfig) else values for group, values in (node or {}).items()}
-    known = groups(observation)
-    for group, values in node.items():
-        if group not in known:
-            raise ConfigError(f"unknown option {group} (known: {', '.join(known)})")
-        if _scalar(observation, group):
-            continue
-        if not isinstance(values, dict):
-            raise ConfigError(f"{group} holds options ({group}.<name>=...), not a value: "
-                              f"got {group}='{values}'")
-        for key in values:
-            complaint = unknown_option(f"{group}.{key}", observation)
-            if complaint:
-                raise ConfigError(complaint)
-    return validate(schema, node, "")  # types, finiteness, the declared values, the rules
+        with open(path, "rb") as f:
+            return f.read(size)
+    except FileNotFoundError:
+        raise MissingFileError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise InputError(f"{path}: a directory, not {what}") from None

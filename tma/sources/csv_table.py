@@ -1,4 +1,5 @@
-"""CSV / TSV tables of contacts' values and/or own-ship fixes -> ``Recording``s.
+"""The CSV reader: CSV / TSV tables of contacts' values and/or own-ship fixes -> ``Recording``s
+(kind ``csv``: ``.csv``, ``.tsv``, ``.txt``; options ``columns.*``, ``csv.*``, ``time.format``).
 
 One row per value (a bearing, for ``bearings2d``; or per fix in a navigation file); a header
 row names the columns. What is read, and how each choice is made (every automatic choice is
@@ -17,33 +18,22 @@ noted for the log):
 - ``csv.delimiter`` (sniffed among ``,`` ``;`` tab), ``csv.decimal`` (``,`` found when the
   numbers are written ``12,5``); a units row under the header (``s,deg,deg`` or ``[s]``) is
   skipped; extra columns are ignored; CRLF line ends and a UTF-8 byte-order mark are fine;
-- tracks: ids as written: integers (``12``) stay the ids, any other text (``T1``, ``007``,
-  ``NA``) is a label, never re-read as a number. Spaces around an id are padding
-  (``a, b`` tables) unless they tell ids apart: `` 7`` and ``7`` in one table are two
-  contacts, as written. A DataFrame's ids are written as Python writes them (``str``): ``7``
-  and ``7.0`` are two contacts. Ids alike but written differently (`` 7`` and ``7``, ``7``
-  and ``7.0``, ``007`` and ``7``) are kept apart and named in a warning (``Caution``).
-
-Everything is vectorised over the rows (pandas' C parser, numpy sorts): a million rows take
-about a second. A row with a missing or unreadable time, value, track id or own-ship position
-(or a time that is not absolute among absolute ones) is left out and counted with its line
-(``bad_rows=drop``), or refuses the file in one line naming the column, the line and the
-option (``bad_rows=fail``); a file-wide problem (a column not found, a unit, a time zone) is
-always one ``InputError``.
+- tracks: ids as written (``tma.sources.table``, which reads the rows of a file and of a
+  DataFrame alike).
 """
 
 import csv
 import io
 import re
 import warnings
+from dataclasses import dataclass, make_dataclass
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
-from tma.errors import InputError, MissingFileError
-from tma.sources.base import Caution, Contacts, Navigation, Recording, line_places
-from tma.utc import MAX_SPAN_S, UNIX_FROM_S, UNIX_MAGNITUDE, UNIX_SCALE_NS, UTC_FROM_NS, ZONED
+from tma.config import Form, param
+from tma.errors import ConfigError, InputError
+from tma.sources.base import Reader, Recording, file_head
 
 DOCUMENTED = {"time": "time_s", "x": "own_x_m", "y": "own_y_m", "track": "track_id"}
 COMMON = {  # candidates per role, in order of preference (lower case)
@@ -63,134 +53,88 @@ COMMON = {  # candidates per role, in order of preference (lower case)
 SNIFFED = (",", ";", "\t")
 SAMPLE_BYTES = 1 << 16
 SAMPLE_LINES = 50
-MAX_TRACK_ID = 2**53  # an id written as a larger integer is kept as text
-NAMED_ALIKE = 3  # groups of alike ids named in the warning
-INTEGER_ID = re.compile(r"-?(?:0|[1-9][0-9]{0,15})")  # an id written as a plain integer
-SAME_FIX = {"x": 1e-6, "lat": 1e-9}  # m, deg (0.1 mm): rows at one time share one own-ship
-UTC_WORD = r"(?i)(?<=\d)\s*(?:UTC|GMT)$"  # a time of day ending in the word UTC: zone Z
-ZONE_NAME = re.compile(r"\d\s*([A-Za-z]{2,5})")  # ... ending in a zone's name (CET, EST)
 UNIT_WORDS = {"s", "sec", "secs", "second", "seconds", "ms", "us", "ns", "utc", "iso",
               "iso8601", "iso-8601", "deg", "degree", "degrees", "rad", "radian", "radians",
               "m", "km", "nmi", "-", "id", "1", "m/s", "kn", "knots", "unix", "text", "none"}
 
 
-def read_csv_table(path, options, *, navigation: bool, contacts: bool) -> list[Recording]:
-    """Read a CSV/TSV table with a family's reading ``options``. ``navigation``: own-ship
-    positions are needed (from this file); ``contacts``: the contacts' values are needed.
-    Returns one Recording per own-ship: one, unless the rows of different tracks give
-    different own-ship positions at one time (then one per track, as each track had its own
-    own-ship). Rows with a missing or unreadable time, value, track id or own-ship position,
-    or a time not absolute among absolute ones, are left out and counted
-    (``options.bad_rows``; under ``fail`` the first refuses the file)."""
-    return read_table(_Table(Path(path), options), options, navigation=navigation,
-                      contacts=contacts)
+POSITION_ROLES = ("time", "x", "y", "lat", "lon")  # table columns besides value and track
+COLUMN_DOCS = {  # what each column of a table holds (the observation's is the family's)
+    "time": "the times (relative s, Unix time or ISO-8601: time.format)",
+    "x": "own-ship's position east (m)", "y": "own-ship's position north (m)",
+    "lat": "own-ship's latitude (deg, WGS84)", "lon": "own-ship's longitude (deg, WGS84)",
+    "track": "the contact of each row (an integer id, or a label kept as written; a table "
+             "without one holds one contact)"}
+FOUND = "; null: tma's name or a common one, found automatically (any case)"
 
 
-def read_frame(frame: pd.DataFrame, name: str, options, *, navigation: bool,
-               contacts: bool) -> list[Recording]:
-    """``read_csv_table`` of a pandas DataFrame (``name``: what messages call it), read as
-    the same table written to a file would be: the same columns found, the same checks and
-    notes; a datetime64 column is UTC times (a zone-less one is taken as UTC and noted), and
-    a row's "line" is its position in the frame, from 0."""
-    return read_table(_Frame(frame, name, options), options, navigation=navigation,
-                      contacts=contacts)
+DELIMITER_NAMES = {"comma": ",", "semicolon": ";", "tab": "\t", "\\t": "\t", "pipe": "|",
+                   "space": " "}
+DECIMAL_NAMES = {"dot": ".", "comma": ","}
 
 
-def read_table(table, options, *, navigation: bool, contacts: bool) -> list[Recording]:
-    """The Recordings of a ``_Table`` (a file's layout) or ``_Frame``."""
-    path = table.path
-    role = options.observation.role
-    cols = table.columns(navigation=navigation, contacts=contacts)
-    df = table.read(cols)
-    line = table.lines(len(df))
-    notes = list(table.notes)
-    rows, keep = options.dropped(), np.ones(len(df), dtype=bool)
-
-    def drop(bad, reason, refusal):
-        keep[:] &= rows.drop(bad & keep, reason, line_places(line), f"{path}: {refusal}")
-
-    tcol = cols["time"]
-    t_raw, fmt, t_ok, not_absolute = _time_column(df, tcol, options.time.format, path, line,
-                                                  notes)
-    drop(~t_ok, "time missing or unreadable",
-         f"column {tcol} has missing times or values that are not "
-         + ("ISO-8601 times such as 2024-05-01T10:00:00Z; set columns.time or time.format"
-            if fmt in ("iso", "iso_utc") else "numbers"))
-    unit = fmt.replace("unix_", "")
-    drop(not_absolute, "time not absolute among absolute times",
-         f"column {tcol} has times that are not Unix times ({unit}) like the others: times "
-         "must be all Unix or all relative (time.format=s, unix_s, unix_ms, unix_us, unix_ns)"
-         if fmt.startswith("unix") else
-         f"column {tcol} has times before 2000 among UTC times")
-    if role in cols:
-        b_raw = _number_column(df, cols[role], path)
-        drop(~np.isfinite(b_raw), f"{role} missing or not a number",
-             f"column {cols[role]} has missing, NaN or non-numeric values")
-        track_raw = _track_text(df, cols.get("track"))
-        if track_raw is not None:
-            drop((track_raw == "").to_numpy(), "track id missing",
-                 f"column {cols['track']} has missing track ids")
-    geo = "lat" in cols
-    if navigation:
-        p0, p1 = (_number_column(df, cols[k], path) for k in (("lat", "lon") if geo else "xy"))
-        drop(~(np.isfinite(p0) & np.isfinite(p1)), "own-ship position missing or not a number",
-             f"columns {', '.join(cols[k] for k in (('lat', 'lon') if geo else 'xy'))} have "
-             "missing, NaN or non-numeric values")
-    if not keep.any():
-        raise InputError(f"{path}: no usable row: {rows.text()}")
-    if not keep.all():
-        line, t_raw = line[keep], t_raw[keep]
-    t, epoch = _seconds(t_raw, fmt, tcol, path, line)
-    track = None
-    if role in cols:
-        b, stated = _values(b_raw[keep], cols[role], options, table, path, line, notes)
-        track = _tracks(None if track_raw is None else track_raw[keep], len(t), notes,
-                        f"{path}: {cols.get('track')}")
-        _check_increasing(t, track, tcol, path, line)
-    if not navigation:
-        return [Recording(None, Contacts(t, epoch, track, b, str(path), stated), notes=notes,
-                          dropped=rows)]
-    pos = (p0[keep], p1[keep])
-    if geo:
-        _check_lat_lon(*pos, cols, path, line)
-    nav_rows, consistent = _one_fix_per_time(t, pos, SAME_FIX["lat" if geo else "x"])
-    if not consistent.all() and not contacts:
-        row = nav_rows[int(np.flatnonzero(~consistent)[0])]
-        raise InputError(f"{path}: two different own-ship positions at the time of line "
-                         f"{line[row]} ({tcol}): one fix per time")
-    if not contacts:
-        return [Recording(_navigation(t, epoch, pos, nav_rows, geo, path, line), None,
-                          notes=notes, dropped=rows)]
-    if consistent.all():
-        return [Recording(_navigation(t, epoch, pos, nav_rows, geo, path, line),
-                          Contacts(t, epoch, track, b, str(path), stated), notes=notes,
-                          dropped=rows)]
-    notes.append("tracks report different own-ship positions at one time: each track gets "
-                 "its own own-ship (and dataset shard)")
-    recordings = []
-    code = _codes(track)
-    order = np.argsort(code, kind="stable")
-    starts = np.flatnonzero(np.r_[True, code[order][1:] != code[order][:-1]])
-    for k, group in enumerate(np.split(order, starts[1:])):  # times increase (checked)
-        nav = _navigation(t, epoch, pos, group, geo, path, line)
-        recordings.append(Recording(nav, Contacts(t[group], epoch, track[group], b[group],
-                                                  str(path), stated), notes=notes,
-                                    dropped=rows if k == 0 else options.dropped()))
-    return recordings
+def _delimiter_problem(value) -> str | None:
+    fine = value in DELIMITER_NAMES or len(value) == 1 and value not in "\"\r\n"
+    return None if fine else ""
 
 
-class _Table:
-    """The file's layout from its first lines: delimiter, decimal mark, header, units row."""
+@dataclass
+class CsvFormat:
+    """How a table is written (``csv.*``)."""
+
+    delimiter: str | None = param(
+        None, "the separator of a table's fields: one character or its name; null: sniffed "
+        "among , ; and tab", form=Form(f"one character or one of {', '.join(DELIMITER_NAMES)}",
+                                       _delimiter_problem))
+    decimal: str | None = param(None, "the decimal mark: . or , (or dot, comma); null: ., or , "
+                                "when the delimiter is not a comma and the numbers are written "
+                                "12,5", choices=(None, ".", ",", *DECIMAL_NAMES))
+
+    def rules(self):
+        """The names of delimiters and decimal marks become the characters."""
+        self.delimiter = DELIMITER_NAMES.get(self.delimiter, self.delimiter)
+        self.decimal = DECIMAL_NAMES.get(self.decimal, self.decimal)
+        if self.decimal is not None and self.decimal == self.delimiter:
+            raise ConfigError(f"csv.decimal and csv.delimiter are both '{self.decimal}'")
+
+
+TIME_FORMATS = ("auto", "s", "unix_s", "unix_ms", "unix_us", "unix_ns", "iso", "iso_utc")
+
+
+@dataclass
+class TimeFormat:
+    """How a table's times are written (``time.format``)."""
+
+    format: str = param("auto", "how the times are written: auto: numbers by magnitude (Unix "
+                        "s from 1e8, ms from 1e11, us from 1e14, ns from 1e17; smaller: relative "
+                        "s), text as ISO-8601 with a zone; s: relative seconds; unix_s|ms|us|ns: "
+                        "Unix time; iso: ISO-8601 with a zone (Z, +01:00); iso_utc: ISO-8601, a "
+                        "time without zone taken as UTC", choices=TIME_FORMATS)
+
+
+def options(observation) -> dict:
+    """The options only tables are read with: which column holds what (``columns.*``, the
+    observation's column among them), how the file is written (``csv.*``) and its times
+    (``time.format``)."""
+    role, plural, units = observation.role, observation.plural, observation.units
+    docs = {**COLUMN_DOCS, role: f"the {plural} ({' or '.join(u.name for u in units)}: "
+                                 f"{role}.units)"}
+    columns = make_dataclass("Columns", [(r, str | None, param(None, f"column of {docs[r]}"
+                                                              f"{FOUND}"))
+                                         for r in (*POSITION_ROLES, role, "track")])
+    columns.__doc__ = ("Table column names; None = tma's name or a common one found "
+                       "automatically.")
+    return {"columns": columns, "csv": CsvFormat, "time": TimeFormat}
+
+
+class CsvFile:
+    """A table's layout and columns: the file's from its first lines (delimiter, decimal
+    mark, header, units row), and which column holds what (``columns``); ``read`` reads the
+    chosen columns with pandas. ``tma.sources.table.Frame`` is a DataFrame's."""
 
     def __init__(self, path: Path, options):
         self.path, self.options, self.notes = path, options, []
-        try:
-            with open(path, "rb") as f:
-                raw = f.read(SAMPLE_BYTES)
-        except FileNotFoundError:
-            raise MissingFileError(f"{path}: no such file") from None
-        except IsADirectoryError:
-            raise InputError(f"{path}: a directory, not a CSV file") from None
+        raw = file_head(path, SAMPLE_BYTES, "a CSV file")
         try:
             text = raw.decode("utf-8-sig")
         except UnicodeDecodeError as exc:
@@ -209,7 +153,7 @@ class _Table:
                                skipinitialspace=True))
         self.header = [c.strip() for c in rows[0]]
         self.decimal = options.csv.decimal or self._decimal(lines[1:])
-        if all(_is_number(c, self.decimal) for c in self.header if c):
+        if all(is_number(c, self.decimal) for c in self.header if c):
             raise InputError(f"{path}: the first line holds numbers, not column names: the "
                              f"table needs a header row (time, {options.observation.role}, "
                              "own-ship columns)")
@@ -245,9 +189,9 @@ class _Table:
         """Line 2 is a units row if it holds no number while line 3 has a number in a column
         where line 2 has text, and its texts look like units (``deg``, ``[s]``, ``(m)``)."""
         second = [c.strip() for c in second]
-        if any(_is_number(c, self.decimal) for c in second if c):
+        if any(is_number(c, self.decimal) for c in second if c):
             return False
-        text_over_number = any(c and _is_number(d.strip(), self.decimal)
+        text_over_number = any(c and is_number(d.strip(), self.decimal)
                                for c, d in zip(second, third, strict=False))
         unit_like = all(not c or c.lower() in UNIT_WORDS or re.fullmatch(r"[\[(].*[\])]", c)
                         for c in second)
@@ -332,10 +276,12 @@ class _Table:
                          "(degrees) or columns.x=<name> columns.y=<name> (metres east, north), "
                          "or give the own-ship in a separate file with navigation=FILE")
 
-    def read(self, cols: dict[str, str]) -> pd.DataFrame:
+    def read(self, cols: dict[str, str]):
         """The chosen columns (by position, so odd header spellings cannot get in the way).
         Every column is parsed, so that a line with more fields than the header is refused.
         The track column is text as written (``007`` is not ``7``, ``NA`` is a name)."""
+        import pandas as pd
+
         index = sorted({self.header.index(name) for name in cols.values()})
         track = self.header.index(cols["track"]) if "track" in cols else None
         try:
@@ -354,7 +300,7 @@ class _Table:
                         skiprows=[1] if self.units is not None else None).iloc[:, 0]
                 if track is not None and _space_after(self.path, self.delimiter):
                     # skipinitialspace took the spaces before the ids: ' 7' is not '7'
-                    df.iloc[:, track] = _with_leading_space(df.iloc[:, track], pd.read_csv(
+                    df.iloc[:, track] = with_leading_space(df.iloc[:, track], pd.read_csv(
                         self.path, sep=self.delimiter, usecols=[track], dtype=str,
                         keep_default_na=False, encoding="utf-8-sig",
                         skiprows=[1] if self.units is not None else None).iloc[:, 0])
@@ -388,7 +334,7 @@ def _space_after(path: Path, delimiter: str) -> bool:
             return re.search(sep + rb"[ \t]", data) is not None
 
 
-def _with_leading_space(kept: pd.Series, raw: pd.Series) -> pd.Series:
+def with_leading_space(kept, raw):
     """The ids as written: ``raw`` (read without ``skipinitialspace``) where it is ``kept``
     with spaces before it; ``kept`` elsewhere (a quoted id after a space, which only
     ``skipinitialspace`` reads as its text)."""
@@ -396,10 +342,12 @@ def _with_leading_space(kept: pd.Series, raw: pd.Series) -> pd.Series:
     return raw.where(raw.str.lstrip(" \t") == kept.fillna(""), kept)
 
 
-class _Frame(_Table):
+class Frame(CsvFile):
     """A pandas DataFrame as a table: its columns are the header, its rows the lines."""
 
-    def __init__(self, frame: pd.DataFrame, name: str, options):
+    def __init__(self, frame, name: str, options):
+        import pandas as pd
+
         if not isinstance(frame, pd.DataFrame):
             raise InputError(f"{name}: a pandas DataFrame is needed, got {type(frame).__name__}")
         if frame.empty:
@@ -411,10 +359,12 @@ class _Frame(_Table):
             raise InputError(f"{name}: two columns share a name: {', '.join(self.header)}")
         self.units, self.delimiter, self.decimal = None, ",", "."
 
-    def read(self, cols: dict[str, str]) -> pd.DataFrame:
-        """The chosen columns; datetime64 ones in UTC (``_time_column`` takes their
+    def read(self, cols: dict[str, str]):
+        """The chosen columns; datetime64 ones in UTC (``tma.utc.time_column`` takes their
         nanoseconds as they are), the track column as text as written (numbers as Python
         prints them: ``7``, ``7.5``)."""
+        import pandas as pd
+
         out = {}
         for role, name in cols.items():
             series = self.frame.iloc[:, self.header.index(name)]
@@ -432,7 +382,7 @@ class _Frame(_Table):
         return np.arange(n)
 
 
-def _is_number(text: str, decimal: str = ".") -> bool:
+def is_number(text: str, decimal: str = ".") -> bool:
     try:
         float(text.replace(decimal, ".") if decimal != "." else text)
     except ValueError:
@@ -440,294 +390,34 @@ def _is_number(text: str, decimal: str = ".") -> bool:
     return True
 
 
-def _number_column(df, col, path) -> np.ndarray:
-    """A column as float64, NaN where a cell is missing or not a number (true/false columns
-    are refused: no number is meant)."""
-    series = df[col]
-    if pd.api.types.is_bool_dtype(series):
-        raise InputError(f"{path}: column {col} holds true/false, not numbers")
-    if pd.api.types.is_numeric_dtype(series):
-        return series.to_numpy(dtype=float)
-    try:
-        return pd.to_numeric(series, errors="coerce").to_numpy(dtype=float)
-    except (OverflowError, ValueError, TypeError) as exc:
-        raise InputError(f"{path}: column {col} has values that are not numbers of a "
-                         f"usable size ({exc})") from None
+def read_csv_table(path, options, *, navigation: bool, contacts: bool,
+                   date_hint_ns: int | None = None) -> list[Recording]:
+    """Read a CSV/TSV table with a family's reading ``options``. ``navigation``: own-ship
+    positions are needed (from this file); ``contacts``: the contacts' values are needed.
+    Returns one Recording per own-ship: one, unless the rows of different tracks give
+    different own-ship positions at one time (then one per track, as each track had its own
+    own-ship). Rows with a missing or unreadable time, value, track id or own-ship position,
+    or a time not absolute among absolute ones, are left out and counted
+    (``options.bad_rows``; under ``fail`` the first refuses the file)."""
+    from tma.sources.table import read_table
+
+    return read_table(CsvFile(Path(path), options), options, navigation=navigation,
+                      contacts=contacts)
 
 
-def _time_column(df, col, fmt, path, line, notes):
-    """``(values, format, ok, not_absolute)``: the times as read (ns since 1970 for ISO text,
-    else the numbers), their format (``iso``/``iso_utc``, ``s``, ``rel_ms``..., ``unix_*``),
-    which rows hold a readable time, and which hold a time that is not absolute where the
-    others are (a 0 among Unix times, a 1970 stamp among UTC ones: a clock that was not set,
-    never a relative clock)."""
-    series = df[col]
-    numeric = pd.api.types.is_numeric_dtype(series)  # true/false too: refused as numbers
-    ns = None
-    if pd.api.types.is_timedelta64_dtype(series):  # a DataFrame's durations: relative times
-        if fmt not in ("auto", "s"):
-            raise InputError(f"{path}: {col} holds durations (timedelta64: times relative to "
-                             f"a start), not time.format={fmt} times; leave time.format=auto "
-                             "(time.start_utc=... dates them)")
-        ok = series.notna().to_numpy()
-        notes.append(f"{path.name}: {col} read as relative times (durations)")
-        return (np.where(ok, series.dt.as_unit("ns").array.asi8, 0), "rel_ns", ok,
-                np.zeros_like(ok))
-    if pd.api.types.is_datetime64_any_dtype(series) and fmt in ("auto", "iso", "iso_utc"):
-        ok = series.notna().to_numpy()  # a DataFrame's UTC times (``_Frame``), exact to the ns
-        ns = np.where(ok, series.dt.as_unit("ns").array.asi8, 0)
-    elif fmt in ("iso", "iso_utc") or (fmt == "auto" and not numeric and _mostly_text(series)):
-        ns, ok = _iso_times(series, col, fmt, path, line, notes)
-    if ns is not None:
-        early = ok & (ns < UTC_FROM_NS)
-        absolute = ok.any() and np.median(ns[ok]) >= UTC_FROM_NS
-        return ns, "iso" if fmt == "auto" else fmt, ok, early if absolute else np.zeros_like(ok)
-    if pd.api.types.is_integer_dtype(series):
-        values = series.to_numpy(dtype=np.int64)
-        ok = np.ones(values.size, dtype=bool)
-    else:
-        values = _number_column(df, col, path)
-        ok = np.isfinite(values)
-    if not ok.any():
-        return values, "s", ok, np.zeros_like(ok)
-    median = abs(float(np.median(values[ok])))
-    scaled_name = re.search(r"_(ms|us|ns)$", col.lower())
-    if fmt == "auto":
-        if scaled_name:  # the name says the unit; the magnitude says Unix or relative
-            unit = scaled_name.group(1)
-            per_s = UNIX_SCALE_NS["unix_s"] / UNIX_SCALE_NS["unix_" + unit]
-            fmt = ("unix_" if median / per_s >= UNIX_FROM_S else "rel_") + unit
-        else:
-            fmt = next((f for bound, f in UNIX_MAGNITUDE if median >= bound), "s")
-        if fmt != "s":
-            notes.append(f"{path.name}: {col} read as "
-                         f"{fmt.replace('unix_', 'Unix time in ').replace('rel_', 'relative ')}"
-                         f" (time.format={fmt if fmt.startswith('unix') else 's'})")
-    not_absolute = np.zeros_like(ok)
-    if fmt.startswith("unix"):
-        bound = UNIX_FROM_S * (1e9 / UNIX_SCALE_NS[fmt])
-        if median >= bound:  # Unix times: all must be (a 0 is a clock not set)
-            not_absolute = ok & (values < bound)
-    return values, fmt, ok, not_absolute
+def read_frame(frame, name: str, options, *, navigation: bool,
+               contacts: bool) -> list[Recording]:
+    """``read_csv_table`` of a pandas DataFrame (``name``: what messages
+    call it), read as the same table written to a file would be: the same columns found, the
+    same checks and notes; a datetime64 column is UTC times (a zone-less one is taken as UTC and
+    noted), and a row's "line" is its position in the frame, from 0."""
+    from tma.sources.table import read_table
+
+    return read_table(Frame(frame, name, options), options, navigation=navigation,
+                      contacts=contacts)
 
 
-def _seconds(values, fmt, col, path, line) -> tuple[np.ndarray, int | None]:
-    """Seconds (float64) since ``epoch_utc_ns`` (absolute times) or relative (epoch None), of
-    times as ``_time_column`` read them (every one usable)."""
-    if fmt in ("iso", "iso_utc"):
-        first = int(values.min())
-        return _checked_span((values - first) / 1e9, values, col, path, line), first
-    if fmt in ("s", "rel_ms", "rel_us", "rel_ns"):
-        seconds = values.astype(float) / {"s": 1, "rel_ms": 1e3, "rel_us": 1e6,
-                                           "rel_ns": 1e9}[fmt]
-        span = seconds.max() - seconds.min()
-        if span > MAX_SPAN_S:
-            far = int(np.argmax(np.abs(seconds - np.median(seconds))))
-            raise InputError(f"{path}: {col} {values[far]:g} on line {line[far]} makes the log "
-                             f"span {span:.3g} s (at most {MAX_SPAN_S:.3g} s): {col} must be "
-                             "seconds (or set time.format)")
-        return seconds, None
-    scale = UNIX_SCALE_NS[fmt]
-    if values.dtype.kind == "i":
-        first = int(values.min())
-        seconds = (values - first).astype(float) * (scale / 1e9)
-        return _checked_span(seconds, values, col, path, line), first * scale
-    if np.abs(values).max() * scale >= 2**63:
-        k = int(np.argmax(np.abs(values)))
-        raise InputError(f"{path}: {col} {values[k]:g} on line {line[k]} is beyond the year "
-                         f"2262 as Unix time ({fmt}); check time.format")
-    first = float(values.min())
-    seconds = (values - first) * (scale / 1e9)
-    return _checked_span(seconds, values, col, path, line), int(round(first * scale))
-
-
-def _checked_span(seconds, values, col, path, line):
-    if seconds.max() > MAX_SPAN_S:
-        k = int(np.argmax(seconds))
-        raise InputError(f"{path}: {col} {values[k]:g} on line {line[k]} makes the log span "
-                         f"{seconds.max():.3g} s (at most {MAX_SPAN_S:.3g} s)")
-    return seconds
-
-
-def _mostly_text(series) -> bool:
-    """A text column of times, not numbers with a few bad cells (those are reported as such)."""
-    sample = series.dropna().astype(str).head(1000)
-    numeric = pd.to_numeric(sample, errors="coerce").notna().mean() if len(sample) else 0
-    return numeric < 0.5
-
-
-def _iso_times(series, col, fmt, path, line, notes) -> tuple[np.ndarray, np.ndarray]:
-    """ISO-8601 texts as UTC ns (int64) and which rows hold one. A column whose times mostly
-    have no zone is refused (unless ``iso_utc``): the times would be guessed; a few rows
-    without one among zoned times are rows without a readable time."""
-    text = series.astype("str").str.strip()
-    missing = series.isna().to_numpy() | (text == "").to_numpy()
-    utc_word = text.str.contains(UTC_WORD, regex=True)
-    if utc_word.any():  # "... 08:00:00 UTC": the zone Z, as loggers often write it
-        text = text.str.replace(UTC_WORD, "Z", regex=True)
-        notes.append(f"{path.name}: {col}: ' UTC' read as the zone Z")
-    zoned = text.str.contains(ZONED, regex=True).to_numpy(dtype=bool)
-    unzoned = ~zoned & ~missing
-    if fmt != "iso_utc" and unzoned.sum() * 2 >= (~missing).sum() and unzoned.any():
-        k = int(np.argmax(unzoned))
-        named = re.search(rf"{ZONE_NAME.pattern}$", text.iloc[k])
-        if named:  # "CET", "EST": no offset (summer time?): the offset is the user's to say
-            raise InputError(f"{path}: {col} '{text.iloc[k]}' on line {line[k]} names its zone "
-                             f"({named.group(1)}), which is no offset: write it as one "
-                             f"({text.iloc[k][:named.start(1)].rstrip()}+01:00, say) or Z for "
-                             "UTC")
-        raise InputError(f"{path}: {col} '{text.iloc[k]}' on line {line[k]} has no time zone: "
-                         f"write times with one ({text.iloc[k]}Z for UTC) or set "
-                         "time.format=iso_utc to read zone-less times as UTC")
-    if fmt == "iso_utc" and unzoned.any():
-        notes.append(f"{path.name}: {col} without time zone read as UTC (time.format=iso_utc)")
-    try:
-        parsed = pd.to_datetime(text.where(~missing & (zoned | (fmt == "iso_utc"))),
-                                format="ISO8601", utc=True, errors="coerce")
-    except (ValueError, OverflowError) as exc:
-        raise InputError(f"{path}: column {col}: not ISO-8601 times ({exc})") from None
-    ok = parsed.notna().to_numpy()
-    if fmt == "auto" and ok.any():
-        notes.append(f"{path.name}: {col} read as ISO-8601 times (time.format=iso)")
-    return np.where(ok, parsed.dt.as_unit("ns").array.asi8, 0), ok
-
-
-def _values(values, col, options, table, path, line, notes):
-    """The observation's ``values`` (of column ``col``) in its first unit, and whether a unit
-    was stated: by ``<role>.units``, or another unit than the first by the units row or the
-    column's name. A name or units row saying the first unit is what a column in another unit
-    mislabelled would say too, so the family's guard still checks it."""
-    observation = options.observation
-    plural = observation.plural
-    units, stated = options.contact.units, options.contact.units is not None
-    if units is None:
-        in_row = table.unit_of(col)
-        by_row = next((u for u in observation.units[1:] if in_row in u.aliases), None)
-        by_name = observation.unit_of_name(col)
-        if by_row is not None:
-            units, stated = by_row.name, True
-            notes.append(f"{path.name}: {plural} in {by_row.words} (units row)")
-        elif by_name is not None:
-            units, stated = by_name.name, True
-            notes.append(f"{path.name}: {plural} in {by_name.words} (column name {col})")
-    unit = observation.unit(units or observation.units[0].name)
-    observation.check_range(values, unit, f"{path}: {col}", lambda k: f" on line {line[k]}")
-    return unit.to_first(values), stated
-
-
-def _track_text(df, col):
-    """The track ids as written (text, spaces included; empty where missing), or None
-    without a track column. An id of spaces only is missing."""
-    if col is None:
-        return None
-    text = df[col].fillna("").astype(str)
-    return text.where(text.str.strip() != "", "")
-
-
-def _tracks(text, n: int, notes: list, where: str) -> np.ndarray:
-    """Track ids as written: int64 when every id is written as a plain integer (``12``,
-    ``-3``: the ids themselves), else the texts (object array), kept as labels: ``007`` and
-    ``7``, ``1e3`` and ``1000`` are different contacts, ``NA`` is a name. Spaces around the
-    ids are dropped unless they tell ids apart (`` 7`` and ``7``: two contacts, kept as
-    written); ids alike but written differently are noted (``_alike_ids``). No track column:
-    one contact, 0."""
-    if text is None:
-        return np.zeros(n, dtype=np.int64)
-    text = _unpadded(text)
-    _alike_ids(text, notes, where)
-    if text.str.fullmatch(INTEGER_ID.pattern).all():
-        ids = text.astype(np.int64).to_numpy()
-        if np.all(np.abs(ids) <= MAX_TRACK_ID):
-            return ids
-    return text.to_numpy(dtype=object)
-
-
-def _unpadded(text: pd.Series) -> pd.Series:
-    """The ids without the spaces around them, except the ids that only those spaces tell
-    apart (`` 7`` beside ``7``), kept as written."""
-    stripped = text.str.strip()
-    if (stripped == text).all():
-        return text
-    codes, written = pd.factorize(text)
-    padded_alike = pd.Series(written).str.strip().duplicated(keep=False).to_numpy()
-    return stripped.where(~padded_alike[codes], text)
-
-
-def _alike(text: str):
-    """What two ids written differently may both mean: the number they write, else the text
-    without its spaces."""
-    stripped = text.strip()
-    try:
-        return float(stripped)
-    except ValueError:
-        return stripped
-
-
-def _alike_ids(text: pd.Series, notes: list, where: str) -> None:
-    """Note (as a warning) the ids alike but written differently (`` 7`` and ``7``, ``7``
-    and ``7.0``, ``007`` and ``7``): they are kept apart, as written."""
-    written = pd.unique(text)
-    if len(written) < 2 or len(written) > 100_000:  # ids by the row: nothing to tell apart
-        return
-    groups: dict = {}
-    for w in written:
-        groups.setdefault(_alike(w), []).append(w)
-    alike = [sorted(g) for g in groups.values() if len(g) > 1]
-    if alike:
-        shown = "; ".join(" and ".join(repr(w) for w in g) for g in alike[:NAMED_ALIKE])
-        notes.append(Caution(
-            f"{where}: {len(alike)} group(s) of contact ids alike but written differently "
-            f"({shown}{' ...' if len(alike) > NAMED_ALIKE else ''}) are kept as different "
-            "contacts (ids are kept as written): write each contact's id alike if they are "
-            "one"))
-
-
-def _codes(track: np.ndarray) -> np.ndarray:
-    """Integer codes of the tracks (labels factorised: sorting numbers is faster)."""
-    return pd.factorize(track)[0] if track.dtype == object else track
-
-
-def _check_increasing(t, track, col, path, line):
-    """Times must increase strictly within each track, in file order."""
-    code = _codes(track)
-    order = np.argsort(code, kind="stable")
-    ts, tr = t[order], code[order]
-    bad = (tr[1:] == tr[:-1]) & (np.diff(ts) <= 0)
-    if bad.any():
-        k = int(np.argmax(bad))
-        kind = "duplicate" if ts[k + 1] == ts[k] else "non-increasing"
-        raise InputError(f"{path}: {kind} {col} for track {track[order[k + 1]]} on line "
-                         f"{line[order[k + 1]]} ({col} must increase within a track)")
-
-
-def _check_lat_lon(lat, lon, cols, path, line):
-    for values, name, limit in ((lat, cols["lat"], 90), (lon, cols["lon"], 360)):
-        outside = (values < -limit) | (values > limit) if limit == 90 else \
-            (values < -180) | (values > 360)
-        if outside.any():
-            k = int(np.argmax(outside))
-            raise InputError(f"{path}: {name} {values[k]:g} on line {line[k]} is not a "
-                             f"{'latitude' if limit == 90 else 'longitude'} in degrees; are "
-                             "columns.lat and columns.lon right?")
-
-
-def _one_fix_per_time(t, pos, tolerance):
-    """Rows of the first occurrence of each distinct time (sorted by time), and per distinct
-    time whether every row there gives the same own-ship position (within ``tolerance``)."""
-    order = np.argsort(t, kind="stable")
-    ts = t[order]
-    starts = np.flatnonzero(np.r_[True, ts[1:] != ts[:-1]])
-    same = np.ones(starts.size, dtype=bool)
-    for values in pos:
-        v = values[order]
-        same &= np.maximum.reduceat(v, starts) - np.minimum.reduceat(v, starts) <= tolerance
-    return order[starts], same
-
-
-def _navigation(t, epoch, pos, rows, geo, path, line) -> Navigation:
-    """Own-ship fixes of ``rows`` (their times distinct), sorted by time."""
-    rows = rows[np.argsort(t[rows], kind="stable")]
-    a, b = pos[0][rows], pos[1][rows]
-    if geo:
-        return Navigation(t[rows], epoch, str(path), lat_deg=a, lon_deg=b, lines=line[rows])
-    return Navigation(t[rows], epoch, str(path), x_m=a, y_m=b, lines=line[rows])
+READER = Reader(
+    kind="csv", name="a CSV table", extensions=(".csv", ".tsv", ".txt"), read=read_csv_table,
+    options=options, selects_contacts="columns.{role}=<column>",
+    selects_navigation="columns.lat/columns.lon or columns.x/columns.y")

@@ -11,7 +11,7 @@ read by field path in ``mcap.py``.
 import numpy as np
 from google.protobuf.message import Message
 
-from tma.io.mcap_log import float_array, int_array, schema_errors
+from tma.io.mcap_values import float_array, int_array, schema_errors
 
 LOCATION_FIX = "foxglove.LocationFix"
 _PROTOBUF_TIMESTAMP = "google.protobuf.Timestamp"

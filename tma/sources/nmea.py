@@ -1,4 +1,6 @@
-"""NMEA 0183 own-ship navigation (``$--GGA``, ``$--RMC``, any talker) -> ``Recording``.
+"""The NMEA reader: NMEA 0183 own-ship navigation (``$--GGA``, ``$--RMC``, any talker) ->
+``Recording`` (kind ``nmea``: a first line starting with ``$`` or ``!``, or ``.nmea``,
+``.nmea0183``, ``.log``; option ``nmea.date``).
 
 Navigation only: use the file as ``navigation=FILE`` while ``input=`` holds the contacts.
 RMC carries date, time and position; GGA carries time and position, its date comes from the
@@ -14,13 +16,14 @@ is left. Times are UTC.
 """
 
 import datetime as dt
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pynmea2
 
+from tma.config import Form, param
 from tma.errors import InputError, MissingFileError
-from tma.sources.base import NAMED, Navigation, Recording, line_places
+from tma.sources.base import NAMED, Navigation, Reader, Recording, line_places
 
 DAY_NS = 86_400 * 10**9
 HALF_DAY_NS = DAY_NS // 2
@@ -32,6 +35,23 @@ def is_nmea(head: bytes) -> bool:
         if line.strip():
             return line.lstrip(b"\xef\xbb\xbf").lstrip()[:1] in (b"$", b"!")
     return False
+
+
+def _date_problem(value) -> str | None:
+    try:
+        dt.date.fromisoformat(str(value))
+    except ValueError:
+        return ""
+    return None if len(str(value)) == 10 else ""
+
+
+@dataclass
+class NmeaOptions:
+    """What NMEA navigation does not say (``nmea.*``)."""
+
+    date: str | None = param(None, "the UTC date of NMEA GGA fixes that no RMC sentence dates; "
+                             "null: from RMC, else from the values' absolute times",
+                             form=Form("a date YYYY-MM-DD", _date_problem))
 
 
 BAD_LINES = {  # kind of line left out: (reason in the manifest, refusal under bad_rows=fail)
@@ -48,6 +68,8 @@ def read_nmea(path, options, date_hint_ns: int | None = None) -> Recording:
     refuses the file); fixes the receiver flags as invalid are left out and counted under
     either policy. Without RMC sentences, GGA fixes are dated by ``nmea.date``, else by
     ``date_hint_ns`` (UTC ns of the first bearing: the GGA day nearest it)."""
+    import pynmea2
+
     path = Path(path)
     try:
         text = path.read_bytes().decode("ascii", errors="replace")
@@ -183,3 +205,16 @@ def _utc_ns(fixes, path, date: str | None, hint_ns: int | None):
 
 def _day_start_ns(date: dt.date) -> int:
     return (date - dt.date(1970, 1, 1)).days * DAY_NS
+
+
+def read(path, options, *, navigation: bool, contacts: bool,
+         date_hint_ns: int | None = None) -> list[Recording]:
+    """``read_nmea`` as a reader (``Reader.read``): navigation only."""
+    if contacts:
+        raise InputError(f"{path}: NMEA holds own-ship navigation only: give it as "
+                         f"navigation=FILE and the {options.observation.plural} as input=")
+    return [read_nmea(path, options, date_hint_ns)]
+
+
+READER = Reader(kind="nmea", name="an NMEA file", extensions=(".nmea", ".nmea0183", ".log"),
+                read=read, sniff=is_nmea, options=lambda observation: {"nmea": NmeaOptions})

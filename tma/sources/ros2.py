@@ -19,7 +19,7 @@ read by field path in ``mcap.py``.
 
 import numpy as np
 
-from tma.io.mcap_log import float_array, schema_errors
+from tma.io.mcap_values import float_array, schema_errors
 
 NAVSATFIX = "sensor_msgs/msg/NavSatFix"
 ODOMETRY = "nav_msgs/msg/Odometry"

@@ -7,7 +7,7 @@
 
 Times come from ``t_s``, never from log times: seconds after the log's epoch (metadata record
 ``tma.time``) when it has one, else on the log's own clock. With a geographic origin (record
-``tma.geo``) own-ship is returned as latitude/longitude (``tma.geo.local_to_geodetic``, the
+``tma.geo``) own-ship is returned as latitude/longitude (``tma.maths.geo.local_to_geodetic``, the
 inverse of the local plane tma writes), so the origin reaches every output. The readers return
 raw fixes and values: navigation may start after the first value or end before the last
 (``align`` decides what to keep).
@@ -16,17 +16,9 @@ raw fixes and values: navigation may start after the first value or end before t
 import numpy as np
 
 from tma.errors import InputError
-from tma.geo import local_to_geodetic
-from tma.io.mcap_log import (
-    GEO,
-    float_array,
-    geo_origin,
-    int_array,
-    number,
-    read_epoch,
-    schema_errors,
-    track_labels,
-)
+from tma.io.mcap_log import GEO, geo_origin, read_epoch, track_labels
+from tma.io.mcap_values import float_array, int_array, number, schema_errors
+from tma.maths.geo import local_to_geodetic
 from tma.utc import MAX_NS
 
 OWNSHIP = "tma.OwnshipNavigation"

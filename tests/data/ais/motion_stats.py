@@ -101,7 +101,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 import build_cases as bc  # noqa: E402
 
-from tma.jit import njit  # noqa: E402
+from tma.runtime.jit import njit  # noqa: E402
 
 MAX_GAP_S = 60.0
 SAMPLE_S = 10.0

@@ -17,11 +17,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from tma.angles import wrap_to_180
+from tests.families.bearings2d.recorded_geometry import ingest
 from tma.families import build_estimator
-from tma.families.bearings2d.ingest import ingest
 from tma.families.bearings2d.log import read_bearings_log
 from tma.io.dataset import Dataset
+from tma.maths.angles import wrap_to_180
 
 AIS = Path(__file__).resolve().parents[2] / "data" / "ais"
 CRITERIA = {  # issue 28, item 3, on every recording

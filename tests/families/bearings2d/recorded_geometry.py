@@ -15,7 +15,8 @@ from tma.families.bearings2d.estimators.lm import LevenbergMarquardt
 from tma.families.bearings2d.ingest import OBSERVATION
 from tma.families.bearings2d.log import read_bearings_log
 from tma.io.dataset import Dataset
-from tma.sources.base import source_options as reading_options
+from tma.sources.options import source_options as reading_options
+from tma.stages.ingest import ingest as ingest_log
 
 ORIGIN = (59.9, 10.7)  # deg
 START_UTC = "2025-06-01T08:00:00Z"
@@ -137,3 +138,8 @@ def check_against_truth(estimates: pd.DataFrame, t_offset_s=0.0, labels=None, ra
 def source_options(node=None):
     """The reading options of ``bearings2d`` (its observation, the bearing) from ``node``."""
     return reading_options(node, OBSERVATION)
+
+
+def ingest(input_path, **kwargs):
+    """``tma.stages.ingest.ingest`` of a bearing log into a ``bearings2d`` dataset."""
+    return ingest_log(input_path, family="bearings2d", **kwargs)

@@ -21,7 +21,7 @@ from tma.families.bearings2d.status import (
     MIN_RANGE_M,
     not_an_answer,
 )
-from tma.geo import local_to_geodetic
+from tma.maths.geo import local_to_geodetic
 from tma.utc import format_utc
 
 ORIGIN = {"lat": 59.9, "lon": 10.7}

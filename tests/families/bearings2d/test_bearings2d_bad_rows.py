@@ -19,6 +19,7 @@ from tests.families.bearings2d.recorded_geometry import (
     EPOCH_NS,
     check_against_truth,
     estimate,
+    ingest,
     iso,
     latlon,
     recorded,
@@ -33,7 +34,6 @@ from tests.families.bearings2d.test_bearings2d_sources_ros2 import (
     write_ros2,
 )
 from tma.errors import ConfigError, InputError
-from tma.families.bearings2d.ingest import ingest
 from tma.families.bearings2d.log import channels
 from tma.sources.align import far_off
 

@@ -17,6 +17,7 @@ from tests.families.bearings2d.recorded_geometry import (
     ORIGIN,
     check_against_truth,
     estimate,
+    ingest,
     iso,
     latlon,
     ownship_en,
@@ -24,7 +25,6 @@ from tests.families.bearings2d.recorded_geometry import (
 )
 from tma.errors import ConfigError, InputError
 from tma.families.bearings2d import map_outputs
-from tma.families.bearings2d.ingest import ingest
 from tma.families.bearings2d.log import write_bearings_log
 from tma.families.bearings2d.scenario import Config, simulate_shard
 from tma.io.atomic import sha256_file

@@ -15,10 +15,9 @@ from mcap.reader import make_reader
 from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
 from tests.conftest import compose_cfg
-from tests.families.bearings2d.recorded_geometry import iso, recorded
+from tests.families.bearings2d.recorded_geometry import ingest, iso, recorded
 from tests.families.bearings2d.test_bearings2d_topics_and_options import _one_topic_per_contact
 from tma.errors import ConfigError
-from tma.families.bearings2d.ingest import ingest
 from tma.sources.labels import MAX_SHOWN, shown_labels
 
 LONG = "contact-" + "x" * 292  # 300 characters

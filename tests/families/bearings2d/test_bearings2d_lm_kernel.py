@@ -24,7 +24,7 @@ from tma.families.bearings2d.model import (
     predicted_bearings,
 )
 from tma.families.bearings2d.scenario import Config, simulate_shard
-from tma.jit import njit
+from tma.runtime.jit import njit
 
 THETA = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")
 

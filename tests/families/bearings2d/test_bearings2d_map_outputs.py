@@ -17,14 +17,14 @@ from omegaconf import OmegaConf
 from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
 from tests.conftest import compose_cfg
-from tma.aggregate import aggregate
 from tma.families.bearings2d import map_outputs
 from tma.families.bearings2d.log import read_bearings_log, write_bearings_log
 from tma.families.bearings2d.map_outputs import CHI2_2_P95, ellipse_points, write_map_mcap
 from tma.families.bearings2d.report import track_report
 from tma.families.bearings2d.scenario import Config, simulate_shard
-from tma.geo import local_to_geodetic
 from tma.io.dataset import Dataset, datasets_dir, file_record, shard_relpath, write_manifest
+from tma.maths.geo import local_to_geodetic
+from tma.stages.aggregate import aggregate
 
 ORIGIN = (59.9, 10.7)  # deg
 EPOCH_NS = 1_767_225_600 * 10**9  # 2026-01-01T00:00:00Z, the scenario's default epoch

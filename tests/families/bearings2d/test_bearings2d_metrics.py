@@ -5,7 +5,7 @@ import pandas as pd
 import pytest
 
 from tma.families.bearings2d.metrics import summary_row, track_metrics
-from tma.stats import wilson_interval
+from tma.maths.stats import wilson_interval
 
 
 def test_wilson_interval_known_values():

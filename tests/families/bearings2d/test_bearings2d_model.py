@@ -6,7 +6,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tma.angles import wrap_to_180, wrap_to_pi
 from tma.families import build_estimator
 from tma.families.bearings2d.log import BearingsLog
 from tma.families.bearings2d.model import (
@@ -18,6 +17,7 @@ from tma.families.bearings2d.model import (
     predicted_bearings,
     wrap_residual,
 )
+from tma.maths.angles import wrap_to_180, wrap_to_pi
 
 
 def _setup(n=50, seed=0):

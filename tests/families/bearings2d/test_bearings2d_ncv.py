@@ -8,7 +8,6 @@ import pytest
 from scipy.optimize import least_squares
 from scipy.stats import f as f_dist
 
-from tma.angles import bearing_from_north, wrap_to_pi
 from tma.families import build_estimator
 from tma.families.bearings2d import ncv
 from tma.families.bearings2d.log import BearingsLog
@@ -17,6 +16,7 @@ from tma.families.bearings2d.scenario import Config
 from tma.families.bearings2d.scenario import simulate_shard as simulate
 from tma.families.bearings2d.status import trend_test_p
 from tma.families.bearings2d.target_motion import TargetConfig
+from tma.maths.angles import bearing_from_north, wrap_to_pi
 
 CHI2_4_95 = 9.487729036781154
 

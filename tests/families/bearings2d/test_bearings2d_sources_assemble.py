@@ -18,7 +18,7 @@ from tests.families.bearings2d.recorded_geometry import (
 from tma.errors import InputError
 from tma.families.bearings2d import ingest as bearings2d_ingest
 from tma.families.bearings2d.log import SENSOR
-from tma.io.mcap_log import json_record
+from tma.io.mcap_values import json_record
 from tma.sources.align import align
 from tma.sources.base import Contacts, Navigation, Recording
 from tma.utc import format_utc

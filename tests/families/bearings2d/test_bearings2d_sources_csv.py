@@ -13,12 +13,12 @@ from tests.families.bearings2d.recorded_geometry import (
     EPOCH_NS,
     check_against_truth,
     estimate,
+    ingest,
     iso,
     recorded,
     source_options,
 )
 from tma.errors import InputError
-from tma.families.bearings2d.ingest import ingest
 from tma.sources.csv_table import read_csv_table
 
 

@@ -19,12 +19,12 @@ from tests.families.bearings2d.recorded_geometry import (
     EPOCH_NS,
     check_against_truth,
     estimate,
+    ingest,
     recorded,
     source_options,
 )
 from tests.families.bearings2d.test_bearings2d_sources_ros2 import fuzz
 from tma.errors import InputError
-from tma.families.bearings2d.ingest import ingest
 from tma.io.dataset import Dataset
 from tma.sources.mcap import read_mcap
 

@@ -14,12 +14,12 @@ from tests.families.bearings2d.recorded_geometry import (
     EPOCH_NS,
     check_against_truth,
     estimate,
+    ingest,
     iso,
     recorded,
     source_options,
 )
 from tma.errors import ConfigError, InputError
-from tma.families.bearings2d.ingest import ingest
 from tma.io.atomic import sha256_file
 from tma.sources import source_kind
 from tma.sources.nmea import read_nmea

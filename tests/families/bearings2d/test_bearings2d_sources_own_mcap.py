@@ -15,11 +15,11 @@ from tests.families.bearings2d.recorded_geometry import (
     ORIGIN,
     check_against_truth,
     estimate,
+    ingest,
     recorded,
     source_options,
 )
 from tma.errors import ConfigError, InputError
-from tma.families.bearings2d.ingest import ingest
 from tma.families.bearings2d.log import (
     BEARINGS_TOPIC,
     CHANNELS,
@@ -31,7 +31,8 @@ from tma.families.bearings2d.log import (
     write_bearings_log,
 )
 from tma.io.dataset import Dataset
-from tma.io.mcap_log import Channel, LogWriter, json_record
+from tma.io.mcap_log import Channel, LogWriter
+from tma.io.mcap_values import json_record
 from tma.sources.mcap import read_mcap
 
 NO_OPTIONS = source_options({})

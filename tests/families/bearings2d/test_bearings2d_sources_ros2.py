@@ -14,11 +14,11 @@ from tests.families.bearings2d.recorded_geometry import (
     EPOCH_NS,
     check_against_truth,
     estimate,
+    ingest,
     recorded,
     source_options,
 )
 from tma.errors import ConfigError, InputError
-from tma.families.bearings2d.ingest import ingest
 from tma.io.dataset import Dataset
 from tma.sources.mcap import read_mcap
 

@@ -1,11 +1,10 @@
 """Targets that move like ships (``target_motion.py``): manoeuvre paths against the exact
-arcs of ``tma.path``, wander against its covariance (Monte Carlo), the truth at the last
+arcs of ``tma.maths.path``, wander against its covariance (Monte Carlo), the truth at the last
 bearing, reproducibility and common random numbers."""
 
 import numpy as np
 import pytest
 
-from tma.angles import bearing_from_north
 from tma.families.bearings2d.scenario import Config, simulate_shard
 from tma.families.bearings2d.target_motion import (
     ManoeuvreConfig,
@@ -15,7 +14,8 @@ from tma.families.bearings2d.target_motion import (
     target_paths,
     wander,
 )
-from tma.path import LegPath
+from tma.maths.angles import bearing_from_north
+from tma.maths.path import LegPath
 
 
 class _Fixed:

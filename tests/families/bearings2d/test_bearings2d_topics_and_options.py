@@ -14,6 +14,7 @@ from tests.families.bearings2d.recorded_geometry import (
     ORIGIN,
     check_against_truth,
     estimate,
+    ingest,
     iso,
     recorded,
     source_options,
@@ -25,7 +26,6 @@ from tests.families.bearings2d.test_bearings2d_sources_ros2 import (
     write_ros2,
 )
 from tma.errors import ConfigError, InputError
-from tma.families.bearings2d.ingest import ingest
 from tma.sources.mcap import read_mcap
 
 

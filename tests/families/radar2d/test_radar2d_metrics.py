@@ -10,7 +10,6 @@ from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
 from pipeline.simulate import simulate_stage
 from tests.conftest import compose_cfg
-from tma.aggregate import RunEntry
 from tma.config import to_plain
 from tma.families.radar2d.metrics import (
     per_scan_errors,
@@ -20,6 +19,7 @@ from tma.families.radar2d.metrics import (
 )
 from tma.families.radar2d.report import aggregate_runs
 from tma.families.radar2d.scenario import Config, simulate_shard
+from tma.stages.aggregate import RunEntry
 
 # 30 s straight, a 36 s right turn, 60 s straight, scans every 2 s: with J = 5 the window is
 # full at (5 - 1) x 2 = 8 s, the turn covers [30, 66] s and the path ends at 126 s

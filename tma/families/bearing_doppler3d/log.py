@@ -13,18 +13,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.errors import InputError
-from tma.io.mcap_log import (
-    COMPRESSION,
-    Channel,
-    LogWriter,
+from tma.io.mcap_log import COMPRESSION, Channel, LogWriter, read_epoch
+from tma.io.mcap_read import read_log
+from tma.io.mcap_values import (
     float_array,
     int_array,
     is_number,
     json_record,
     number,
-    read_epoch,
     read_json_record,
-    read_log,
     schema_errors,
 )
 

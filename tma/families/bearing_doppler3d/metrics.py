@@ -11,8 +11,8 @@ import numpy as np
 import pandas as pd
 from scipy.special import gammaincinv  # scipy.stats takes 0.5 s to import, for one quantile
 
-from tma.angles import wrap_to_pi
 from tma.families.bearing_doppler3d.model import PHI, STATE_NAMES
+from tma.maths.angles import wrap_to_pi
 
 DIVERGENCE_M = 1000.0
 DIVERGENCE_AFTER_S = 10.0

@@ -25,7 +25,7 @@ import numpy as np
 
 from tma.config import to_plain
 from tma.errors import ConfigError
-from tma.jit import njit
+from tma.runtime.jit import njit
 
 X, Y, Z, V, PHI, A = range(6)
 # The drift Jacobian's non-zero entries, in the order of the rows of ``jacobian_columns``.

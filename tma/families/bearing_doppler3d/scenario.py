@@ -21,8 +21,8 @@ from tma.families.bearing_doppler3d.log import (
 )
 from tma.families.bearing_doppler3d.model import STATE_NAMES, AuvModel, model_record
 from tma.io import arrow
+from tma.runtime.sharding import shard_rng, shard_track_ids
 from tma.scenario import ScenarioConfig
-from tma.sharding import shard_rng, shard_track_ids
 
 FAMILY = "bearing_doppler3d"
 # Sanity bounds on step counts: a shard's epochs, and its Euler-Maruyama normals per epoch,

@@ -37,8 +37,8 @@ from tma.families.bearings2d.metrics import (  # noqa: E402
     summary_row,
     track_metrics,
 )
-from tma.stats import wilson_interval  # noqa: E402
-from tma.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
+from tma.maths.stats import wilson_interval  # noqa: E402
+from tma.report.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
 
 log = logging.getLogger(__name__)
 
@@ -117,7 +117,8 @@ def starts_changed(estimates: pd.DataFrame) -> dict:
 
 
 def benchmark_table(entries) -> pd.DataFrame:
-    """The table of the runs ``entries`` (``tma.aggregate.RunEntry``) of simulated datasets."""
+    """The table of the runs ``entries`` (``tma.stages.aggregate.RunEntry``) of simulated
+    datasets."""
     rows, bounds = [], {}
     for entry in entries:
         truth = entry.dataset.read_truth()

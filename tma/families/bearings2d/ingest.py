@@ -1,6 +1,6 @@
 """What ``bearings2d`` reads from a recorded log, and the logs it makes of it.
 
-The readers and the stage are the core's (``tma.sources``, ``tma.ingest``); this family
+The readers and the stage are the core's (``tma.sources``, ``tma.stages.ingest``); this family
 declares its observation, the bearing (``OBSERVATION``: degrees clockwise from north or
 radians, a direction vector as ``atan2(x, y)``, tma's own ``tma.BearingBatch`` on
 ``/sonar/bearings``), guards it against radians read as degrees (``radians_guard``), checks
@@ -18,7 +18,8 @@ import numpy as np
 from tma.config import Params, param
 from tma.errors import InputError
 from tma.families.bearings2d.log import BEARINGS_TOPIC, SCHEMAS, BearingsLog, nominal_sigma
-from tma.geo import MAX_MAPPED_M
+from tma.io.grid import epochs, scatter
+from tma.maths.geo import check_mapped
 from tma.sources.base import Observation, Unit
 from tma.utc import MAX_SPAN_S
 
@@ -128,27 +129,14 @@ def logs(aligned, settings: Settings, where: str):
             raise InputError(f"{where}: the log spans {lg.t_s[-1]:.3g} s (at most "
                              f"{MAX_SPAN_S:.3g} s): times must be seconds")
         lg.validate(where)
-        _within_the_map(lg, where)
+        if lg.origin_deg is not None:  # before anything is written, naming the input
+            check_mapped(lg.own_x_m, lg.own_y_m, lg.t_s, where)
     labels = aligned.summary["track_labels"]
     if labels is not None and skipped["count"]:  # the skipped contacts are not in the dataset
         kept = {str(i) for lg in out for i in lg.track_id}
         labels = {i: s for i, s in labels.items() if i in kept}
     return out, {"min_bearings": settings.min_bearings}, {
         "sigma_deg": out[0].sigma_deg, "skipped_contacts": skipped, "track_labels": labels}
-
-
-def _within_the_map(lg: BearingsLog, where: str):
-    """Own-ship within ``MAX_MAPPED_M`` of the origin, where the tangent plane maps it (checked
-    here, naming the input and the time, before anything is written)."""
-    if lg.origin_deg is None:
-        return
-    far = np.hypot(lg.own_x_m, lg.own_y_m) > MAX_MAPPED_M
-    if far.any():
-        k = int(np.argmax(far))
-        raise InputError(f"{where}: own-ship goes farther than {MAX_MAPPED_M / 1e3:g} km from "
-                         f"the origin ({np.hypot(lg.own_x_m[k], lg.own_y_m[k]) / 1e3:.0f} km at "
-                         f"t = {lg.t_s[k]:.9g} s after the log's start): its tangent plane "
-                         "cannot map it; split the log")
 
 
 def _logs(t, x, y, track, bearing, sigma, where) -> list[BearingsLog]:
@@ -176,30 +164,11 @@ def _logs(t, x, y, track, bearing, sigma, where) -> list[BearingsLog]:
 
 def _grid(t, x, y, track, bearing, ids, sigma, where) -> BearingsLog:
     """The (tracks x epochs) bearing array; own-ship at each epoch (equal at equal times)."""
-    order = np.argsort(t, kind="stable")
-    new_epoch = np.r_[True, t[order][1:] != t[order][:-1]]
-    col = np.empty(t.size, dtype=np.int64)
-    col[order] = np.cumsum(new_epoch) - 1
-    first = order[new_epoch]
-    n_epochs = first.size
-    row = np.searchsorted(ids, track)
-    cell = np.sort(row * n_epochs + col)
-    twice = cell[1:] == cell[:-1]
-    if twice.any():
-        k = int(cell[int(np.argmax(twice))])
-        raise InputError(f"{where}: track {ids[k // n_epochs]} has two bearings at one time "
-                         f"({t[first[k % n_epochs]]:.9g} s after the log's start)")
-    grid = np.full((ids.size, n_epochs), np.nan)
-    grid[row, col] = bearing
-    return BearingsLog(t_s=t[first], own_x_m=x[first], own_y_m=y[first], track_id=ids,
+    t_s, col, first = epochs(t)
+    _, grid = scatter(track, col, bearing, t_s.size, where, "bearings", t_s.__getitem__,
+                      track_id=ids)
+    return BearingsLog(t_s=t_s, own_x_m=x[first], own_y_m=y[first], track_id=ids,
                        bearing_deg=grid, sigma_deg=sigma)
-
-
-def ingest(input_path, **kwargs):
-    """``tma.ingest.ingest`` of a bearing log into a ``bearings2d`` dataset."""
-    from tma.ingest import ingest as ingest_log
-
-    return ingest_log(input_path, family="bearings2d", **kwargs)
 
 
 def contacts(logs: list[BearingsLog]):

@@ -29,25 +29,28 @@ import numpy as np
 
 from tma.errors import InputError
 from tma.families.bearings2d.manoeuvres import ManoeuvrePrior
-from tma.geo import MAX_MAPPED_M, LocationFix, local_to_geodetic, location_fix
+from tma.io.grid import epochs, scatter
 from tma.io.mcap_log import (
     COMPRESSION,
     GEO,
     TRACKS,
     Channel,
     LogWriter,
-    float_array,
     geo_origin,
+    read_epoch,
+    track_labels,
+)
+from tma.io.mcap_read import read_log
+from tma.io.mcap_values import (
+    float_array,
     int_array,
     json_record,
     number,
-    read_epoch,
     read_json_record,
-    read_log,
     schema_errors,
-    track_labels,
 )
 from tma.io.mcap_writer import Encoded, Ragged
+from tma.maths.geo import LocationFix, check_mapped, local_to_geodetic, location_fix
 from tma.utc import MAX_EPOCH_NS
 
 OWNSHIP_TOPIC = "/ownship/navigation"
@@ -194,12 +197,8 @@ def write_bearings_log(path, log: BearingsLog, metadata=None, encoding="protobuf
         metadata[GEO] = json_record({"origin_lat_deg": lat0, "origin_lon_deg": lon0,
                                      "epoch_utc_ns": log.epoch_utc_ns})
         chosen = [*chosen, OWNSHIP_FIX_CHANNEL]
+        check_mapped(log.own_x_m, log.own_y_m, log.t_s)  # (no path: it may be a staging file's)
         own_lat, own_lon = local_to_geodetic(log.own_x_m, log.own_y_m, (lat0, lon0))
-        if not np.isfinite(own_lat).all():  # (no path: it may be a staging file's)
-            k = int(np.argmax(~np.isfinite(own_lat)))
-            raise InputError(f"own-ship goes farther than {MAX_MAPPED_M / 1e3:g} km from the "
-                             f"origin (at t = {log.t_s[k]:.9g} s): its tangent plane cannot map "
-                             "it; split the log")
     with LogWriter(path, chosen, metadata, epoch_utc_ns=log.epoch_utc_ns,
                    compression=COMPRESSION[encoding]) as w:
         step = max(1, BLOCK_BEARINGS // max(1, log.n_tracks))
@@ -298,20 +297,12 @@ def read_bearings_log(path) -> BearingsLog:
         # the common case: every contact at every epoch, one message each
         t, track_id = t_msg, first.copy()
         bearing = np.stack(vals_per_msg, axis=1)
-    else:
-        t = np.unique(t_msg)  # equal t_s: one epoch sent as several messages
-        all_ids = np.concatenate(ids_per_msg)
-        track_id = np.unique(all_ids)
-        bearing = np.full((track_id.size, t.size), np.nan)
-        rows = np.searchsorted(track_id, all_ids)
-        cols = np.repeat(np.searchsorted(t, t_msg), [i.size for i in ids_per_msg])
-        cell = rows * t.size + cols
-        unique, once = np.unique(cell, return_index=True)
-        if unique.size != cell.size:
-            dup = np.setdiff1d(np.arange(cell.size), once)[0]
-            raise InputError(f"{where}: track_id {all_ids[dup]} twice at the epoch "
-                             f"t = {t[cols[dup]]!r} s")
-        bearing[rows, cols] = np.concatenate(vals_per_msg)
+    else:  # equal t_s: one epoch sent as several messages (an epoch may hold no bearing)
+        t, msg_col, _ = epochs(t_msg)
+        cols = np.repeat(msg_col, [i.size for i in ids_per_msg])
+        track_id, bearing = scatter(np.concatenate(ids_per_msg), cols,
+                                    np.concatenate(vals_per_msg), t.size, where, "bearings",
+                                    t.__getitem__)
     log = BearingsLog(
         t_s=t, own_x_m=np.interp(t, nav_t, nav_x), own_y_m=np.interp(t, nav_t, nav_y),
         track_id=track_id, bearing_deg=bearing, sigma_deg=nominal_sigma(metadata, where),

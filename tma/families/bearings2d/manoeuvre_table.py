@@ -38,8 +38,8 @@ from tma.families.bearings2d.metrics import (  # noqa: E402
     errors_now,
     track_metrics,
 )
-from tma.stats import wilson_interval  # noqa: E402
-from tma.tables import (  # noqa: E402
+from tma.maths.stats import wilson_interval  # noqa: E402
+from tma.report.tables import (  # noqa: E402
     fixed_layout,
     markdown_table,
     save_figure,

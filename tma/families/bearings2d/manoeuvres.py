@@ -58,7 +58,7 @@ from tma.families.bearings2d.ncv import (
     smooth,
     theta_of_state,
 )
-from tma.jit import njit
+from tma.runtime.jit import njit
 
 # manoeuvres assumed of a recording's targets (which declares none), measured from the AIS
 # positions of the vessels underway in two recordings, the Solent and New York Harbor

@@ -38,18 +38,19 @@ from tma.families.bearings2d.log import (  # noqa: E402
     BearingsLog,
     read_bearings_log,
 )
-from tma.geo import (  # noqa: E402
+from tma.io.mcap_log import Channel, LogWriter  # noqa: E402
+from tma.io.mcap_values import json_record  # noqa: E402
+from tma.io.mcap_writer import Encoded  # noqa: E402
+from tma.maths.geo import (  # noqa: E402
     MAX_MAPPED_M,
     LocationFix,
     enu_covariance,
     local_to_geodetic,
     location_fix,
 )
-from tma.io.mcap_log import Channel, LogWriter, json_record  # noqa: E402
-from tma.io.mcap_writer import Encoded  # noqa: E402
-from tma.linalg import scaled_inverse  # noqa: E402
+from tma.maths.linalg import scaled_inverse  # noqa: E402
+from tma.report.tables import save_figure  # noqa: E402
 from tma.sources.labels import file_part, fit_file_name, shown_labels  # noqa: E402
-from tma.tables import save_figure  # noqa: E402
 
 log = logging.getLogger(__name__)
 

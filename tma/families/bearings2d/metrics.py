@@ -21,11 +21,11 @@ import numpy as np
 import pandas as pd
 from scipy.special import gammaincinv  # scipy.stats takes 0.5 s to import, for one quantile
 
-from tma.angles import wrap_to_180
 from tma.families.bearings2d.model import bearing_jacobian
 from tma.families.bearings2d.status import STATUSES, kinematics_now
-from tma.linalg import scaled_inverse
-from tma.stats import wilson_interval
+from tma.maths.angles import wrap_to_180
+from tma.maths.linalg import scaled_inverse
+from tma.maths.stats import wilson_interval
 
 THETA = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")
 # an ok track's normalised error lies below this 95 % of runs: chi2.ppf(0.95, 4), which

@@ -12,8 +12,8 @@ import math
 
 import numpy as np
 
-from tma.angles import bearing_from_north, wrap_angle, wrap_residual
-from tma.jit import njit
+from tma.maths.angles import bearing_from_north, wrap_angle, wrap_residual
+from tma.runtime.jit import njit
 
 THETA_COLUMNS = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")
 

@@ -50,9 +50,9 @@ import math
 
 import numpy as np
 
-from tma.angles import wrap_angle
 from tma.families.bearings2d.model import atan2, bearing_residuals
-from tma.jit import njit
+from tma.maths.angles import wrap_angle
+from tma.runtime.jit import njit
 
 MAX_S = 1e4  # an innovation variance (in noise variances) above this: a diffuse one
 # q (m^2/s^3) for a log that declares none (a recording): the Solent AIS tracks of

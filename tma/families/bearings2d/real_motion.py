@@ -18,10 +18,10 @@ target's class over the window, ``tma.ais.pairs.classify``), ``pair``, ``own_mms
 import numpy as np
 
 from tma.ais.recording import label_of, pairs_of
-from tma.angles import bearing_from_north, course_from_velocity, wrap_to_pi
 from tma.config import require
 from tma.io import arrow
-from tma.sharding import shard_rng, shard_track_ids
+from tma.maths.angles import bearing_from_north, course_from_velocity, wrap_to_pi
+from tma.runtime.sharding import shard_rng, shard_track_ids
 from tma.utc import format_utc
 
 TRUTH_SPAN_S = 120.0
@@ -40,10 +40,10 @@ def label(cfg) -> str:
     return f"{label_of(cfg.real.file)}-sigma{cfg.sigma_deg:g}-n{cfg.n_tracks}"
 
 
-def simulate_shard(cfg, shard_index: int):
-    """``(BearingsLog, truth)`` of shard ``shard_index`` (module docstring)."""
+def simulate_shard(cfg, shard_index: int, with_outliers):
+    """``(BearingsLog, truth)`` of shard ``shard_index`` (module docstring); ``with_outliers``:
+    the scenario's outliers (``scenario.with_outliers``), drawn as it draws them."""
     from tma.families.bearings2d.log import BearingsLog
-    from tma.families.bearings2d.scenario import with_outliers
 
     rec, pairs = pairs_of(cfg.real)
     k = shard_index % len(pairs)

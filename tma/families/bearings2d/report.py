@@ -44,10 +44,10 @@ from tma.families.bearings2d.truth_report import (  # noqa: E402
     shown_columns,
     with_truth,
 )
-from tma.geo import local_to_geodetic  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
+from tma.maths.geo import local_to_geodetic  # noqa: E402
+from tma.report.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
 from tma.sources.labels import shown_labels  # noqa: E402
-from tma.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
 from tma.utc import format_utc  # noqa: E402
 
 INTRO = """Bearings-only TMA of a constant-velocity target from a manoeuvring observer

@@ -30,15 +30,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.ais.recording import RealPairs
-from tma.angles import bearing_from_north, course_from_velocity, wrap_to_pi
 from tma.config import param, require
 from tma.families.bearings2d import real_motion, target_motion
 from tma.families.bearings2d.log import BearingsLog, read_bearings_log, write_bearings_log
 from tma.families.bearings2d.target_motion import TargetConfig
 from tma.io import arrow
-from tma.path import LegPath, leg_config
+from tma.maths.angles import bearing_from_north, course_from_velocity, wrap_to_pi
+from tma.maths.path import LegPath, leg_config
+from tma.runtime.sharding import shard_rng, shard_track_ids
 from tma.scenario import ScenarioConfig
-from tma.sharding import shard_rng, shard_track_ids
 
 FAMILY = "bearings2d"
 OUTLIER_STREAM = 1  # spawn-key element of the outlier stream under the shard's (shard,)
@@ -64,7 +64,7 @@ class ObserverConfig:
     start_x_m: float = param(0.0, "own-ship's position x at t = 0 (m east)")
     start_y_m: float = param(0.0, "own-ship's position y at t = 0 (m north)")
     speed_m_s: float = param(5.0, "own-ship's speed (m/s)", "(0, 1e4)")
-    legs: list[LegConfig] = param(doc="own-ship's legs (tma.path)", factory=_default_legs)
+    legs: list[LegConfig] = param(doc="own-ship's legs (tma.maths.path)", factory=_default_legs)
 
 
 @dataclass
@@ -163,7 +163,7 @@ def epochs(cfg: Config, path: LegPath) -> np.ndarray:
 def simulate_shard(cfg: Config, shard_index: int):
     """Simulate one shard: ``(BearingsLog, truth pyarrow.Table)``."""
     if cfg.real.file is not None:  # real ship motion from AIS (real_motion.py)
-        return real_motion.simulate_shard(cfg, shard_index)
+        return real_motion.simulate_shard(cfg, shard_index, with_outliers)
     track_id = shard_track_ids(cfg, shard_index)
     n = track_id.size
     rng = shard_rng(cfg, shard_index)

@@ -44,9 +44,9 @@ import math
 
 import numpy as np
 
-from tma.angles import bearing_from_north, course_from_velocity
-from tma.jit import njit
-from tma.linalg import scaled_inverse
+from tma.maths.angles import bearing_from_north, course_from_velocity
+from tma.maths.linalg import scaled_inverse
+from tma.runtime.jit import njit
 
 # scipy.special (the chi-square and normal tails) is imported by the functions that use it:
 # every command imports this module (with the estimators, to register their defaults), few

@@ -18,10 +18,10 @@ fits, ambiguous, an AIS gap: the manifest says why) have these columns blank.
 import numpy as np
 import pandas as pd
 
-from tma.angles import wrap_to_180
 from tma.families.bearings2d.metrics import NEES_95, THETA, normalised_error
 from tma.families.bearings2d.status import kinematics_now
-from tma.stats import wilson_interval
+from tma.maths.angles import wrap_to_180
+from tma.maths.stats import wilson_interval
 
 # quantity: (the report's estimate, its one-sigma error, the unit of the columns' names)
 QUANTITIES = {"range": ("range_now_m", "range_sd_m", "m"),

@@ -11,18 +11,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.errors import InputError
-from tma.io.mcap_log import (
-    COMPRESSION,
-    Channel,
-    LogWriter,
+from tma.io.grid import scatter
+from tma.io.mcap_log import COMPRESSION, Channel, LogWriter, read_epoch
+from tma.io.mcap_read import read_log
+from tma.io.mcap_values import (
     float_array,
     int_array,
     is_number,
     json_record,
     number,
-    read_epoch,
     read_json_record,
-    read_log,
     schema_errors,
 )
 
@@ -92,13 +90,10 @@ def read_radar_log(path) -> RadarLog:
     for i, x, y in zip(ids, xs, ys, strict=True):
         if not i.size == x.size == y.size:
             raise InputError(f"{where}: track_id, x_m and y_m differ in length in a message")
-        if np.unique(i).size != i.size:
-            raise InputError(f"{where}: a track_id appears twice in one scan")
-    track_id = np.unique(np.concatenate(ids))
-    plots = np.full((track_id.size, t.size, 2), np.nan)
-    for k, (i, x, y) in enumerate(zip(ids, xs, ys, strict=True)):
-        rows = np.searchsorted(track_id, i)
-        plots[rows, k, 0], plots[rows, k, 1] = x, y
+    scan = np.repeat(np.arange(t.size), [i.size for i in ids])  # a message is a scan
+    track_id, plots = scatter(np.concatenate(ids), scan,
+                              np.c_[np.concatenate(xs), np.concatenate(ys)], t.size, where,
+                              "plots", t.__getitem__)
     log = RadarLog(t, track_id, plots, sensor, read_epoch(metadata, where))
     log.validate(where)
     return log

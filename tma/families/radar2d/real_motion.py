@@ -16,7 +16,7 @@ import numpy as np
 
 from tma.ais.recording import label_of, windows_of
 from tma.io import arrow
-from tma.sharding import shard_rng, shard_track_ids
+from tma.runtime.sharding import shard_rng, shard_track_ids
 from tma.utc import format_utc
 
 
@@ -24,12 +24,13 @@ def label(cfg) -> str:
     return f"{label_of(cfg.real.file)}-w{cfg.real.window_s:g}-{cfg.noise}-n{cfg.n_tracks}"
 
 
-def simulate_shard(cfg, shard_index: int):
-    """``(RadarLog, truth)`` of shard ``shard_index`` (module docstring)."""
+def simulate_shard(cfg, shard_index: int, sensor: dict):
+    """``(RadarLog, truth)`` of shard ``shard_index`` (module docstring); ``sensor``: the
+    scenario's record of the radar (``scenario.sensor_metadata``), here at the recording's
+    radar position."""
     from tma.families.radar2d.log import RadarLog
-    from tma.families.radar2d.scenario import sensor_metadata
 
-    rec, windows, sensor = windows_of(cfg.real, cfg.scan_period_s)
+    rec, windows, position = windows_of(cfg.real, cfg.scan_period_s)
     track_id = shard_track_ids(cfg, shard_index)
     n = track_id.size
     t = np.arange(int(np.floor(cfg.real.window_s / cfg.scan_period_s + 1e-9)) + 1) * (
@@ -44,7 +45,7 @@ def simulate_shard(cfg, shard_index: int):
         tb = np.clip(w.t0_s + t + half, None, ship.t_s[-1])
         v[k, :, 0], v[k, :, 1] = ship.mean_velocity(ta, tb)
     noise = shard_rng(cfg, shard_index).standard_normal((n, t.size, 2))
-    rx, ry = (float(c) for c in sensor)
+    rx, ry = (float(c) for c in position)
     if cfg.noise == "cartesian":
         plots = xy + cfg.sigma_m * noise
     else:
@@ -52,7 +53,7 @@ def simulate_shard(cfg, shard_index: int):
         bearing = (np.arctan2(xy[..., 0] - rx, xy[..., 1] - ry)
                    + np.deg2rad(cfg.bearing_sd_deg) * noise[..., 1])
         plots = np.stack([rx + rng_m * np.sin(bearing), ry + rng_m * np.cos(bearing)], axis=-1)
-    metadata = {**sensor_metadata(cfg), "radar_x_m": rx, "radar_y_m": ry}
+    metadata = {**sensor, "radar_x_m": rx, "radar_y_m": ry}
     log = RadarLog(t, track_id, plots, metadata, cfg.epoch_ns)
     per_run = {
         "window": track_id % len(windows),

@@ -24,7 +24,7 @@ from tma.families.radar2d.metrics import (  # noqa: E402
     table_columns,
 )
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
-from tma.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
+from tma.report.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
 
 INTRO = """Tracking a small fast boat that turns sharply{radius} in front of a coastal
 radar (`../shared/specs/radar2d.md`); one row per tracker and boat speed over the Monte Carlo

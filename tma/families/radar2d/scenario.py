@@ -17,9 +17,9 @@ from tma.errors import ConfigError
 from tma.families.radar2d import real_motion
 from tma.families.radar2d.log import RadarLog, read_radar_log, write_radar_log
 from tma.io import arrow
-from tma.path import LegPath, leg_config
+from tma.maths.path import LegPath, leg_config
+from tma.runtime.sharding import shard_rng, shard_track_ids
 from tma.scenario import ScenarioConfig
-from tma.sharding import shard_rng, shard_track_ids
 
 FAMILY = "radar2d"
 # Sanity bounds: every run's scans are held in memory at once; a coastal radar's horizon is
@@ -45,7 +45,7 @@ class Config(ScenarioConfig):
     speed_m_s: float = param(10.0, "the vessel's speed (m/s)", "(0, inf)")
     initial_course_deg: float = param(90.0, "its course at t = 0 (deg clockwise from north: 90 "
                                       "heads +x)", "[-360, 360]")
-    legs: list[LegConfig] = param(doc="the vessel's legs (tma.path)", factory=_default_legs)
+    legs: list[LegConfig] = param(doc="the vessel's legs (tma.maths.path)", factory=_default_legs)
     scan_period_s: float = param(3.0, "radar scan period (s)", "(0, inf)")
     noise: str = param("cartesian", "plot noise: isotropic cartesian, or polar at the radar",
                        choices=("cartesian", "polar"))
@@ -100,7 +100,7 @@ def sensor_metadata(cfg: Config) -> dict:
 
 def simulate_shard(cfg: Config, shard_index: int):
     if cfg.real.file is not None:  # real vessel motion from AIS (real_motion.py)
-        return real_motion.simulate_shard(cfg, shard_index)
+        return real_motion.simulate_shard(cfg, shard_index, sensor_metadata(cfg))
     track_id = shard_track_ids(cfg, shard_index)
     n = track_id.size
     rng = shard_rng(cfg, shard_index)

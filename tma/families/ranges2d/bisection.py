@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from tma.jit import njit
+from tma.runtime.jit import njit
 
 
 class BisectionDensity:

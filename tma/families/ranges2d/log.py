@@ -11,19 +11,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.errors import InputError
-from tma.io.mcap_log import (
-    COMPRESSION,
-    Channel,
-    LogWriter,
+from tma.io.grid import scatter
+from tma.io.mcap_log import COMPRESSION, Channel, LogWriter, read_epoch
+from tma.io.mcap_read import read_log
+from tma.io.mcap_values import (
     float_array,
     int_array,
     integer,
     is_number,
     json_record,
     number,
-    read_epoch,
     read_json_record,
-    read_log,
     schema_errors,
 )
 
@@ -118,12 +116,11 @@ def read_ranges_log(path) -> RangesLog:
     for i, v in zip(ids, values, strict=True):
         if i.size != v.size:
             raise InputError(f"{where}: track_id and range_m differ in length in a message")
-        if np.unique(i).size != i.size:
-            raise InputError(f"{where}: a track_id appears twice in one message")
-    track_id = np.unique(np.concatenate(ids))
-    ranges = np.full((track_id.size, len(lm_ids), t.size), np.nan)
-    for i, v, lm, k in zip(ids, values, lm_rows, cols, strict=True):
-        ranges[np.searchsorted(track_id, i), lm, k] = v
+    cell = np.repeat(np.array(lm_rows) * t.size + cols, [i.size for i in ids])  # (landmark, epoch)
+    track_id, ranges = scatter(np.concatenate(ids), cell, np.concatenate(values),
+                               len(lm_ids) * t.size, where, "ranges of one landmark",
+                               lambda k: t[k % t.size])
+    ranges = ranges.reshape(track_id.size, len(lm_ids), t.size)
     log = RangesLog(t, np.array([landmarks[i] for i in lm_ids], float), track_id, ranges, model,
                     read_epoch(metadata, where))
     log.validate(where)

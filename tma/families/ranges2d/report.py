@@ -21,7 +21,7 @@ from tma.families.ranges2d.metrics import COLUMNS, summary_row, track_metrics  #
 from tma.families.ranges2d.model import RangeModel  # noqa: E402
 from tma.io import arrow  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
-from tma.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
+from tma.report.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
 
 
 def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) -> list[Path]:

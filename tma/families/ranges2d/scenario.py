@@ -16,8 +16,8 @@ import numpy as np
 from tma.config import param, require
 from tma.families.ranges2d.log import RangesLog, read_ranges_log, write_ranges_log
 from tma.io import arrow
+from tma.runtime.sharding import shard_rng, shard_track_ids
 from tma.scenario import ScenarioConfig
-from tma.sharding import shard_rng, shard_track_ids
 
 FAMILY = "ranges2d"
 MAX_PAIRS = 100_000  # population: a shard's ranges are held in memory at once

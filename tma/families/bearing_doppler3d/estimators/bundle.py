@@ -8,7 +8,7 @@ import numpy as np
 
 from tma.families.bearing_doppler3d.model import AuvModel
 from tma.io.artefacts import load_or_build
-from tma.parallel import run_tasks
+from tma.runtime.parallel import run_tasks
 
 SHARD = 2500
 # About 15 kB per path at the default 101 epochs (float64 truth, float32 observations), held

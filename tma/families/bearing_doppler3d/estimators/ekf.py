@@ -17,7 +17,7 @@ from tma.families.bearing_doppler3d.model import (
     jacobian_columns,
     transition,
 )
-from tma.jit import njit
+from tma.runtime.jit import njit
 
 STATE_ROWS = np.arange(6)  # the covariance holds the states in the model's order
 

@@ -22,7 +22,7 @@ from tma.families.bearing_doppler3d.model import (
     jacobian_columns,
     transition,
 )
-from tma.jit import njit
+from tma.runtime.jit import njit
 
 ORDER = np.array([3, 5, 4, 0, 1, 2])  # (v, a, phi, X, Y, Z) in the model's state indices
 INVERSE = np.argsort(ORDER)  # INVERSE[i]: the row of state i in the square-root order

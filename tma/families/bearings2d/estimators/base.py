@@ -27,7 +27,7 @@ from tma.families.bearings2d.status import (
     trend_test_p,
     two_sided_chi2_p,
 )
-from tma.linalg import scaled_inverse
+from tma.maths.linalg import scaled_inverse
 
 BLOCK_TRACKS = 64
 GROSS_SIGMAS = 5.0  # a robust fit's outliers: bearings this many sigma off (Gaussian: 6e-7)

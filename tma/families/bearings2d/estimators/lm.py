@@ -49,7 +49,7 @@ from tma.families.bearings2d.estimators.lm_kernel import (
 )
 from tma.families.bearings2d.model import BearingTerms, bearing_jacobian, bearing_residuals
 from tma.families.bearings2d.status import noiseless_fit_p, robust_fit_p, runs_test_p
-from tma.linalg import scaled_inverse
+from tma.maths.linalg import scaled_inverse
 
 MAX_INT = np.iinfo(np.int64).max
 SCALES = ("sigma", "mad")

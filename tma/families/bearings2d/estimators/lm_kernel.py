@@ -20,7 +20,7 @@ from tma.families.bearings2d.model import (  # noqa: F401 (the losses, imported 
     TUNING,
     track_terms,
 )
-from tma.jit import njit
+from tma.runtime.jit import njit
 
 # Stop reasons recorded per track.
 STOP_F_TOL, STOP_MAX_ITER, STOP_LAMBDA_MAX = 0, 1, 2

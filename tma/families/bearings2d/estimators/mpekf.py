@@ -63,7 +63,7 @@ from tma.families.bearings2d.estimators.base import (
     evaluate_in_blocks,
 )
 from tma.families.bearings2d.model import BearingTerms, wrap_residual
-from tma.linalg import scaled_inverse
+from tma.maths.linalg import scaled_inverse
 
 SINGULAR_RCOND = 1e-14  # J^T J with a smaller scaled eigenvalue ratio: no covariance
 

@@ -24,7 +24,7 @@ from tma.families.bearings2d.estimators.base import (
     Solution,
     TargetMotion,
 )
-from tma.linalg import jacobi_scaled_eigh, solve_shifted
+from tma.maths.linalg import jacobi_scaled_eigh, solve_shifted
 
 
 @dataclass

@@ -14,7 +14,6 @@ from pathlib import Path
 
 import pyarrow as pa
 
-from tma import __version__
 from tma.config import to_plain
 from tma.errors import ConfigError, TmaError
 from tma.families import dataset_name, load_scenario
@@ -23,8 +22,9 @@ from tma.io.atomic import sha256_json, write_parquet_atomic
 from tma.io.dataset import Dataset, datasets_dir, file_record, shard_relpath, write_manifest
 from tma.io.owned import building
 from tma.io.shards import finished_record, mark_finished, sidecar
-from tma.parallel import in_threads, run_tasks
-from tma.sharding import n_shards
+from tma.runtime.parallel import in_threads, run_tasks
+from tma.runtime.sharding import n_shards
+from tma.version import __version__
 
 log = logging.getLogger(__name__)
 PARTS = "parts"
@@ -102,7 +102,7 @@ def _is_good(root: Path, config: dict) -> bool:
 
 def simulate_datasets(scenario_nodes, data_dir, *, engine=2, force=False, progress=True):
     """Create the dataset of each scenario config node; returns the dataset directories.
-    ``engine``: where shards run (``tma.parallel.Engine``, or a number of local workers)."""
+    ``engine``: where shards run (``tma.runtime.parallel.Engine``, or a number of local workers)."""
     configs = [load_scenario(node) for node in scenario_nodes]
     roots = [datasets_dir(data_dir) / dataset_name(module, cfg) for module, cfg in configs]
     with building(roots) as outputs:  # a second simulate of a dataset waits, finds it done

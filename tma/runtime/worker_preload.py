@@ -1,5 +1,5 @@
-"""What the workers' fork server (``tma.parallel.preload_workers``) imports, and so every worker
-forked from it has from its start; imported there only (its import does the work).
+"""What the workers' fork server (``tma.runtime.forkserver.preload_workers``) imports, and so
+every worker forked from it has from its start; imported there only (its import does the work).
 
 The modules named in ``$TMA_PRELOAD`` (comma-separated), each on its own: one that fails to
 import (a broken plotting backend, say) is left to the worker that needs it, which then
@@ -17,7 +17,7 @@ only those that estimate with compiled kernels win back."""
 import importlib
 import os
 
-from tma.parallel import FORK_SERVER, PRELOAD, die_with_parent
+from tma.runtime.forkserver import FORK_SERVER, PRELOAD, die_with_parent
 
 die_with_parent(int(os.environ.get(FORK_SERVER) or 0))  # the command that started the server
 _forking = [0]  # the pid of the process that forks (the server; a worker, for its children)

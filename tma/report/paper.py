@@ -34,8 +34,8 @@ import numpy as np
 import pandas as pd
 from scipy.special import ndtri
 
-from tma.stats import wilson_interval
-from tma.tables import markdown_table
+from tma.maths.stats import wilson_interval
+from tma.report.markdown import markdown_table
 
 COLUMNS = ["family", "quantity", "setting", "paper", "ours", "ours_lo", "ours_hi", "z",
            "verdict", "note"]

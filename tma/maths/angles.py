@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from tma.jit import njit
+from tma.runtime.jit import njit
 
 TWO_PI = 2.0 * np.pi
 

@@ -23,7 +23,11 @@ if TYPE_CHECKING:  # pandas (0.2 s) and pyarrow.dataset load where used, not at 
     import pyarrow.dataset as pds
 
 from tma.errors import ConfigError, InputError
-from tma.estimation import (
+from tma.families import family as family_of
+from tma.io.dataset import Dataset, datasets_dir
+from tma.io.owned import plain_name, remove_stale_temporaries
+from tma.runtime.parallel import in_threads
+from tma.stages.estimate import (
     MANIFEST,
     check_datasets,
     full_config,
@@ -33,16 +37,12 @@ from tma.estimation import (
     runs_dir,
     seconds_per_track,
 )
-from tma.families import family as family_of
-from tma.io.dataset import Dataset, datasets_dir
-from tma.io.owned import plain_name, remove_stale_temporaries
-from tma.parallel import in_threads
 
 
 @dataclass
 class RunEntry:
     """A finished run as a report sees it: its dataset, estimator, directory, manifest and
-    estimates, and its wall seconds per track (``tma.estimation.seconds_per_track``; NaN when
+    estimates, and its wall seconds per track (``tma.stages.estimate.seconds_per_track``; NaN when
     unknown), read once here."""
 
     dataset: Dataset

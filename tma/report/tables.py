@@ -8,6 +8,7 @@ from pathlib import Path
 import pandas as pd
 
 from tma.io.atomic import atomic_path, write_text_atomic
+from tma.report.markdown import markdown_table
 
 log = logging.getLogger(__name__)
 
@@ -41,21 +42,13 @@ def write_csv(df: pd.DataFrame, path: Path, float_format=None):
         df.to_csv(tmp, index=False, float_format=float_format, lineterminator="\n")
 
 
-def markdown_table(df: pd.DataFrame) -> str:
-    """A GitHub-flavoured Markdown table of already formatted (string) cells."""
-    head = "| " + " | ".join(df.columns) + " |"
-    rule = "|" + "|".join("---" for _ in df.columns) + "|"
-    body = ["| " + " | ".join(str(v) for v in row) + " |" for row in df.itertuples(index=False)]
-    return "\n".join([head, rule, *body]) + "\n"
-
-
 def write_table(tables_dir, name: str, title: str, intro: str, data: pd.DataFrame,
                 shown: pd.DataFrame, *, float_format=None, notes: str = "",
                 paper=None) -> list[Path]:
     """One table, as every report writes it: ``<name>.csv`` (``data``, every number;
     ``float_format`` as ``write_csv``), ``<name>.md`` (``# title``, ``intro``, the formatted
     cells of ``shown``, ``notes``) and, given ``paper`` = ``(rows, intro)`` (the family's
-    comparison, ``tma.paper``), the section "Against the paper" at the end of the Markdown
+    comparison, ``tma.report.paper``), the section "Against the paper" at the end of the Markdown
     and ``<name>_paper.csv``. Returns the paths written: csv, md (, paper csv)."""
     tables_dir = Path(tables_dir)
     paths = [tables_dir / f"{name}.csv", tables_dir / f"{name}.md"]
@@ -64,7 +57,7 @@ def write_table(tables_dir, name: str, title: str, intro: str, data: pd.DataFram
     if notes:
         text += f"\n{notes.strip()}\n"
     if paper is not None:
-        from tma.paper import csv_frame, section  # tma.paper writes its CSV with write_csv
+        from tma.report.paper import csv_frame, section
 
         rows, paper_intro = paper
         text = text.rstrip("\n") + "\n\n" + section(rows, paper_intro)

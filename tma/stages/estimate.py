@@ -25,7 +25,6 @@ from time import perf_counter
 import numpy as np
 import pyarrow as pa
 
-from tma import __version__
 from tma.config import to_plain
 from tma.errors import ConfigError, InputError, IntegrityError, TmaError
 from tma.families import build_estimator, estimator_class, scenario_module
@@ -34,7 +33,8 @@ from tma.io.atomic import sha256_json, write_json_atomic, write_parquet_atomic
 from tma.io.dataset import Dataset, file_record, read_sealed_manifest, sealed
 from tma.io.owned import building
 from tma.io.shards import finished_record, mark_finished
-from tma.parallel import in_threads, iter_tasks
+from tma.runtime.parallel import in_threads, iter_tasks
+from tma.version import __version__
 
 log = logging.getLogger(__name__)
 RUN_FORMAT = "tma-run"
@@ -314,7 +314,7 @@ def missing_run_line(data_dir, dataset: Dataset, config: dict) -> str:
     """One line for a run of ``config`` (full, as ``run_path`` hashes it) on ``dataset`` that
     does not exist: the finished runs of ``dataset`` that do, each with the overrides that
     select it (``estimator=NAME`` and the values that differ from NAME's on this dataset)."""
-    from tma.experiment import override_text
+    from tma.plan.grid import override_text
 
     found, stale = [], 0
     for path in sorted((runs_dir(data_dir) / dataset.name).glob(f"*/{MANIFEST}")):

@@ -29,10 +29,11 @@ from tma.families import family as family_named
 from tma.io.atomic import sha256_file
 from tma.io.dataset import MANIFEST, datasets_dir, file_record, shard_relpath, write_manifest
 from tma.io.owned import building, is_owned, plain_name
-from tma.sources import read_source, source_kind
+from tma.sources import read_source, reader, source_kind
 from tma.sources.align import align
-from tma.sources.base import Caution, groups, inapplicable, source_options, unknown_option
+from tma.sources.base import Caution
 from tma.sources.labels import name_room
+from tma.sources.options import groups, inapplicable, source_options, unknown_option
 
 log = logging.getLogger(__name__)
 
@@ -128,16 +129,16 @@ def _first_utc_ns(recordings) -> int | None:
 
 
 def _require(rec, path, kind, options):
-    role = options.observation.role
+    """The recording holds contacts and own-ship, else a message naming the options of its
+    kind that select them (``Reader.selects_contacts``, ``selects_navigation``)."""
+    role, declared = options.observation.role, reader(kind)
     if rec.contacts is None:
         raise InputError(f"{path}: no {options.observation.plural} found ({kind}); name them "
-                         "with " + (f"columns.{role}=<column>" if kind == "csv" else
-                                    f"{role}.topic=<topic> [{role}.field=<field>]"))
+                         f"with {declared.selects_contacts.format(role=role)}")
     if rec.navigation is None:
         raise InputError(f"{path}: no own-ship fixes found ({kind}); name them with "
-                         + ("columns.lat/columns.lon or columns.x/columns.y" if kind == "csv"
-                            else "ownship.topic=<topic>")
-                         + ", or give them in a separate file with navigation=FILE")
+                         f"{declared.selects_navigation.format(role=role)}, or give them in a "
+                         "separate file with navigation=FILE")
 
 
 @dataclass

@@ -11,6 +11,8 @@ them).
 import numpy as np
 from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix
 
+from tma.errors import InputError
+
 SEA_LEVEL_TOL_M = 1e-6  # height above the sea at which a point counts as on it
 MAX_ITERATIONS = 20  # each shrinks the height by ~(distance / earth radius)^2: 8 at 2000 km
 MAX_MAPPED_M = 2e6  # farther from the origin the tangent plane is no map: NaN
@@ -25,6 +27,21 @@ def geodetic_to_local(lat_deg, lon_deg, origin_deg) -> tuple[np.ndarray, np.ndar
     east, north, _ = pymap3d.geodetic2enu(lat_deg, lon_deg, 0.0, origin_deg[0], origin_deg[1],
                                           0.0, deg=True)
     return np.asarray(east, dtype=float), np.asarray(north, dtype=float)
+
+
+def check_mapped(x_m, y_m, t_s, where: str = "") -> None:
+    """The own-ship-off-the-map rule, for ingest (before anything is written, ``where``: the
+    input) and the log writer alike: an InputError when own-ship (``x_m``, ``y_m`` at times
+    ``t_s``) goes farther than ``MAX_MAPPED_M`` from the origin, where its tangent plane maps
+    nothing (``local_to_geodetic`` would give NaN), naming the first such time."""
+    distance = np.hypot(np.asarray(x_m, float), np.asarray(y_m, float))
+    far = ~(distance <= MAX_MAPPED_M)  # NaN and inf too
+    if far.any():
+        k = int(np.argmax(far))
+        raise InputError(f"{where + ': ' if where else ''}own-ship goes farther than "
+                         f"{MAX_MAPPED_M / 1e3:g} km from the origin ({distance[k] / 1e3:.0f} km "
+                         f"at t = {t_s[k]:.9g} s after the log's start): its tangent plane "
+                         "cannot map it; split the log")
 
 
 def local_to_geodetic(x_m, y_m, origin_deg) -> tuple[np.ndarray, np.ndarray]:
