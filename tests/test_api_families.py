@@ -144,6 +144,7 @@ def test_the_results_hold_the_report_and_keep_the_estimates_beside_them(tmp_path
         "merge": results.merge(pd.DataFrame({"track_id": [0], "x": [1]}), on="track_id"),
         "concat with another frame": pd.concat([results, pd.DataFrame({"label": ["9"]})]),
         "csv": pd.read_csv(_csv(results, tmp_path)),
+        "parquet": pd.read_parquet(_parquet(results, tmp_path)),
     }
     for name, frame in lost.items():
         with pytest.raises(ValueError) as exc:
@@ -159,6 +160,15 @@ def test_the_results_hold_the_report_and_keep_the_estimates_beside_them(tmp_path
 def _csv(frame, tmp_path):
     frame.to_csv(tmp_path / "results.csv", index=False)
     return tmp_path / "results.csv"
+
+
+def _parquet(frame, tmp_path):
+    """Written as pandas writes ``attrs``, as JSON: the family and estimator, no table
+    (before: TypeError, the tables are not JSON)."""
+    frame.to_parquet(tmp_path / "results.parquet")
+    assert pd.read_parquet(tmp_path / "results.parquet").attrs == {
+        "tma": {"family": "bearings2d", "estimator": "lm"}}
+    return tmp_path / "results.parquet"
 
 
 def test_what_does_not_apply_is_refused_naming_what_does(tmp_path):

@@ -16,8 +16,8 @@ code the commands run (``docs/api.md``).
 
 Options are ingest's and an estimator's, named as on the command line: as keyword arguments
 by their group (``columns={"time": "tid"}``, ``bearing={"units": "rad"}``) or in a dict of
-dotted names (``options={"columns.time": "tid"}``). Recorded logs are ``RECORDED``'s (the
-family that ``pipeline.ingest`` reads them for).
+dotted names (``options={"columns.time": "tid"}``). Recorded logs are those of the family
+that reads them (the one with an ``ingest`` module: ``bearings2d``).
 
 Every error is one line of the kind pandas users catch: ``ValueError`` (``tma.errors``),
 ``TypeError`` for an argument of the wrong kind, ``FileNotFoundError`` for no such file, and
@@ -25,6 +25,7 @@ for a map that cannot be written the ``OSError`` the system gave.
 """
 
 import errno
+import functools
 import logging
 import os
 from collections.abc import Sequence
@@ -36,8 +37,19 @@ import pandas as pd
 
 from tma.errors import ConfigError, MissingFileError
 
-RECORDED = "bearings2d"  # whose logs a recording holds: ingest's family (conf/ingest.yaml)
 log = logging.getLogger("tma")
+
+
+@functools.cache
+def _recorded() -> str:
+    """The family whose logs a recording holds: the one that reads recorded logs (it has an
+    ``ingest`` module; ``bearings2d``)."""
+    from importlib.util import find_spec
+
+    from tma.families import NAMES
+
+    (name,) = [n for n in NAMES if find_spec(f"tma.families.{n}.ingest") is not None]
+    return name
 
 
 def _plain(value, key: str):
@@ -79,7 +91,7 @@ def _split(options: dict) -> tuple[dict, dict]:
     reading options of one nested dict."""
     from tma.ingest import setting_names
 
-    return ({k: options.pop(k) for k in setting_names(RECORDED) if k in options}, options)
+    return ({k: options.pop(k) for k in setting_names(_recorded()) if k in options}, options)
 
 
 class Recording:
@@ -97,7 +109,7 @@ class Recording:
     def __init__(self, read):
         self._read = read
         self.logs = list(read.logs)
-        self.family = RECORDED
+        self.family = read.family
 
     @classmethod
     def from_frames(cls, bearings: pd.DataFrame, navigation: pd.DataFrame | None = None, *,
@@ -116,7 +128,7 @@ class Recording:
                 raise TypeError(f"{name} must be a pandas DataFrame, got "
                                 f"{type(frame).__name__}{hint}")
         settings, reading = _split(_nested(options, groups))
-        return cls(read_frames(bearings, navigation, family=RECORDED, options=reading,
+        return cls(read_frames(bearings, navigation, family=_recorded(), options=reading,
                                **settings))
 
     @property
@@ -238,7 +250,7 @@ def read_log(path, *, navigation=None, format: str = "auto", sigma_deg: float | 
                         f"{type(truth).__name__}")
     options = _nested(options, groups)
     _plain({"sigma_deg": sigma_deg, "min_bearings": min_bearings, "truth": truth}, "read_log")
-    return Recording(read(path, family=RECORDED, fmt=format, navigation=navigation,
+    return Recording(read(path, family=_recorded(), fmt=format, navigation=navigation,
                           options=options, sigma_deg=sigma_deg, min_bearings=min_bearings,
                           truth=truth))
 
@@ -376,24 +388,30 @@ def _with_sigma(logs, sigma_deg, family_name: str) -> list:
                           f"dataset's noise is its scenario's: tma.simulate({family_name!r}, "
                           "...) sets it (python -m tma.options "
                           f"{family_name} lists its keys)")
-    family(RECORDED).ingest.Settings(sigma_deg=sigma_deg)  # ingest's sigma_deg= check
+    family(family_name).ingest.Settings(sigma_deg=sigma_deg)  # ingest's sigma_deg= check
     return [replace(lg, sigma_deg=float(sigma_deg)) for lg in logs]
 
 
-class Results:
+class Results(dict):
     """What ``tma.estimate`` keeps beside its results, in ``results.attrs["tma"]``: the
-    family, the estimator, the report as returned and the estimator's own tables (name ->
-    DataFrame, ``estimates`` first). pandas carries ``attrs`` through what selects rows or
-    columns of a frame (filters, ``query``, ``sort_values``, ``head``, ``loc``/``iloc``,
-    ``copy``, ``reset_index``, ``assign``, pickling), so a selection of the results still
-    plots; not through ``merge``, a ``concat`` with other frames or a CSV file. Shared, never
-    copied, by the frames derived from one result (equal only to itself)."""
+    family, the estimator, the report as returned (``report``) and the estimator's own tables
+    (``tables``: name -> DataFrame, ``estimates`` first). pandas carries ``attrs`` through
+    what selects rows or columns of a frame (filters, ``query``, ``sort_values``, ``head``,
+    ``loc``/``iloc``, ``copy``, ``reset_index``, ``assign``, pickling), so a selection of the
+    results still plots; not through ``merge``, a ``concat`` with other frames or a file.
+    Shared, never copied, by the frames derived from one result (equal only to itself). A
+    dict of its family and estimator, so that what writes ``attrs`` as JSON (``to_parquet``)
+    writes those and no table."""
 
     def __init__(self, family: str, estimator: str, report: pd.DataFrame, tables: dict):
+        super().__init__(family=family, estimator=estimator)
         self.family, self.estimator, self.report, self.tables = family, estimator, report, tables
 
     def __eq__(self, other):
         return self is other
+
+    def __ne__(self, other):
+        return self is not other
 
     __hash__ = object.__hash__
 
@@ -402,6 +420,9 @@ class Results:
 
     def __deepcopy__(self, memo):
         return self
+
+    def __reduce__(self):  # pickled with its tables (dict's own pickling would drop them)
+        return (Results, (self.family, self.estimator, self.report, self.tables))
 
     def __repr__(self) -> str:
         return (f"<tma results: {len(self.report)} {self.family} track(s) by "
@@ -441,7 +462,7 @@ def _held(results, what: str) -> Results:
     if not isinstance(held, Results):
         raise ValueError(f"{what}: these results carry no estimate (results.attrs['tma'] is "
                          "kept through filters, sorting and column selection, not through a "
-                         "merge, a concat with other frames or a CSV file): pass what "
+                         "merge, a concat with other frames or a file): pass what "
                          "tma.estimate returned, or rows of it")
     return held
 
