@@ -2,7 +2,20 @@
 
 import numpy as np
 
+from tma.jit import njit
+
 TWO_PI = 2.0 * np.pi
+
+
+def wrap_residual(angle_rad):
+    """Wrap to [-pi, pi] by the nearest multiple of 2 pi (cheaper than a float modulo; the
+    two conventions differ only at exactly +-pi, where a squared residual is the same): the
+    difference of two bearings. Numpy arrays or numbers; ``wrap_angle`` is the same function
+    compiled, for the kernels."""
+    return angle_rad - TWO_PI * np.rint(angle_rad * (1.0 / TWO_PI))
+
+
+wrap_angle = njit(inline="always")(wrap_residual)
 
 
 def wrap_to_pi(angle_rad):

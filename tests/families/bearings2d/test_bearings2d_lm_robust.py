@@ -13,10 +13,9 @@ from scipy.special import chdtri
 from tma.families import build_estimator
 from tma.families.bearings2d.estimators.lm import initial_theta
 from tma.families.bearings2d.estimators.lm_kernel import (
-    LOSS_SQUARED,
+    LOSS_HUBER,
     TUNING,
     marquardt,
-    marquardt_robust,
 )
 from tma.families.bearings2d.model import BearingTerms, bearing_jacobian, bearing_residuals
 from tma.families.bearings2d.scenario import (
@@ -82,8 +81,9 @@ def test_default_is_todays_kernel_call_bit_for_bit(missing):
 
 
 def test_robust_kernel_with_the_squared_loss_is_the_plain_kernel():
-    """The IRLS kernel with omega = 1 takes the plain kernel's decisions (counters) and
-    reaches its result to round-off: the two share every step but the cost evaluation."""
+    """The kernel's robust branch with a quadratic loss (Huber with c = inf: omega = 1)
+    takes the squared branch's decisions (counters) and reaches its result to round-off:
+    the two share every step but the cost evaluation."""
     log, _ = _log(40, 4)
     lm = build_estimator({"name": "lm"})
     theta, (n_f, n_iter, stop), cost, _ = _todays_call(lm, log)
@@ -92,9 +92,9 @@ def test_robust_kernel_with_the_squared_loss_is_the_plain_kernel():
     x = initial_theta(cfg, t, ox, oy, measured, np.zeros(log.n_tracks, dtype=int))
     out = [np.zeros(40, dtype=np.int64) for _ in range(2)] + [np.full(40, -1, dtype=np.int64),
                                                                np.zeros(40)]
-    marquardt_robust(x, t, ox, oy, measured, np.empty((0, 0)), False, LOSS_SQUARED, 1.0,
-                     np.ones(40), cfg.lambda0, cfg.lambda_up, cfg.lambda_down, cfg.f_tol_rad2,
-                     cfg.max_iter, cfg.lambda_max, cfg.pd_rtol, *out)
+    marquardt(x, t, ox, oy, measured, np.empty((0, 0)), False, cfg.lambda0, cfg.lambda_up,
+              cfg.lambda_down, cfg.f_tol_rad2, cfg.max_iter, cfg.lambda_max, cfg.pd_rtol, *out,
+              None, LOSS_HUBER, np.inf, np.ones(40))
     np.testing.assert_array_equal(out[0], n_f)
     np.testing.assert_array_equal(out[1], n_iter)
     np.testing.assert_array_equal(out[2], stop)

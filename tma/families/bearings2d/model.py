@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from tma.angles import TWO_PI, bearing_from_north
+from tma.angles import bearing_from_north, wrap_angle, wrap_residual
 from tma.jit import njit
 
 THETA_COLUMNS = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")
@@ -20,12 +20,6 @@ THETA_COLUMNS = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")
 
 def _masked(values, valid):
     return values if valid is None else np.where(valid, values, 0.0)
-
-
-def wrap_residual(angle_rad):
-    """Wrap to [-pi, pi] by the nearest multiple of 2 pi (cheaper than a float modulo; the
-    two conventions differ only at exactly +-pi, where the squared residual is the same)."""
-    return angle_rad - TWO_PI * np.rint(angle_rad * (1.0 / TWO_PI))
 
 
 def relative_position(theta, t_s, own_x_m, own_y_m):
@@ -152,34 +146,67 @@ def atan2(y, x):
     return math.copysign(a, y)
 
 
+# Losses of the residuals: rho(u) ~ u^2 near 0, u = r / s; tuning constants c (in units of s)
+# for 95 % efficiency under Gaussian noise.
+LOSS_SQUARED, LOSS_HUBER, LOSS_CAUCHY = 0, 1, 2
+LOSSES = {"squared": LOSS_SQUARED, "huber": LOSS_HUBER, "cauchy": LOSS_CAUCHY}
+TUNING = {"squared": math.inf, "huber": 1.345, "cauchy": 2.385}
+
+
+@njit(error_model="numpy")
+def rho_omega(u, loss, c):
+    """rho(u) and the IRLS weight omega = rho'(u) / (2 u): squared u^2 (omega 1); Huber u^2
+    for |u| <= c, else 2 c |u| - c^2 (omega c / |u|); Cauchy c^2 log(1 + (u/c)^2) (omega
+    1 / (1 + (u/c)^2))."""
+    if loss == LOSS_HUBER:
+        au = abs(u)
+        if au <= c:
+            return u * u, 1.0
+        return 2.0 * c * au - c * c, c / au
+    if loss == LOSS_CAUCHY:
+        q = (u / c) * (u / c)
+        return c * c * math.log1p(q), 1.0 / (1.0 + q)
+    return u * u, 1.0
+
+
 # reassoc lets the 14 sums vectorise (their order is then LLVM's), contract fuses multiply-adds;
 # atan2 is compiled apart, without reassoc, so its careful evaluation order stays.
-@njit(error_model="numpy", fastmath={"reassoc", "contract"})
-def track_terms(theta, t, ox, oy, measured, weight, weighted, H, g):
-    """F = sum r_k^2 (rad^2) of one track at ``theta`` (4,); H = J^T J (4, 4) and g = J^T r
-    (4,) written into ``H`` and ``g``.
+@njit(error_model="numpy", fastmath={"reassoc", "contract"}, depends=(rho_omega, wrap_angle))
+def track_terms(theta, t, ox, oy, measured, weight, weighted, H, g, loss=LOSS_SQUARED,
+                c=math.inf, s=1.0):
+    """F = sum_k s^2 rho(r_k / s) (rad^2; the squared loss: sum r_k^2) of one track at
+    ``theta`` (4,); H = J^T Omega J (4, 4) and g = J^T Omega r (4,) written into ``H`` and
+    ``g`` (Omega = diag omega_k, ``rho_omega``; 1 for the squared loss: J^T J and J^T r),
+    the IRLS normal equations, whose step lowers F for a large enough damping.
 
     r_k = wrap(X_k - atan2(dx_k, dy_k)), X the measured bearing (rad); with J = (a, b, a t,
     b t), a = d bearing / dx = dy / rho^2 and b = d bearing / dy = -dx / rho^2, every entry
-    of H is a sum of a^2, ab, b^2 times 1, t or t^2. ``weighted``: multiply each residual and
-    partial by ``weight`` (0 for a missing bearing).
+    of H is a sum of omega a^2, omega ab, omega b^2 times 1, t or t^2. ``weighted``:
+    multiply each residual and partial by ``weight`` (0 for a missing bearing).
     """
     x0, y0, vx, vy = theta[0], theta[1], theta[2], theta[3]
     F = aa0 = aa1 = aa2 = ab0 = ab1 = ab2 = bb0 = bb1 = bb2 = ar0 = ar1 = br0 = br1 = 0.0
+    robust = loss != LOSS_SQUARED  # loop-invariant: the squared loop is compiled apart
+    inv_s = 1.0 / s
     for k in range(t.size):
         tk = t[k]
         dx = x0 + vx * tk - ox[k]
         dy = y0 + vy * tk - oy[k]
-        r = measured[k] - atan2(dx, dy)
-        r -= TWO_PI * np.rint(r * (1.0 / TWO_PI))
+        r = wrap_angle(measured[k] - atan2(dx, dy))
         inv_r2 = 1.0 / (dx * dx + dy * dy)
         if weighted:
             r *= weight[k]
             inv_r2 *= weight[k]
         a = dy * inv_r2
         b = dx * inv_r2  # minus d bearing / dy: the signs are restored below
-        F += r * r
-        aa, ab, bb, ar, br = a * a, a * b, b * b, a * r, b * r
+        if robust:
+            rho, omega = rho_omega(r * inv_s, loss, c)
+            F += s * s * rho
+            aa, ab, bb, ar, br = omega * a * a, omega * a * b, omega * b * b, omega * a * r, \
+                omega * b * r
+        else:
+            F += r * r
+            aa, ab, bb, ar, br = a * a, a * b, b * b, a * r, b * r
         t2 = tk * tk
         aa0 += aa
         aa1 += aa * tk

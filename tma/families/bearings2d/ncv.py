@@ -50,7 +50,7 @@ import math
 
 import numpy as np
 
-from tma.angles import TWO_PI
+from tma.angles import wrap_angle
 from tma.families.bearings2d.model import atan2, bearing_residuals
 from tma.jit import njit
 
@@ -93,15 +93,14 @@ def _predict(m, P, T, lam, mp, Pp):
     Pp[3, 3] += q1
 
 
-@njit(error_model="numpy", depends=(atan2,))
+@njit(error_model="numpy", depends=(atan2, wrap_angle))
 def _update(m, P, z, nom, ox, oy, h, kg, tmp, A):
     """Kalman update of (m, P) with the bearing z (rad) linearised about ``nom`` (R = 1,
     Joseph form; ``h``, ``kg``, ``tmp``, ``A``: work arrays); returns (nu, S)."""
     dx, dy = nom[0] - ox, nom[1] - oy
     inv_r2 = 1.0 / (dx * dx + dy * dy)
     h[0], h[1] = dy * inv_r2, -dx * inv_r2
-    r = z - atan2(dx, dy)  # wrap(z - h(nom)) - H (m - nom)
-    r -= TWO_PI * np.rint(r * (1.0 / TWO_PI))
+    r = wrap_angle(z - atan2(dx, dy))  # wrap(z - h(nom)) - H (m - nom)
     nu = r - h[0] * (m[0] - nom[0]) - h[1] * (m[1] - nom[1])
     S = 1.0
     for i in range(4):
@@ -153,7 +152,7 @@ def _chol_solve(A, b, L, y):
     return True
 
 
-@njit(error_model="numpy", depends=(atan2,))
+@njit(error_model="numpy", depends=(atan2, wrap_angle))
 def _filter(t, ox, oy, z, w, weighted, lo, hi, nom, lam, prior, p0, mf, Pf, Pp, nu, S):
     """Kalman filter over epochs lo..hi linearised about ``nom`` (K, 4); filtered means and
     covariances, predicted covariances (index k: the prediction into k) and the innovations
@@ -206,19 +205,18 @@ def _smooth(t, lo, hi, mf, Pf, Pp, ms):
     return True
 
 
-@njit(error_model="numpy", depends=(atan2,))
+@njit(error_model="numpy", depends=(atan2, wrap_angle))
 def _bearing_cost(ox, oy, z, w, weighted, lo, hi, s):
     """Sum of squared wrapped bearing residuals (rad^2) of the trajectory ``s`` (K, 4)."""
     c = 0.0
     for k in range(lo, hi + 1):
         if (not weighted) or w[k] > 0.0:
-            r = z[k] - atan2(s[k, 0] - ox[k], s[k, 1] - oy[k])
-            r -= TWO_PI * np.rint(r * (1.0 / TWO_PI))
+            r = wrap_angle(z[k] - atan2(s[k, 0] - ox[k], s[k, 1] - oy[k]))
             c += r * r
     return c
 
 
-@njit(error_model="numpy", depends=(atan2,))
+@njit(error_model="numpy", depends=(atan2, wrap_angle))
 def _map_cost(t, ox, oy, z, w, weighted, lo, hi, s, lam, prior, p0):
     """MAP cost (units of sigma^2): squared bearing residuals, the NCV process term of each
     step with ``lam[k]`` > 0 (K,: the step into epoch k) and the diffuse prior about
@@ -238,7 +236,7 @@ def _map_cost(t, ox, oy, z, w, weighted, lo, hi, s, lam, prior, p0):
     return c
 
 
-@njit(error_model="numpy", depends=(atan2,))
+@njit(error_model="numpy", depends=(atan2, wrap_angle))
 def _fit(t, ox, oy, z, w, weighted, lo, hi, nom, lam, prior, p0, max_iter, tol_m, mf, Pf,
          Pp, nu, S, ms, trial):
     """Gauss-Newton (iterated smoother) from ``nom`` (K, 4, updated in place to the MAP
@@ -309,7 +307,7 @@ def _householder(A, rows, cols):
             A[i, j] = 0.0
 
 
-@njit(error_model="numpy", depends=(atan2,))
+@njit(error_model="numpy", depends=(atan2, wrap_angle))
 def _srif(t, ox, oy, z, w, weighted, lo, hi, nom, lam, e, S, R, r):
     """Square-root information filter (Bierman, "Factorization Methods for Discrete
     Sequential Estimation", 1977) over epochs lo..hi, linearised about ``nom``, from no
@@ -365,8 +363,7 @@ def _srif(t, ox, oy, z, w, weighted, lo, hi, nom, lam, e, S, R, r):
             continue
         dx, dy = nom[k, 0] - ox[k], nom[k, 1] - oy[k]
         inv_r2 = 1.0 / (dx * dx + dy * dy)
-        res = z[k] - atan2(dx, dy)
-        res -= TWO_PI * np.rint(res * (1.0 / TWO_PI))
+        res = wrap_angle(z[k] - atan2(dx, dy))
         row[0], row[1], row[2], row[3] = dy * inv_r2, -dx * inv_r2, 0.0, 0.0
         row[4] = res + row[0] * nom[k, 0] + row[1] * nom[k, 1]
         gamma = 1.0
@@ -407,7 +404,7 @@ def _invert_upper(R, Rinv):
     return True
 
 
-@njit(error_model="numpy", depends=(atan2,))
+@njit(error_model="numpy", depends=(atan2, wrap_angle))
 def smooth_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, lam, scale2,
                   p0_pos, max_iter, tol_m, state, P_last, e, cost, passes):
     """Per track i: the NCV MAP trajectory from the constant-velocity ``theta[i]`` with

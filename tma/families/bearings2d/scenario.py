@@ -143,6 +143,8 @@ def label(cfg: Config) -> str:
     target = cfg.target
     motion = "".join([f"-q{target.accel_psd_m2_s3:g}" if target.accel_psd_m2_s3 > 0 else "",
                       f"-man{target.manoeuvres.prob:g}" if target.manoeuvres.prob > 0 else "",
+                      f"-man{target.manoeuvres.rate_per_h:g}ph"
+                      if target.manoeuvres.rate_per_h > 0 else "",
                       "" if target.declared else "-undeclared"])
     return f"sigma{cfg.sigma_deg:g}{outliers}{motion}-n{cfg.n_tracks}"
 

@@ -8,9 +8,9 @@ definite, multiplies lambda by ``lambda_up``; an accepted step multiplies it by
 Every pass makes one fused evaluation of F, J^T J and J^T r at the trial point (accepted and
 rejected alike; n_f_evals counts it once).
 
-``loss=huber|cauchy`` fits robustly (``lm_kernel.marquardt_robust``): F_rho = sum s^2
-rho(r/s), iteratively reweighted inside the same Marquardt loop (H = J^T Omega J, g = J^T
-Omega r, omega = rho'(u) / (2u), a step accepted when F_rho falls; c = 1.345 s for Huber,
+``loss=huber|cauchy`` fits robustly (the same ``lm_kernel.marquardt``, its loss a parameter):
+F_rho = sum s^2 rho(r/s), iteratively reweighted inside the Marquardt loop (H = J^T Omega J,
+g = J^T Omega r, omega = rho'(u) / (2u), a step accepted when F_rho falls; c = 1.345 s for Huber,
 2.385 s for Cauchy). The scale s is the log's nominal sigma (``scale=sigma``), or with
 ``scale=mad`` (or no nominal sigma > 0) 1.4826 median |r| at the first start, re-estimated
 twice at the robust solution (each a new pass from there). The covariance is the sandwich
@@ -43,7 +43,6 @@ from tma.families.bearings2d.estimators.lm_kernel import (
     STOP_F_TOL,
     TUNING,
     marquardt,
-    marquardt_robust,
 )
 from tma.families.bearings2d.model import BearingTerms, bearing_jacobian, bearing_residuals
 from tma.families.bearings2d.status import noiseless_fit_p, robust_fit_p, runs_test_p
@@ -235,13 +234,12 @@ class LevenbergMarquardt(BearingsEstimator):
             "stop_reason": np.full(m, -1, dtype=np.int64),
             "cost_robust_rad2": np.zeros(m),
         }
-        marquardt_robust(out["theta"], terms.t, terms.ox, terms.oy, _tiled(terms.measured, k),
-                         _tiled(terms.weight, k), terms.weighted, LOSSES[cfg.loss],
-                         TUNING[cfg.loss], np.tile(scale, k), float(cfg.lambda0),
-                         float(cfg.lambda_up), float(cfg.lambda_down), float(cfg.f_tol_rad2),
-                         min(int(cfg.max_iter), MAX_INT), float(cfg.lambda_max),
-                         float(cfg.pd_rtol), out["n_f_evals"], out["n_iter"],
-                         out["stop_reason"], out["cost_robust_rad2"])
+        marquardt(out["theta"], terms.t, terms.ox, terms.oy, _tiled(terms.measured, k),
+                  _tiled(terms.weight, k), terms.weighted, float(cfg.lambda0),
+                  float(cfg.lambda_up), float(cfg.lambda_down), float(cfg.f_tol_rad2),
+                  min(int(cfg.max_iter), MAX_INT), float(cfg.lambda_max), float(cfg.pd_rtol),
+                  out["n_f_evals"], out["n_iter"], out["stop_reason"], out["cost_robust_rad2"],
+                  None, LOSSES[cfg.loss], TUNING[cfg.loss], np.tile(scale, k))
         return self._winners(out, k, "cost_robust_rad2")
 
     def _winners(self, out, k, cost):
