@@ -34,6 +34,16 @@ def workdir(tmp_path_factory):
     return root
 
 
+@pytest.fixture(autouse=True)
+def _close_figures():
+    """The figures plot_contact returns are pyplot's: closed after each test, so that a
+    worker's later tests do not meet matplotlib's warning of too many open figures."""
+    yield
+    import matplotlib.pyplot as plt
+
+    plt.close("all")
+
+
 @pytest.mark.parametrize("doc", ["docs/api.md", "README.md"])
 def test_the_documented_python_runs_as_written(doc, workdir, monkeypatch):
     """Every python block of the page, in order, in one namespace, nothing prepended."""

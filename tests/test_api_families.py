@@ -29,6 +29,16 @@ FAMILIES = {
 }
 
 
+@pytest.fixture(autouse=True)
+def _close_figures():
+    """The figures plot_contact returns are pyplot's: closed after each test, so that a
+    worker's later tests do not meet matplotlib's warning of too many open figures."""
+    yield
+    import matplotlib.pyplot as plt
+
+    plt.close("all")
+
+
 def one_line(exc) -> str:
     text = str(exc.value if hasattr(exc, "value") else exc)
     assert "\n" not in text, text
@@ -287,6 +297,8 @@ def test_every_entry_point_raises_only_what_pandas_users_catch(place, monkeypatc
         "simulate": (tma.simulate, ["radar2d"], {"n_tracks": 2, "shard_size": 2,
                                                  "options": None}),
     }
+    import matplotlib.pyplot as plt
+
     for name, (function, args, kwargs) in calls.items():
         function(*args, **kwargs)  # the good call is good
         slots = [*range(len(args)), *kwargs]
@@ -301,6 +313,7 @@ def test_every_entry_point_raises_only_what_pandas_users_catch(place, monkeypatc
                 caught = (OSError if (name, slot) == ("write_map", 2) else FileNotFoundError)
                 try:
                     function(*a, **kw)
+                    plt.close("all")
                 except (ValueError, TypeError, caught) as exc:
                     assert "\n" not in str(exc), (where, str(exc))
                     assert "Traceback" not in str(exc) and str(exc), where
