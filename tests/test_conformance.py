@@ -3,10 +3,11 @@
 
 Each estimator builds from its defaults, refuses a bad value naming the key, is
 deterministic, gives per-track results that do not depend on which other tracks share the
-shard (nor on their order), handles a one-track shard, gives the columns it declares, and has
-its name written once. It runs on the small scenario and with the fast settings it declares
-itself (``conformance_scenario``, ``conformance_config``): a new family or estimator needs no
-edit here.
+shard (nor on their order), handles a one-track shard, gives the columns it declares, has
+its name written once, and runs through the stages a user runs, estimate and aggregate (a
+field the metrics or the report need and it forgot fails there). It runs on the small
+scenario and with the fast settings it declares itself (``conformance_scenario``,
+``conformance_config``): a new family or estimator needs no edit here.
 """
 
 import dataclasses
@@ -130,3 +131,33 @@ def test_its_name_is_written_once(name):
                if re.search(rf"[\"']{re.escape(name)}[\"']", p.read_text())
                and p.name in (f"{name}.py", "__init__.py")]
     assert spelled == [], f"'{name}' written again in {spelled}"
+
+
+@pytest.mark.parametrize("name", estimator_names())
+def test_it_runs_through_estimate_and_aggregate(name, tmp_path):
+    """The stages a user runs, on its family's small scenario: simulate, estimate with its
+    fast settings, aggregate into its family's table. An estimator that leaves out what the
+    metrics or the report read (a counter, a stop reason, a declared column) fails here, not
+    in a user's first table."""
+    from tests.conftest import data_paths, run_stage_here
+
+    cls = estimator_class(name)
+    scenario = [f"scenario.{k}={v}" for k, v in cls.conformance_scenario.items()]
+    # a family whose table measures its estimators against a reference runs that one too
+    references = [other for other in estimator_names() if other != name
+                  and estimator_class(other).family == cls.family
+                  and estimator_class(other).reference]
+    if references:
+        estimators = [f"+estimator@grid.estimators.{e}={e}" for e in (name, *references)]
+        estimators += [f"grid.estimators.{name}.{k}={v}"
+                       for k, v in cls.conformance_config.items()]
+    else:
+        estimators = [f"estimator={name}", *[f"estimator.{k}={v}"
+                                             for k, v in cls.conformance_config.items()]]
+    run_stage_here("table", f"scenario={cls.family}", f"scenario.n_tracks={N_TRACKS}",
+                   f"scenario.shard_size={N_TRACKS}", *scenario, *estimators,
+                   "progress=false", *data_paths(tmp_path))
+    tables = list((tmp_path / "tables").glob("*.md"))
+    assert tables, f"{name}: aggregate wrote no table"
+    runs = list((tmp_path / "data" / "runs").glob(f"*/{name}-*/metrics.parquet"))
+    assert runs, f"{name}: no metrics"

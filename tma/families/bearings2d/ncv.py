@@ -96,7 +96,9 @@ def _predict(m, P, T, lam, mp, Pp):
 @njit(error_model="numpy", depends=(atan2, wrap_angle))
 def _update(m, P, z, nom, ox, oy, h, kg, tmp, A):
     """Kalman update of (m, P) with the bearing z (rad) linearised about ``nom`` (R = 1,
-    Joseph form; ``h``, ``kg``, ``tmp``, ``A``: work arrays); returns (nu, S)."""
+    Joseph form; ``h``, ``kg``, ``tmp``, ``A``: work arrays); returns (nu, S). Written out
+    for a bearing's row, two nonzeros, in the innermost loop of the manoeuvre mixture: the
+    other filters' updates (mpekf, imm, ekf, srekf) differ in their rows and forms."""
     dx, dy = nom[0] - ox, nom[1] - oy
     inv_r2 = 1.0 / (dx * dx + dy * dy)
     h[0], h[1] = dy * inv_r2, -dx * inv_r2

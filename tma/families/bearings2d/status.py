@@ -27,10 +27,10 @@ course and speed at each track's last bearing ("now") by their Jacobians (delta 
 - ``unobservable``: J^T J is numerically singular (scaled by its diagonal, smallest over
   largest eigenvalue <= ``singular_rcond``), or range_sd / range > ``max_range_rel_sd``
   (range is not determined well enough to use: no own-ship manoeuvre, a target too far
-  away, too much unmodelled target motion), or speed_sd / speed > ``max_speed_rel_sd``
-  (the velocity is not determined, so neither is the course: a manoeuvre too recent for the
-  bearings to show its outcome), or the trend test was due but too few bearings remain to
-  run it (the motion cannot be checked);
+  away, too much unmodelled target motion), or, for a target that may manoeuvre,
+  speed_sd / speed > ``max_speed_rel_sd`` (the velocity is not determined, so neither is
+  the course: a manoeuvre too recent for the bearings to show its outcome), or the trend
+  test was due but too few bearings remain to run it (the motion cannot be checked);
 - ``approximate``: the fit passed every test, but its one-sigma errors are not honest by
   construction: the estimator is biased (``nbearings``), or it assumes a constant-velocity
   target where the log's targets are not known to move so (``accel_psd`` > 0);
@@ -261,7 +261,8 @@ def noise_fit(cost_rad2, dof, sigma_deg):
 
 
 def assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t_now_s, own_x_now_m,
-           own_y_now_m, cfg, motion_tested=False, undetermined=False) -> dict:
+           own_y_now_m, cfg, motion_tested=False, undetermined=False,
+           may_manoeuvre=False) -> dict:
     """Status and one-sigma errors per track (see the module docstring).
 
     The covariance of theta is jtj^-1 sigma2 (``sigma2`` rad^2 per track); ``fit_p``: the
@@ -269,7 +270,10 @@ def assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t_now_s,
     few innovations); ``motion_tested``: whether the trend test was due (then a NaN, a
     motion the bearings cannot check, is ``unobservable``); ``approximate``: bool per
     track; ``undetermined``: tracks whose range the geometry does not determine, whatever
-    their errors say (bool per track: ``unobservable`` before any test); ``cfg`` holds
+    their errors say (bool per track: ``unobservable`` before any test); ``may_manoeuvre``:
+    the answer allows manoeuvres, and then a velocity whose speed sd exceeds
+    ``max_speed_rel_sd`` of the speed is ``unobservable`` (a constant-velocity answer keeps
+    its course, however wide); ``cfg`` holds
     ``singular_rcond``, ``fit_alpha``, ``motion_alpha``, ``max_range_rel_sd``,
     ``max_speed_rel_sd``. Returns output columns."""
     finite = np.isfinite(theta).all(axis=1)
@@ -282,7 +286,8 @@ def assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t_now_s,
         poorly_fit = fit_p < cfg.fit_alpha
         drifting = motion_p < cfg.motion_alpha
         vague = ~(sd[:, 0] <= cfg.max_range_rel_sd * rng)  # a NaN sd counts as vague
-        vague |= ~(sd[:, 3] <= cfg.max_speed_rel_sd * speed)
+        if may_manoeuvre:  # a target that may have turned since: no velocity, no course
+            vague |= ~(sd[:, 3] <= cfg.max_speed_rel_sd * speed)
         vague |= motion_tested & np.isnan(motion_p)
     # a geometry that cannot give the range comes first: a fit of the unobservable is
     # anything (a manoeuvring target hugging own-ship fits any bearings)
@@ -351,7 +356,8 @@ def not_an_answer(range_m, range_sd_m, speed_m_s, max_range_rel_sd=COLLAPSED_REL
         ]
     reasons = [
         "there is no finite estimate",
-        "J^T J is singular, so no one-sigma error can be given",
+        "no one-sigma error can be given (J^T J is singular, or own-ship's motion cannot "
+        "give the range of a target that may manoeuvre)",
         "its one-sigma range error exceeds the range itself (own-ship within one sigma: a "
         "collapsed or runaway estimate, whose linearised error means nothing)",
         f"it collapsed onto own-ship (nearer than {MIN_RANGE_M:g} m: within the error of "

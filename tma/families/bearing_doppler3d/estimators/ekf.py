@@ -57,7 +57,9 @@ def predict(x, P, dt, n_steps, lam, nu, mu, block):
 def update(x, P, h, H, obs, r):
     """EKF update of x (6, n), P (6, 6, n) in place with one epoch's readings obs (n, m)
     (non-finite = missing: skipped), one scalar at a time against the predicted mean's
-    readings h (m, n) and Jacobian H (m, 6, n); r (m,) the reading variances."""
+    readings h (m, n) and Jacobian H (m, 6, n); r (m,) the reading variances. (Scalar
+    readings one at a time, compiled per path: the batched forms of mpekf and imm would
+    form matrices this never needs.)"""
     x_lin, xp, Pp, Ph = np.empty(6), np.empty(6), np.empty((6, 6)), np.empty(6)
     for p in range(x.shape[1]):
         for i in range(6):

@@ -1,8 +1,14 @@
-"""The shared pieces of the bearings-only estimators: settings, the per-track status and
-one-sigma errors every output carries, and F / J^T J at a solution."""
+"""The shared pieces of the bearings-only estimators: settings, the contract between the base
+and an estimator (``Bearings`` and ``TargetMotion`` in, a ``Solution`` out of ``solve``), and
+the per-track status and one-sigma errors every output carries.
+
+``BearingsEstimator.estimate`` runs three named steps: ``read`` (the log's bearings as the
+estimators take them, checked), ``solve`` (the estimator's own, typed), ``judge`` (the
+targets' motion fitted about the solution, the noise and trend tests, the status, the
+columns)."""
 
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -75,21 +81,82 @@ class BearingsConfig(EstimatorConfig):
                               "[1, 64]")
 
 
+@dataclass(frozen=True)
+class Bearings:
+    """One shard's bearings as every estimator takes them: times ``t`` (K,, s), own-ship
+    ``own_x``, ``own_y`` (K,, m), the bearings ``measured`` (n, K, rad; 0 where missing),
+    ``valid`` (n, K; None: every bearing present, which spares the masks in the hot loops),
+    each track's ``first`` and ``last`` bearing (n,), ``n_bearings`` (n,) and the log's
+    nominal noise ``sigma_deg`` (None: unknown)."""
+
+    t: np.ndarray
+    own_x: np.ndarray
+    own_y: np.ndarray
+    measured: np.ndarray
+    valid: np.ndarray | None
+    first: np.ndarray
+    last: np.ndarray
+    n_bearings: np.ndarray
+    sigma_deg: float | None
+
+
+@dataclass(frozen=True)
+class TargetMotion:
+    """The targets' motion an estimate assumes: random acceleration ``accel_psd_m2_s3`` per
+    axis (m^2/s^3; 0: none) and the manoeuvres' prior (None: none)."""
+
+    accel_psd_m2_s3: float
+    manoeuvres: ManoeuvrePrior | None = None
+
+    @property
+    def moving(self) -> bool:
+        return self.accel_psd_m2_s3 > 0 or self.manoeuvres is not None
+
+
+@dataclass
+class Solution:
+    """What ``solve`` returns, per track (n,): the estimate ``theta`` (n, 4: x0, y0 (m), vx,
+    vy (m/s)), whether it ``converged``, its ``stop_reason`` (0: the F tolerance; what else
+    means the estimator's own, named by the report), the cost evaluations ``n_f_evals`` and
+    iterations ``n_iter`` (NaN where the estimator has none: a direct solve);
+    optional: the fit at theta (``cost_rad2``, F in rad^2, and ``jtj``, the normal matrix
+    (n, 4, 4); computed when absent), a noise scale and fit test of the estimator's own
+    (``sigma2_rad2``, ``fit_p``: a robust fit's, which replace the nominal ones), the bearings
+    it kept (``inliers``, n x K) or fitted (``bearings_used``: part of each track), from when
+    the solution holds (``leg_start_s``), and its own output ``columns`` (its ``outputs``)."""
+
+    theta: np.ndarray
+    converged: np.ndarray
+    stop_reason: np.ndarray
+    n_f_evals: np.ndarray
+    n_iter: np.ndarray
+    cost_rad2: np.ndarray | None = None
+    jtj: np.ndarray | None = None
+    sigma2_rad2: np.ndarray | None = None
+    fit_p: np.ndarray | None = None
+    inliers: np.ndarray | None = None
+    bearings_used: np.ndarray | None = None
+    leg_start_s: np.ndarray | None = None
+    columns: dict = field(default_factory=dict)
+
+
 class BearingsEstimator(Estimator):
     """Base of estimators over ``bearings2d`` logs; subclasses implement ``solve``. Every
     output carries per track its kinematics now (at the last bearing), their one-sigma
     errors, a ``status`` (see ``status.py``), from when the solution holds
-    (``leg_start_s``), the target motion it assumed (``accel_psd_m2_s3``) and the trend
-    test's p-value (``motion_p_value``, NaN where not run).
+    (``leg_start_s``), the target motion it assumed (``accel_psd_m2_s3``; with manoeuvres,
+    ``manoeuvre_rate_per_h`` and ``p_manoeuvre``) and the trend test's p-value
+    (``motion_p_value``, NaN where not run).
 
-    ``models_motion``: the estimator can follow a nearly-constant-velocity target: with
-    q = ``accel_psd_m2_s3`` > 0 its constant-velocity fit is refined to the NCV maximum a
-    posteriori state (``ncv.smooth``), whose covariance includes the target's own motion;
-    for a robust fit (``loss`` huber|cauchy) on the bearings no more than ``GROSS_SIGMAS``
-    off its constant-velocity line and off the motion fit (outliers, not wander). One that
-    cannot follow such a target reports ``approximate`` there, as does one whose errors are
-    not honest by construction (``honest_errors`` False). ``tests_motion``: the trend test
-    runs even where the log declares its targets' motion (``last_leg``)."""
+    ``models_motion``: the estimator can follow a target that is not at constant velocity:
+    its constant-velocity fit is refined to the maximum a posteriori state under the targets'
+    motion (``ncv.smooth``; with manoeuvres, ``manoeuvres.mixture``), whose covariance
+    includes that motion; for a robust fit (``loss`` huber|cauchy) on the bearings no more
+    than ``GROSS_SIGMAS`` off its constant-velocity line and off the motion fit (outliers,
+    not wander). One that cannot follow such a target reports ``approximate`` there, as does
+    one whose errors are not honest by construction (``honest_errors`` False).
+    ``tests_motion``: the trend test runs even where the log declares its targets' motion
+    (``last_leg``)."""
 
     family = "bearings2d"
     models_motion = False
@@ -98,127 +165,34 @@ class BearingsEstimator(Estimator):
     conformance_scenario = {"sigma_deg": 0.5, "seed": 3}
 
     def estimate(self, log: BearingsLog) -> dict:
-        """Estimate theta for every track of ``log``; returns output columns by name."""
-        cfg = self.config
-        t, ox, oy = log.t_s, log.own_x_m, log.own_y_m
+        """Output columns by name for every track of ``log``: ``read``, ``solve``,
+        ``judge``."""
+        bearings, motion = self.read(log), self.motion(log)
+        return self.judge(bearings, motion, self.solve(bearings, motion), log)
+
+    def read(self, log: BearingsLog) -> Bearings:
+        """The bearings of ``log`` in radians, the missing ones masked; refuses a track with
+        fewer than ``min_bearings``."""
         measured = np.deg2rad(log.bearing_deg)
         valid = np.isfinite(measured)
         n_bearings = valid.sum(axis=1)
-        few = n_bearings < cfg.min_bearings
+        few = n_bearings < self.config.min_bearings
         if np.any(few):
             ids = ", ".join(str(i) for i in log.track_id[few][:10])
             raise InputError(
-                f"{self.name}: tracks {ids} have fewer than {cfg.min_bearings} bearings "
-                f"(min {n_bearings.min()}); 4 parameters (x0, y0, vx, vy) need more"
+                f"{self.name}: tracks {ids} have fewer than {self.config.min_bearings} "
+                f"bearings (min {n_bearings.min()}); 4 parameters (x0, y0, vx, vy) need more"
             )
-        measured = np.where(valid, measured, 0.0)
-        last = valid.shape[1] - 1 - np.argmax(valid[:, ::-1], axis=1)
-        first = np.argmax(valid, axis=1)
-        if valid.all():
-            valid = None  # every bearing present: skip masking in the hot loops
-        self.log_sigma_deg = log.sigma_deg  # the log's nominal noise (None: unknown), for solve
-        q, prior = self.motion(log)
-        self.accel_psd = q  # the targets' motion the outputs assume, for solve
-        undeclared = log.accel_psd_m2_s3 is None or log.sigma_deg is None
-        test = cfg.motion_test == "on" or (cfg.motion_test == "auto"
-                                           and (undeclared or self.tests_motion))
-        test &= log.sigma_deg != 0  # a noiseless sensor: any misfit fails its own test
-        out = self.solve(t, ox, oy, measured, valid, first)
-        theta = out.pop("theta")
-        if "cost_rad2" in out:  # iterative estimators know F and J^T J at their solution
-            cost, jtj = out.pop("cost_rad2"), out.pop("jtj")
-        else:
-            cost, jtj, _ = evaluate_in_blocks(BearingTerms(t, ox, oy, measured, valid), theta)
-        # a fit with its own noise scale and fit test (robust lm) passes both on, and the
-        # bearings it kept
-        sigma2, fit_p = out.pop("sigma2_rad2", None), out.pop("fit_p", None)
-        own_fit_test = fit_p is not None  # a robust fit (its scale, and outliers in "inliers")
-        used = out.pop("bearings_used", None)  # a fit of part of each track (last_leg)
-        if used is not None:
-            n_bearings, valid = used.sum(axis=1), used
-        use = out.pop("inliers", valid)  # and of those, the ones a robust fit kept
-        if fit_p is None:
-            sigma2, fit_p = noise_fit(cost, n_bearings - 4, log.sigma_deg)
-        sigma2 = np.broadcast_to(np.asarray(sigma2, dtype=float), theta.shape[:1])
-        n = theta.shape[0]
-        motion_p = np.full(n, np.nan)
-        approximate = np.full(n, not self.honest_errors)
-        follows = (q > 0 or prior is not None) and self.models_motion
-        p_manoeuvre = np.full(n, np.nan)
-        undetermined = np.zeros(n, dtype=bool)
-        # residuals below any sensor's noise (a noiseless log, declared or not) have no
-        # pattern to test: round-off has one
-        tested = np.full(n, test) & (np.sqrt(sigma2) >= ncv.MIN_SIGMA_RAD)
-        if follows or test:
-            # a track whose range the constant-velocity fit leaves undetermined stays so:
-            # the motion fit could only widen it (and its MAP would shrink range to fit
-            # noise); its innovations for the trend test are those about the fit's line
-            follow = np.zeros(n, dtype=bool)
-            if follows and prior is not None:  # a manoeuvre can explain what a constant
-                # velocity fit leaves undetermined: every track with an estimate (and then
-                # whether own-ship's motion determines the range of the answer, below)
-                follow = np.isfinite(theta).all(axis=1)
-            elif follows:
-                follow = range_rel_sd(theta, jtj, sigma2, t[last], ox[last], oy[last],
-                                      cfg.singular_rcond) <= cfg.max_range_rel_sd
-            innovations = np.full(measured.shape, np.nan)
-            for rows, iterate in ((np.flatnonzero(follow), True),
-                                  (np.flatnonzero(~follow), False)):
-                if rows.size == 0 or not (iterate or test):
-                    continue
-                fit = self._motion_fit(t, ox, oy, measured, use, first, last, theta, rows,
-                                       q if follows else 0.0, prior if follows else None,
-                                       sigma2, iterate, log.sigma_deg is None and iterate,
-                                       own_fit_test)
-                innovations[rows] = fit["innovations"]
-                if "p_manoeuvre" in fit:
-                    p_manoeuvre[rows] = fit["p_manoeuvre"]
-                if iterate:
-                    theta, cost, jtj, sigma2, fit_p = (
-                        np.array(v, dtype=float) for v in (theta, cost, jtj, sigma2, fit_p))
-                    (theta[rows], cost[rows], jtj[rows], sigma2[rows],
-                     fit_p[rows]) = self._followed(fit, log.sigma_deg, fit_p[rows])
-                    out["converged"] = out["converged"].copy()
-                    out["converged"][rows] &= fit["passes"] >= 0
-            if test:
-                motion_p = np.where(tested, trend_test_p(innovations, t, cfg.motion_terms),
-                                    np.nan)
-            if follows and prior is not None:
-                # no target manoeuvre makes range observable, only own-ship's: the bearings'
-                # information on a constant-velocity target at the answer must determine it
-                _, jtj_cv, _ = evaluate_in_blocks(BearingTerms(t, ox, oy, measured, use), theta)
-                undetermined = ~(range_rel_sd(theta, jtj_cv, sigma2, t[last], ox[last],
-                                              oy[last], cfg.singular_rcond)
-                                 <= cfg.max_range_rel_sd)
-        approximate |= (q > 0 or prior is not None) and not self.models_motion
-        trust = assess(theta, jtj, sigma2, fit_p, motion_p, out["converged"], approximate,
-                       t[last], ox[last], oy[last], cfg, motion_tested=tested,
-                       undetermined=undetermined)
-        leg_start = out.pop("leg_start_s", t[first])
-        columns = {
-            "x0_m": theta[:, 0], "y0_m": theta[:, 1], "vx_m_s": theta[:, 2], "vy_m_s": theta[:, 3],
-            **out,
-            "cost_rad2": cost,
-            "n_bearings": n_bearings.astype(np.int64),
-            "t_last_s": t[last], "own_x_last_m": ox[last], "own_y_last_m": oy[last],
-            **trust,
-            "leg_start_s": leg_start,
-            "accel_psd_m2_s3": np.full(n, float(q) if self.models_motion else 0.0),
-            "motion_p_value": motion_p,
-        }
-        if prior is not None and self.models_motion:  # (not in the constant-velocity runs)
-            columns["manoeuvre_rate_per_h"] = np.full(n, prior.rate_per_h)
-            columns["p_manoeuvre"] = p_manoeuvre
-        for i in range(4):
-            for j in range(i, 4):
-                columns[f"jtj_{i}{j}"] = jtj[:, i, j]
-        return columns
+        return Bearings(t=log.t_s, own_x=log.own_x_m, own_y=log.own_y_m,
+                        measured=np.where(valid, measured, 0.0),
+                        valid=None if valid.all() else valid, first=np.argmax(valid, axis=1),
+                        last=valid.shape[1] - 1 - np.argmax(valid[:, ::-1], axis=1),
+                        n_bearings=n_bearings, sigma_deg=log.sigma_deg)
 
-    def motion(self, log: BearingsLog) -> tuple[float, ManoeuvrePrior | None]:
+    def motion(self, log: BearingsLog) -> TargetMotion:
         """The targets' motion the outputs assume: the random acceleration q (m^2/s^3) and
-        the manoeuvres' prior (None: no manoeuvres), as set, else as the log declares, else
-        (a recording, which declares nothing) real-ship motion; both scaled by
-        ``motion_prior_scale``."""
+        the manoeuvres' prior, as set, else as the log declares, else (a recording, which
+        declares nothing) real-ship motion; both scaled by ``motion_prior_scale``."""
         cfg = self.config
         recorded = log.accel_psd_m2_s3 is None
         q = cfg.accel_psd_m2_s3
@@ -230,19 +204,125 @@ class BearingsEstimator(Estimator):
                                         rate_per_h=cfg.manoeuvre_rate_per_h)
         if prior is not None:
             prior = prior.scaled(cfg.motion_prior_scale)
-        return q * cfg.motion_prior_scale, prior if prior and prior.rate_per_h > 0 else None
+        return TargetMotion(q * cfg.motion_prior_scale,
+                            prior if prior and prior.rate_per_h > 0 else None)
 
-    def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
-        """``valid``: mask or None (all present); ``first``: index of each track's first
-        bearing; ``self.log_sigma_deg`` is the log's nominal noise. Returns ``theta`` (n, 4),
-        optionally ``cost_rad2`` and ``jtj`` at theta, ``sigma2_rad2`` and ``fit_p`` (a noise
-        scale and fit test of the estimator's own, replacing the nominal ones in the status),
-        and estimator-specific columns."""
+    def solve(self, bearings: Bearings, motion: TargetMotion) -> Solution:
+        """The estimator's own step: its ``Solution`` from the ``bearings``, under the targets'
+        ``motion`` where it needs it."""
         raise NotImplementedError
 
+    def judge(self, bearings: Bearings, motion: TargetMotion, solution: Solution,
+              log: BearingsLog) -> dict:
+        """The output columns of ``solution``: the noise fit, the targets' motion fitted about
+        it (``models_motion``), the trend test, the status and one-sigma errors
+        (``status.assess``)."""
+        cfg, b = self.config, bearings
+        t, ox, oy, first, last = b.t, b.own_x, b.own_y, b.first, b.last
+        theta, converged = solution.theta, solution.converged
+        if solution.cost_rad2 is not None:  # iterative estimators know F and J^T J there
+            cost, jtj = solution.cost_rad2, solution.jtj
+        else:
+            cost, jtj, _ = evaluate_in_blocks(
+                BearingTerms(t, ox, oy, b.measured, b.valid), theta)
+        n_bearings, valid = b.n_bearings, b.valid
+        if solution.bearings_used is not None:  # a fit of part of each track (last_leg)
+            n_bearings, valid = solution.bearings_used.sum(axis=1), solution.bearings_used
+        # a fit with its own noise scale and fit test (robust lm): its scale, its test, and
+        # of the bearings the ones it kept
+        sigma2, fit_p = solution.sigma2_rad2, solution.fit_p
+        own_fit_test = fit_p is not None
+        use = valid if solution.inliers is None else solution.inliers
+        if fit_p is None:
+            sigma2, fit_p = noise_fit(cost, n_bearings - 4, b.sigma_deg)
+        sigma2 = np.broadcast_to(np.asarray(sigma2, dtype=float), theta.shape[:1])
+        n = theta.shape[0]
+        undeclared = log.accel_psd_m2_s3 is None or b.sigma_deg is None
+        test = cfg.motion_test == "on" or (cfg.motion_test == "auto"
+                                           and (undeclared or self.tests_motion))
+        test &= b.sigma_deg != 0  # a noiseless sensor: any misfit fails its own test
+        # residuals below any sensor's noise (a noiseless log, declared or not) have no
+        # pattern to test: round-off has one
+        tested = np.full(n, test) & (np.sqrt(sigma2) >= ncv.MIN_SIGMA_RAD)
+        follows = motion.moving and self.models_motion
+        q, prior = motion.accel_psd_m2_s3, motion.manoeuvres
+        motion_p, p_manoeuvre = np.full(n, np.nan), np.full(n, np.nan)
+        undetermined = np.zeros(n, dtype=bool)
+        if follows or test:
+            # without manoeuvres, a track whose range the constant-velocity fit leaves
+            # undetermined stays so: wander could only widen it (and its MAP would shrink
+            # range to fit noise); its innovations for the trend test are those about the
+            # fit's line. A manoeuvre can explain what a constant-velocity fit leaves
+            # undetermined: with them, every track with an estimate (and then whether
+            # own-ship's motion determines the range of the answer, below)
+            follow = np.zeros(n, dtype=bool)
+            if follows and prior is not None:
+                follow = np.isfinite(theta).all(axis=1)
+            elif follows:
+                follow = range_rel_sd(theta, jtj, sigma2, t[last], ox[last], oy[last],
+                                      cfg.singular_rcond) <= cfg.max_range_rel_sd
+            innovations = np.full(b.measured.shape, np.nan)
+            for rows, iterate in ((np.flatnonzero(follow), True),
+                                  (np.flatnonzero(~follow), False)):
+                if rows.size == 0 or not (iterate or test):
+                    continue
+                fit = self._motion_fit(b, use, theta, rows, q if follows else 0.0,
+                                       prior if follows else None, sigma2, iterate,
+                                       b.sigma_deg is None and iterate, own_fit_test)
+                innovations[rows] = fit["innovations"]
+                if "p_manoeuvre" in fit:
+                    p_manoeuvre[rows] = fit["p_manoeuvre"]
+                if iterate:
+                    theta, cost, jtj, sigma2, fit_p = (
+                        np.array(v, dtype=float) for v in (theta, cost, jtj, sigma2, fit_p))
+                    (theta[rows], cost[rows], jtj[rows], sigma2[rows],
+                     fit_p[rows]) = self._followed(fit, b.sigma_deg, fit_p[rows])
+                    converged = converged.copy()
+                    converged[rows] &= fit["passes"] >= 0
+            if test:
+                motion_p = np.where(tested, trend_test_p(innovations, t, cfg.motion_terms),
+                                    np.nan)
+            if follows and prior is not None:
+                # no target manoeuvre makes range observable, only own-ship's: the bearings'
+                # information on a constant-velocity target at the answer must determine it
+                _, jtj_cv, _ = evaluate_in_blocks(
+                    BearingTerms(t, ox, oy, b.measured, use), theta)
+                undetermined = ~(range_rel_sd(theta, jtj_cv, sigma2, t[last], ox[last],
+                                              oy[last], cfg.singular_rcond)
+                                 <= cfg.max_range_rel_sd)
+                # there no one-sigma error can be given (the prior's would pretend one): the
+                # estimate is no answer (status.not_an_answer)
+                jtj = np.where(undetermined[:, None, None], np.nan, jtj)
+        approximate = np.full(n, not self.honest_errors)
+        approximate |= motion.moving and not self.models_motion
+        trust = assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t[last],
+                       ox[last], oy[last], cfg, motion_tested=tested,
+                       undetermined=undetermined,
+                       may_manoeuvre=prior is not None and self.models_motion)
+        columns = {
+            "x0_m": theta[:, 0], "y0_m": theta[:, 1], "vx_m_s": theta[:, 2], "vy_m_s": theta[:, 3],
+            "n_f_evals": solution.n_f_evals, "n_iter": solution.n_iter,
+            "stop_reason": solution.stop_reason, "converged": converged,
+            **solution.columns,
+            "cost_rad2": cost,
+            "n_bearings": n_bearings.astype(np.int64),
+            "t_last_s": t[last], "own_x_last_m": ox[last], "own_y_last_m": oy[last],
+            **trust,
+            "leg_start_s": t[first] if solution.leg_start_s is None else solution.leg_start_s,
+            "accel_psd_m2_s3": np.full(n, float(q) if self.models_motion else 0.0),
+            "motion_p_value": motion_p,
+        }
+        if prior is not None and self.models_motion:  # (not in the constant-velocity runs)
+            columns["manoeuvre_rate_per_h"] = np.full(n, prior.rate_per_h)
+            columns["p_manoeuvre"] = p_manoeuvre
+        for i in range(4):
+            for j in range(i, 4):
+                columns[f"jtj_{i}{j}"] = jtj[:, i, j]
+        return columns
+
     @staticmethod
-    def _motion_fit(t, ox, oy, measured, use, first, last, theta, rows, q, prior, sigma2,
-                    iterate, sigma_unknown, robust):
+    def _motion_fit(b: Bearings, use, theta, rows, q, prior, sigma2, iterate, sigma_unknown,
+                    robust):
         """The motion fit of tracks ``rows``: ``ncv.smooth`` (``iterate`` False: about their
         constant-velocity line), or with a manoeuvre ``prior`` ``manoeuvres.mixture``; a
         robust fit's (``robust``) bearings more than ``GROSS_SIGMAS`` off the motion fit are
@@ -251,7 +331,8 @@ class BearingsEstimator(Estimator):
         sigma_rad = np.full(rows.size, np.nan) if sigma_unknown else np.sqrt(sigma2[rows])
 
         def fit_of(part):
-            args = (t, ox, oy, measured[rows], part, first[rows], last[rows], theta[rows], q)
+            args = (b.t, b.own_x, b.own_y, b.measured[rows], part, b.first[rows], b.last[rows],
+                    theta[rows], q)
             if prior is None or not iterate:
                 return ncv.smooth(*args, sigma_rad, iterate=iterate)
             return manoeuvres.mixture(*args, prior, sigma_rad)

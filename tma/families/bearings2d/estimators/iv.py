@@ -32,7 +32,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.config import param
-from tma.families.bearings2d.estimators.base import BearingsConfig, BearingsEstimator
+from tma.families.bearings2d.estimators.base import (
+    Bearings,
+    BearingsConfig,
+    BearingsEstimator,
+    Solution,
+    TargetMotion,
+)
 from tma.families.bearings2d.estimators.nbearings import NBearings
 from tma.families.bearings2d.model import relative_position
 
@@ -95,21 +101,17 @@ def solve_scaled(M, v, rcond):
 class InstrumentalVariable(BearingsEstimator):
     Config = Config
 
-    def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
+    def solve(self, bearings: Bearings, motion: TargetMotion) -> Solution:
         cfg = self.config
+        t, own_x, own_y, measured_rad, valid = (bearings.t, bearings.own_x, bearings.own_y,
+                                                bearings.measured, bearings.valid)
         n = measured_rad.shape[0]
-        start = NBearings(NBearings.Config(rcond=cfg.rcond)).solve(
-            t, own_x, own_y, measured_rad, valid, first)
-        theta = start["theta"]
+        theta = NBearings(NBearings.Config(rcond=cfg.rcond)).solve(bearings, motion).theta
         use = np.ones(measured_rad.shape, dtype=bool) if valid is None else valid
         terms = pseudo_linear_terms(t, own_x, own_y, measured_rad)
         for _ in range(cfg.iterations):
             theta = solve_scaled(*iv_system(theta, t, own_x, own_y, terms, use), cfg.rcond)
         converged = np.isfinite(theta).all(axis=1)
-        return {
-            "theta": theta,
-            "n_f_evals": np.full(n, np.nan),
-            "n_iter": np.full(n, float(cfg.iterations)),
-            "converged": converged,
-            "stop_reason": np.where(converged, 0, -1).astype(np.int64),
-        }
+        return Solution(theta=theta, converged=converged,
+                        stop_reason=np.where(converged, 0, -1).astype(np.int64),
+                        n_f_evals=np.full(n, np.nan), n_iter=np.full(n, float(cfg.iterations)))

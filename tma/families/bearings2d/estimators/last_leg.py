@@ -35,6 +35,7 @@ import numpy as np
 
 from tma.config import param, require
 from tma.families.bearings2d import ncv
+from tma.families.bearings2d.estimators.base import Bearings, Solution, TargetMotion
 from tma.families.bearings2d.estimators.lm import MAX_INT, LevenbergMarquardt
 from tma.families.bearings2d.estimators.lm import Config as LmConfig
 from tma.families.bearings2d.estimators.lm_kernel import STOP_F_TOL, marquardt
@@ -64,14 +65,17 @@ class LastLeg(LevenbergMarquardt):
     conformance_config = {"starts": 2}  # every output present (the loss is squared)
     tests_motion = True  # its legs are tested whatever the log declares
 
-    def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
-        out = super().solve(t, own_x, own_y, measured_rad, valid, first)
+    def solve(self, bearings: Bearings, motion: TargetMotion) -> Solution:
+        t, own_x, own_y, measured_rad, valid = (bearings.t, bearings.own_x, bearings.own_y,
+                                                bearings.measured, bearings.valid)
+        q, sigma = motion.accel_psd_m2_s3, bearings.sigma_deg
+        out = self.fit(t, own_x, own_y, measured_rad, valid, bearings.first, sigma)
         n, K = measured_rad.shape
         present = np.ones((n, K), dtype=bool) if valid is None else valid
         used = present.copy()
         rounds = np.zeros(n, dtype=np.int64)
         todo = np.arange(0) if self.config.motion_test == "off" else np.flatnonzero(
-            self._drifting(t, own_x, own_y, measured_rad, present, out["theta"]))
+            self._drifting(t, own_x, own_y, measured_rad, present, out["theta"], q, sigma))
         for _ in range(self.config.max_rounds):
             if todo.size == 0:
                 break
@@ -82,25 +86,25 @@ class LastLeg(LevenbergMarquardt):
             todo, tau = todo[found], tau[found]
             used[todo] &= t >= tau[:, None]
             leg = self._settle(t, own_x, own_y, measured_rad[todo], used[todo],
-                               out["theta"][todo])
+                               out["theta"][todo], sigma)
             used[todo] = leg.pop("used")
             out["n_f_evals"][todo] += leg.pop("n_f_evals")  # the work of every round, summed
             for key, value in leg.items():
                 out[key][todo] = value
             drifting = self._drifting(t, own_x, own_y, measured_rad[todo], used[todo],
-                                      out["theta"][todo])
+                                      out["theta"][todo], q, sigma)
             todo = todo[drifting]
         out["converged"] = out["stop_reason"] == STOP_F_TOL
-        out["bearings_used"] = used
-        out["leg_start_s"] = t[np.argmax(used, axis=1)]
-        out["n_rounds"] = rounds
-        return out
+        columns = {k: out.pop(k) for k in self.outputs if k in out}
+        columns["n_rounds"] = rounds
+        return Solution(**out, bearings_used=used, leg_start_s=t[np.argmax(used, axis=1)],
+                        columns=columns)
 
-    def _drifting(self, t, own_x, own_y, measured, used, theta):
-        """Tracks whose residual sequence fails the trend test, under the motion assumed."""
+    def _drifting(self, t, own_x, own_y, measured, used, theta, q, sigma):
+        """Tracks whose residual sequence fails the trend test, under the wander ``q``
+        assumed (``sigma``: the nominal noise, deg; None: unknown)."""
         if measured.shape[0] == 0:
             return np.zeros(0, dtype=bool)
-        q, sigma = self.accel_psd, self.log_sigma_deg
         first = np.argmax(used, axis=1)
         last = used.shape[1] - 1 - np.argmax(used[:, ::-1], axis=1)
         fit = ncv.smooth(t, own_x, own_y, measured, used, first, last, theta, q,
@@ -114,7 +118,7 @@ class LastLeg(LevenbergMarquardt):
             np.sqrt(fit["sigma2"]) >= ncv.MIN_SIGMA_RAD)
         return drifting & noisy
 
-    def _settle(self, t, own_x, own_y, measured, used, theta):
+    def _settle(self, t, own_x, own_y, measured, used, theta, sigma):
         """The fit of each candidate leg, its start moved on by ``step_s`` while its
         constant-velocity residual sequence still fails the trend test at ``settle_alpha``
         (the change time falls within a turn: the leg starts once the turn is over), as
@@ -127,7 +131,6 @@ class LastLeg(LevenbergMarquardt):
         while todo.size:
             first = np.argmax(used[todo], axis=1)
             last = used.shape[1] - 1 - np.argmax(used[todo, ::-1], axis=1)
-            sigma = self.log_sigma_deg
             cv = ncv.smooth(t, own_x, own_y, measured[todo], used[todo], first, last,
                             fit["theta"][todo], 0.0,
                             np.full(todo.size, np.nan if sigma is None else np.deg2rad(sigma)),

@@ -35,8 +35,11 @@ import numpy as np
 from tma.config import param, require
 from tma.families.bearings2d.estimators.base import (
     GROSS_SIGMAS,
+    Bearings,
     BearingsConfig,
     BearingsEstimator,
+    Solution,
+    TargetMotion,
 )
 from tma.families.bearings2d.estimators.lm_kernel import (
     LOSSES,
@@ -175,12 +178,22 @@ class LevenbergMarquardt(BearingsEstimator):
     # from each track's first bearing unless the command line says otherwise
     recorded_defaults = {"initial_bearing_deg": None}
 
-    def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
+    def solve(self, bearings: Bearings, motion: TargetMotion) -> Solution:
+        t, own_x, own_y, measured_rad, valid, first = (
+            bearings.t, bearings.own_x, bearings.own_y, bearings.measured, bearings.valid,
+            bearings.first)
+        out = self.fit(t, own_x, own_y, measured_rad, valid, first, bearings.sigma_deg)
+        columns = {k: out.pop(k) for k in self.outputs if k in out}
+        return Solution(**out, columns=columns)
+
+    def fit(self, t, own_x, own_y, measured_rad, valid, first, sigma) -> dict:
+        """The Marquardt fit of every track from its starts (``valid``: mask or None;
+        ``first``: each track's first bearing; ``sigma``: the nominal noise, deg, None where
+        unknown): the ``Solution``'s fields and the outputs, by name."""
         cfg = self.config
         terms = BearingTerms(t, own_x, own_y, measured_rad, valid)
         starts = np.concatenate([initial_theta(cfg, t, own_x, own_y, measured_rad, first, d)
                                  for d in start_distances(cfg)])
-        sigma = self.log_sigma_deg
         if cfg.loss != "squared" and cfg.scale == "sigma" and sigma is not None and sigma > 0:
             scale = np.full(measured_rad.shape[0], np.deg2rad(sigma))
             out = self._robust(terms, starts, scale)
@@ -255,7 +268,8 @@ class LevenbergMarquardt(BearingsEstimator):
 
     def _robust_columns(self, out, t, own_x, own_y, measured_rad, valid, scale, sigma):
         """At the robust solution: the plain F, the sandwich information as ``jtj``, the
-        bearings beyond c, and (private, for ``estimate``) sigma^2 = s^2 and the fit test."""
+        bearings beyond c, the bearings kept, and sigma^2 = s^2 and the fit test (the
+        ``Solution``'s own noise scale and test)."""
         loss = self.config.loss
         theta = out["theta"]
         r = bearing_residuals(theta, t, own_x, own_y, measured_rad, valid)

@@ -55,8 +55,11 @@ import numpy as np
 from tma.config import param
 from tma.errors import InputError
 from tma.families.bearings2d.estimators.base import (
+    Bearings,
     BearingsConfig,
     BearingsEstimator,
+    Solution,
+    TargetMotion,
     evaluate_in_blocks,
 )
 from tma.families.bearings2d.model import BearingTerms, wrap_residual
@@ -222,7 +225,9 @@ def run_filter(t, own_x, own_y, measured_rad, valid, first, last, cfg, sigma_rad
                 innovation = wrap_residual(measured_rad[update, k] - y[update, 2])
                 y[update] += gain * innovation[:, None]
                 IKH = np.broadcast_to(np.eye(4), Pu.shape).copy()
-                IKH[:, :, 2] -= gain  # Joseph form: (I - K H) P (I - K H)^T + K R K^T
+                # Joseph form: (I - K H) P (I - K H)^T + K R K^T, H the bearing component
+                # e_2 (a column of P, not a product: imm's matrix update would cost more)
+                IKH[:, :, 2] -= gain
                 P[update] = (IKH @ Pu @ IKH.transpose(0, 2, 1)
                              + R * gain[:, :, None] * gain[:, None, :])
         if start.any():  # a gate's restart starts afresh, without the prior
@@ -265,8 +270,11 @@ class ModifiedPolarEKF(BearingsEstimator):
     Config = Config
     outputs = ("n_gated",)  # bearings the innovation gate skipped (0 without a gate)
 
-    def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
-        sigma = self.config.sigma_deg if self.config.sigma_deg is not None else self.log_sigma_deg
+    def solve(self, bearings: Bearings, motion: TargetMotion) -> Solution:
+        t, own_x, own_y, measured_rad, valid, first = (
+            bearings.t, bearings.own_x, bearings.own_y, bearings.measured, bearings.valid,
+            bearings.first)
+        sigma = self.config.sigma_deg if self.config.sigma_deg is not None else bearings.sigma_deg
         if sigma is None:
             raise InputError("mpekf: the log declares no bearing noise; give the noise the "
                              "filter should assume with estimator.sigma_deg=<deg>")
@@ -293,13 +301,7 @@ class ModifiedPolarEKF(BearingsEstimator):
         good &= np.isfinite(info).all(axis=(1, 2))
         info[~good] = np.nan
         theta[~good] = np.nan
-        return {
-            "theta": theta,
-            "cost_rad2": cost,
-            "jtj": info,
-            "n_f_evals": np.full(n, np.nan),
-            "n_iter": np.full(n, np.nan),
-            "converged": good,
-            "stop_reason": np.where(good, 0, -1).astype(np.int64),
-            "n_gated": gated,
-        }
+        return Solution(theta=theta, converged=good,
+                        stop_reason=np.where(good, 0, -1).astype(np.int64),
+                        n_f_evals=np.full(n, np.nan), n_iter=np.full(n, np.nan),
+                        cost_rad2=cost, jtj=info, columns={"n_gated": gated})

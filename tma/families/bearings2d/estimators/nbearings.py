@@ -17,7 +17,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.config import param
-from tma.families.bearings2d.estimators.base import BearingsConfig, BearingsEstimator
+from tma.families.bearings2d.estimators.base import (
+    Bearings,
+    BearingsConfig,
+    BearingsEstimator,
+    Solution,
+    TargetMotion,
+)
 from tma.linalg import jacobi_scaled_eigh, solve_shifted
 
 
@@ -31,7 +37,10 @@ class NBearings(BearingsEstimator):
     Config = Config
     honest_errors = False  # biased by the noise of its first bearing: never ok, approximate
 
-    def solve(self, t, own_x, own_y, measured_rad, valid, first) -> dict:
+    def solve(self, bearings: Bearings, motion: TargetMotion) -> Solution:
+        t, own_x, own_y, measured_rad, valid, first = (
+            bearings.t, bearings.own_x, bearings.own_y, bearings.measured, bearings.valid,
+            bearings.first)
         n = measured_rad.shape[0]
         rows = np.arange(n)
         phi0 = measured_rad[rows, first][:, None]
@@ -54,10 +63,6 @@ class NBearings(BearingsEstimator):
         t0 = t0[:, 0]
         x0 = own_x[first] + r0 * np.sin(phi0[:, 0]) - vx * t0
         y0 = own_y[first] + r0 * np.cos(phi0[:, 0]) - vy * t0
-        return {
-            "theta": np.column_stack([x0, y0, vx, vy]),
-            "n_f_evals": np.full(n, np.nan),
-            "n_iter": np.full(n, np.nan),
-            "converged": ~singular,
-            "stop_reason": np.where(singular, -1, 0).astype(np.int64),
-        }
+        return Solution(theta=np.column_stack([x0, y0, vx, vy]), converged=~singular,
+                        stop_reason=np.where(singular, -1, 0).astype(np.int64),
+                        n_f_evals=np.full(n, np.nan), n_iter=np.full(n, np.nan))

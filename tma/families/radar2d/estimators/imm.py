@@ -110,6 +110,7 @@ class IMM(RadarEstimator):
                 # given S = I here and its estimate made NaN below (flagged divergent)
                 wrecked = ~(np.isfinite(S).all(axis=(1, 2)) & (np.linalg.det(S) > 0))
                 S[wrecked] = np.eye(2)
+                # the batched matrix update (2-D plots), whose S the mode likelihood needs
                 K = P[j] @ H.T @ np.linalg.inv(S)
                 x[j] = x[j] + np.einsum("nij,nj->ni", K, nu)
                 P[j] = np.where(has[:, None, None], P[j] - K @ S @ K.transpose(0, 2, 1), P[j])
