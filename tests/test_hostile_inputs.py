@@ -166,11 +166,17 @@ def test_runs_name_unknown_families_and_recorded_runs(logs, tmp_path, caplog):
     assert "aggregate" not in caplog.text  # never said to need aggregating
 
 
-def test_estimate_of_another_family_is_refused_naming_what_it_reads():
+def test_estimate_of_another_family_runs_its_estimators():
+    """Issue 30 (AttributeError), issue 29 item 5: a radar2d simulation is estimated by its
+    family's first tracker (tests/test_api_families.py checks its numbers); a bearings2d
+    estimator on it is refused naming the radar2d ones."""
+    sim = tma.simulate("radar2d", n_tracks=2, shard_size=2)
+    results = tma.estimate(sim)
+    assert results.tma.estimator == "alphabeta" and list(results["track_id"]) == [0, 1]
     with pytest.raises(ValueError) as exc:
-        tma.estimate(tma.simulate("radar2d", n_tracks=2, shard_size=2))
-    assert one_line(exc).startswith("tma.estimate reads bearings2d logs")
-    assert "pipeline.table scenario=radar2d" in str(exc.value)
+        tma.estimate(sim, estimator="lm")
+    assert one_line(exc) == ("estimator 'lm' reads bearings2d logs, these are radar2d's: "
+                             "choose one of alphabeta, fuzzy_mm, imm")
 
 
 # -- contact ids are kept as written -----------------------------------------------------------

@@ -122,14 +122,16 @@ def test_real_ship_motion_shows_no_number_that_is_not_an_answer(tmp_path):
     for estimator in ("lm", "last_leg"):
         for case in truth.itertuples(index=False):
             rec = tma.read_log(tmp_path / f"{case.case}.csv", sigma_deg=0.5)
-            (row,) = tma.estimate(rec, estimator=estimator).itertuples(index=False)
+            found = tma.estimate(rec, estimator=estimator)
+            (row,) = found.itertuples(index=False)
+            (theta,) = found.tma.estimates.itertuples(index=False)
             where = (estimator, case.case, row.status, row.range_now_m, row.speed_m_s)
             if np.isnan(row.range_now_m):  # blanked: all of it, with its status and why
                 assert row.status != "ok", where
                 assert "the estimate is not shown" in row.note or (
                     row.note.startswith("no finite estimate")), where
                 assert all(np.isnan(getattr(row, c)) for c in ESTIMATE_COLUMNS), where
-                assert np.isnan(row.x0_m) and np.isnan(row.vy_m_s), where
+                assert np.isnan(theta.x0_m) and np.isnan(theta.vy_m_s), where
             else:  # shown: an answer of the right order, whatever its status
                 assert case.range_m / 10 < row.range_now_m < case.range_m * 10, where
                 assert row.speed_m_s < 10 * case.speed_m_s + 5, where

@@ -138,3 +138,38 @@ def _plot(path, curves, doppler):
     fixed_layout(fig)
     save_figure(fig, path)
     plt.close(fig)
+
+
+# -- the Python API's hook (tma.api): what tma.estimate returns of bearing_doppler3d estimates
+
+def results(run) -> tuple[pd.DataFrame, dict]:
+    """``tma.estimate``'s results of ``run`` (``tma.api.Estimated``): one row per path, the
+    filter's state at its last epoch (``t_now_s``; ``X_m``, ``Y_m``, ``Z_m``, ``v_m_s``,
+    ``phi_rad``, ``a_m_s2``) with its own standard deviations (``sd_*``), its flag
+    (``filter_ok``) and ``status``; against the truth, as the table measures it
+    (``metrics``): the errors then (``err_*``, heading wrapped), the largest horizontal
+    error from ``DIVERGENCE_AFTER_S`` on, the NEES then (6 degrees of freedom) and ``status``
+    ``ok`` or ``divergent``. Tables: ``estimates`` (per epoch) and ``covariance`` (every
+    ``covariance_every`` epochs)."""
+    est = run.estimates.sort_values(["track_id", "step"], kind="stable").reset_index(drop=True)
+    last = est.groupby("track_id", sort=False).tail(1).reset_index(drop=True)
+    ok = last["filter_ok"].astype(bool)
+    frame = pd.DataFrame({"track_id": last["track_id"], "t_now_s": last["t_s"],
+                          **{c: last[c] for c in STATE_NAMES},
+                          **{f"sd_{c}": last[f"sd_{c}"] for c in STATE_NAMES},
+                          "filter_ok": ok, "status": np.where(ok, "ok", "divergent")})
+    tables = {"estimates": est, **run.side_tables}
+    if run.truth is None:
+        return frame, tables
+    err, _, t, flags = errors(est, run.truth)
+    ids = frame["track_id"].to_numpy()
+    paths = path_metrics(ids, err, t, flags)
+    for k, c in enumerate(STATE_NAMES):
+        frame[f"err_{c}"] = err[:, -1, k]
+    frame["horizontal_err_max_m"] = paths["horizontal_err_max_m"].to_numpy()
+    covariance = run.side_tables.get("covariance")
+    if covariance is not None:  # the last epoch's covariance is always kept
+        path_nees, stored = nees(err, covariance, ids)
+        frame["nees_now"] = path_nees[:, -1] if stored[-1] == t.size - 1 else np.nan
+    frame["status"] = paths["status"].to_numpy()
+    return frame, tables

@@ -24,6 +24,7 @@ from tma.families.bearings2d import (  # noqa: E402
 )
 from tma.families.bearings2d.map_outputs import (  # noqa: E402
     MAX_PLOTS,
+    contact_figure,
     position_covariance,
     read_logs,
     reference,
@@ -34,6 +35,7 @@ from tma.families.bearings2d.map_outputs import (  # noqa: E402
 from tma.families.bearings2d.metrics import (  # noqa: E402
     REGIONS,
     TABLE_COLUMNS,
+    THETA,
     summary_row,
     track_metrics,
 )
@@ -443,3 +445,92 @@ def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) 
         written += write_success_table(rows, tables_dir, table_name,
                                        (paper.against_paper(runs), paper.INTRO))
     return written
+
+
+# -- the Python API's hooks (tma.api): what tma.estimate returns, tma.plot_contact draws and
+# tma.write_map writes of bearings2d estimates
+
+# the metrics of a simulated track that are numbers of its estimate: blank where it is blank
+SIMULATED_ERRORS = ["bearing_err_deg", "distance_rel_err", "course_err_deg", "speed_rel_err",
+                    "nees"]
+
+
+def results(run) -> tuple[pd.DataFrame, dict]:
+    """``tma.estimate``'s results of ``run`` (``tma.api.Estimated``): the per-contact report
+    aggregate writes (``contact_report``), then against the AIS of a recording its truth
+    columns (``truth_report.with_truth``), against a simulation's truth its metrics
+    (``metrics.track_metrics``, as ``tma.runs`` gives them; the errors and ``nees`` blank
+    where the estimate is). Tables: ``estimates``, the estimator's own columns (``x0_m``..,
+    ``jtj_ij``, ``t_last_s``: what the plot and the map draw from), ``x0_m``.. blank where the
+    report's estimate is."""
+    est = run.estimates
+    report = contact_report(est, run.logs, "estimate",
+                            getattr(run.estimator.config, "max_range_rel_sd", None),
+                            run.recorded)
+    blank = ~np.isfinite(report["range_now_m"].to_numpy(float))
+    if run.truth is not None and run.recorded:  # the AIS of its trial
+        report = with_truth(report, est, run.truth)
+    elif run.truth is not None:  # a simulation
+        metrics = track_metrics(est, run.truth)
+        metrics.loc[blank, SIMULATED_ERRORS] = np.nan
+        report = pd.concat([report, metrics.drop(columns=[c for c in metrics
+                                                          if c in report])], axis=1)
+    estimates = est.copy()
+    estimates.loc[blank, list(THETA)] = np.nan
+    return report, {"estimates": estimates}
+
+
+SAME_TIME_S = 1e-6  # a contact's last bearing time in the results and in its recording
+SAME_PLACE_M = 1e-3  # own-ship there
+
+
+def check_logs(report: pd.DataFrame, estimates: pd.DataFrame, logs):
+    """ValueError, naming the first contact that differs, unless ``logs`` are those the
+    contacts of ``report`` (and their ``estimates``, row for row) were estimated from: each
+    contact's track id in them, its last bearing at the same time from the same own-ship
+    position, and its UTC the same where both are dated."""
+    where = {int(i): (lg, row) for lg in logs for row, i in enumerate(lg.track_id)}
+    epoch = logs[0].epoch_utc_ns
+    for r, e in zip(report.itertuples(index=False), estimates.itertuples(index=False),
+                    strict=True):
+        place = where.get(int(r.track_id))
+        if place is None:
+            why = f"track id {r.track_id} is not in this recording"
+        else:
+            lg, row = place
+            last = np.flatnonzero(np.isfinite(lg.bearing_deg[row]))[-1]
+            why = ""
+            if not (abs(lg.t_s[last] - e.t_last_s) <= SAME_TIME_S
+                    and abs(lg.own_x_m[last] - e.own_x_last_m) <= SAME_PLACE_M
+                    and abs(lg.own_y_m[last] - e.own_y_last_m) <= SAME_PLACE_M):
+                why = "its last bearing is at another time or own-ship position here"
+            elif isinstance(r.time_now_utc, str) and epoch is not None and (
+                    r.time_now_utc != format_utc(epoch + round(r.t_now_s * 1e9))):
+                why = f"its last bearing is at {r.time_now_utc} there, at another UTC here"
+        if why:
+            raise ValueError(f"these results were not estimated from this recording (contact "
+                             f"{r.label!r}: {why}); pass the recording given to tma.estimate")
+
+
+def plot_contact(report: pd.DataFrame, estimates: pd.DataFrame, logs, label):
+    """``tma.plot_contact``: the Figure of contact ``label`` (``map_outputs.contact_figure``)
+    of the contacts of ``report`` and their ``estimates``, drawn over ``logs``."""
+    check_logs(report, estimates, logs)
+    return contact_figure(report, estimates, logs, label)
+
+
+def write_map(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, truth_track=None
+              ) -> Path:
+    """``tma.write_map``: the map MCAP of the contacts of ``report`` (``map_outputs.
+    write_map_mcap``), which needs own-ship in latitude/longitude and UTC times."""
+    check_logs(report, estimates, logs)
+    epoch, origin = logs[0].epoch_utc_ns, logs[0].origin_deg
+    if origin is None:
+        raise ValueError("a map needs own-ship in latitude/longitude; this log's is in local "
+                         "x/y metres (a simulation, or a log read without them): read a log "
+                         "with its origin, origin={'lat': ..., 'lon': ...}")
+    if epoch is None:
+        raise ValueError("a map needs UTC times; this log's are relative: read it with "
+                         "time={'start_utc': ...}")
+    return write_map_mcap(path, report, estimates, logs, epoch, origin,
+                          {"estimator": "tma.estimate"}, truth_track=truth_track)

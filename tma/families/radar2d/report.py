@@ -17,6 +17,7 @@ from tma.families.radar2d.metrics import (  # noqa: E402
     DEFAULT_MEMORY,
     GATE_M,
     SEGMENT_NAMES,
+    Segments,
     per_scan_errors,
     segments,
     sigma_column,
@@ -193,3 +194,43 @@ def _plot(error_path, memory_path, curves):
     fixed_layout(fig, title=False)
     save_figure(fig, memory_path)
     plt.close(fig)
+
+
+# -- the Python API's hook (tma.api): what tma.estimate returns of radar2d estimates
+
+def results(run) -> tuple[pd.DataFrame, dict]:
+    """``tma.estimate``'s results of ``run`` (``tma.api.Estimated``): one row per run (a
+    track), its state at its last scan (``t_now_s``, ``x_now_m``, ``y_now_m``, velocity,
+    ``speed_now_m_s``, ``course_now_deg`` clockwise from north) and ``status``; against its
+    truth, as the table measures it (``metrics.per_scan_errors``, the segments of the
+    scenario and of the tracker's memory J), the error now, its mean and maximum from the
+    scan where the window fills, and ``status`` ``ok`` or ``track_lost``. Tables:
+    ``estimates`` (per scan) and, with a truth, ``errors`` (per scan)."""
+    est = run.estimates.sort_values(["track_id", "step"], kind="stable").reset_index(drop=True)
+    last = est.groupby("track_id", sort=False).tail(1).reset_index(drop=True)
+    frame = pd.DataFrame({
+        "track_id": last["track_id"], "t_now_s": last["t_s"],
+        "x_now_m": last["x_m"], "y_now_m": last["y_m"],
+        "vx_now_m_s": last["vx_m_s"], "vy_now_m_s": last["vy_m_s"],
+        "speed_now_m_s": np.hypot(last["vx_m_s"], last["vy_m_s"]),
+        "course_now_deg": np.rad2deg(np.arctan2(last["vx_m_s"], last["vy_m_s"])) % 360.0,
+        "status": last["status"]})
+    tables = {"estimates": est}
+    if run.truth is None:
+        return frame, tables
+    memory = getattr(run.estimator.config, "memory", DEFAULT_MEMORY)
+    if (run.scenario.get("real") or {}).get("file") is None:
+        segs = segments(run.scenario, memory)
+    else:  # real motion: no legs, track loss from the window fill (real_motion_table)
+        segs = Segments({}, (memory - 1) * run.scenario["scan_period_s"], np.nan, ())
+    per_scan = per_scan_errors(est, run.truth, segs)
+    late = per_scan[per_scan["t_s"] >= segs.loss_from_s - 1e-9]
+    by_run = late.groupby("track_id")["error_m"]
+    gaps = late["error_m"].isna().groupby(late["track_id"]).any()  # a scan without estimate
+    ids = frame["track_id"]
+    frame["error_now_m"] = per_scan.groupby("track_id").tail(1).set_index("track_id")[
+        "error_m"].reindex(ids).to_numpy()
+    frame["error_mean_m"] = by_run.mean().mask(gaps).reindex(ids).to_numpy()
+    frame["error_max_m"] = by_run.max().mask(gaps).reindex(ids).to_numpy()
+    frame["status"] = per_scan.groupby("track_id")["status"].first().reindex(ids).to_numpy()
+    return frame, {**tables, "errors": per_scan}

@@ -121,3 +121,26 @@ def _plot(path, dataset, reference, samples):
     fixed_layout(fig)
     save_figure(fig, path)
     plt.close(fig)
+
+
+# -- the Python API's hook (tma.api): what tma.estimate returns of ranges2d estimates
+
+SHOWN = ["track_id", "x_m", "y_m", "se_x_m", "se_y_m", "samples_used", "status"]
+
+
+def results(run) -> tuple[pd.DataFrame, dict]:
+    """``tma.estimate``'s results of ``run`` (``tma.api.Estimated``): one row per track, its
+    posterior mean ``x_m``, ``y_m`` with the estimator's own standard errors (Monte Carlo;
+    0 for ``quadrature``), the samples it used (bisection evaluations included) and
+    ``status``; against the truth of a ``population`` scenario (``concrete`` has none) the
+    error of each coordinate and the distance (``truth_err_m``, as ``metrics.track_metrics``).
+    Tables: ``estimates`` (every column: relative errors, correlations, counts) and the
+    sampler's first draws (``samples``) where it keeps them."""
+    est = run.estimates
+    frame = est[SHOWN].copy()
+    if run.truth is not None:
+        truth = run.truth.set_index("track_id").loc[est["track_id"]]
+        frame["truth_err_x_m"] = est["x_m"].to_numpy() - truth["x_m"].to_numpy()
+        frame["truth_err_y_m"] = est["y_m"].to_numpy() - truth["y_m"].to_numpy()
+        frame["truth_err_m"] = np.hypot(frame["truth_err_x_m"], frame["truth_err_y_m"])
+    return frame, {"estimates": est, **run.side_tables}
