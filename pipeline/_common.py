@@ -324,6 +324,12 @@ def sweep_job(cfg: DictConfig):
     return int(hydra_cfg.job.num)
 
 
+def job_tables(cfg: DictConfig) -> bool:
+    """Whether a job of a multirun writes its own table (``job_tables``; the config of
+    ``table input=LOG`` has no such key: no)."""
+    return bool(cfg.get("job_tables", False))
+
+
 def sweep_record(cfg: DictConfig) -> SweepRecord | None:
     """Where this aggregate job records the runs it read, for ``SweepTable`` (a job of a
     multirun only)."""
