@@ -64,10 +64,12 @@ if (_command() or _tma_command()) and not _informational(sys.argv[1:]):
     # command's __main__ is its script, which imports pipeline.cli
     verbs = ["pipeline._common", "pipeline.simulate", "pipeline.estimate", "pipeline.aggregate",
              "pipeline.ingest", "pipeline.cli"]
-    # the jobs of a multirun plot there only when each writes its own table (job_tables=true)
-    plotting = multirun and any(a.partition("=")[0].lstrip("+") == "job_tables"
-                                and a.partition("=")[2].lower() not in ("false", "null")
-                                for a in sys.argv[1:])
+    # the jobs of a multirun plot there only when each writes its own table (job_tables=true;
+    # a recorded log's per-contact report, input=LOG)
+    plotting = multirun and any(
+        a.startswith("input=") or (a.partition("=")[0].lstrip("+") == "job_tables"
+                                   and a.partition("=")[2].lower() not in ("false", "null"))
+        for a in sys.argv[1:])
     preload_workers([v for v in verbs if v != _command()]
                     + (["matplotlib.pyplot"] if plotting else []))
     if multirun:

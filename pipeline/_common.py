@@ -325,9 +325,10 @@ def sweep_job(cfg: DictConfig):
 
 
 def job_tables(cfg: DictConfig) -> bool:
-    """Whether a job of a multirun writes its own table (``job_tables``; the config of
-    ``table input=LOG`` has no such key: no)."""
-    return bool(cfg.get("job_tables", False))
+    """Whether a job of a multirun writes its own table (``job_tables``). The config of
+    ``table input=LOG`` has no such key and its sweep no table of all jobs: each job writes
+    its log's per-contact report."""
+    return bool(cfg.get("job_tables", True))
 
 
 def sweep_record(cfg: DictConfig) -> SweepRecord | None:
