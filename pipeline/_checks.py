@@ -26,7 +26,7 @@ def check_stage_options(cfg: dict, known: set[str]):
             isinstance(v, dict) for v in (grid.get("estimators") or {}).values())):
         raise ConfigError(f"grid must be null or {{estimators: {{name: estimator config}}}}, "
                           f"got '{grid}'")
-    for key in ("force", "progress"):
+    for key in ("force", "progress", "job_tables"):
         if key in cfg and not isinstance(cfg[key], bool):
             raise ConfigError(f"{key} must be true or false, got '{cfg[key]}'")
     for key in ("dataset", "table", "name"):

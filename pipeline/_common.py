@@ -324,6 +324,13 @@ def sweep_job(cfg: DictConfig):
     return int(hydra_cfg.job.num)
 
 
+def job_tables(cfg: DictConfig) -> bool:
+    """Whether a job of a multirun writes its own table (``job_tables``). The config of
+    ``table input=LOG`` has no such key and its sweep no table of all jobs: each job writes
+    its log's per-contact report."""
+    return bool(cfg.get("job_tables", True))
+
+
 def sweep_record(cfg: DictConfig) -> SweepRecord | None:
     """Where this aggregate job records the runs it read, for ``SweepTable`` (a job of a
     multirun only)."""

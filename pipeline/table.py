@@ -10,7 +10,7 @@ from time import perf_counter
 
 from omegaconf import open_dict
 
-from pipeline._common import log, plain, run_stage, stage_main
+from pipeline._common import job_tables, log, plain, run_stage, stage_main, sweep_job
 from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
 from pipeline.ingest import check_option_keys, with_truth_shorthand
@@ -39,7 +39,9 @@ def table_stage(cfg):
             name, stage = "ingest", ingest_stage
         elif name == "simulate" and cfg.dataset:
             continue  # a stored dataset: nothing to simulate
-        if name == "estimate":  # not during simulate: it would delay the worker pool's start
+        if name == "estimate" and (sweep_job(cfg) is None or job_tables(cfg)):
+            # not during simulate: it would delay the worker pool's start; a job of a sweep
+            # writes no table unless asked (job_tables)
             prefetch = prefetch_report(str(cfg.get("scenario", {}).get("family",
                                                                        cfg.get("family"))))
         if name == "aggregate" and prefetch is not None:

@@ -36,6 +36,26 @@ def test_a_command_imports_nothing_heavy_it_does_not_need(verb):
     assert _loaded(f"import pipeline.{verb}") == set()
 
 
+# what composing a command's config needs none of (issue 32): the stages' libraries, mcap's
+# writer (and the importlib.metadata it loads), Dask's event loop, and the fork server's
+# multiprocessing, since --cfg, --help and --info start no worker
+NOT_AT_START_UP = (*HEAVY, "scipy", "mcap.writer", "mcap_protobuf", "importlib.metadata",
+                   "asyncio", "multiprocessing", "tma.ais.pairs")
+
+
+@pytest.mark.parametrize("verb", ["table", "estimate"])
+def test_composing_a_commands_config_loads_no_stage_library(verb):
+    """``python -m pipeline.<verb> --cfg job`` as a user runs it (the start-up ``make bench``
+    measures), the modules it imports read off ``-X importtime``."""
+    proc = subprocess.run([sys.executable, "-X", "importtime", "-m", f"pipeline.{verb}",
+                           "--cfg", "job"], cwd=REPO, capture_output=True, text=True, check=True)
+    assert "scenario:" in proc.stdout  # the composed config
+    imported = {line.rpartition("|")[2].strip() for line in proc.stderr.splitlines()
+                if line.startswith("import time:")}
+    assert {"pipeline._common", "tma.families.bearings2d.estimators.base"} <= imported
+    assert imported.isdisjoint(NOT_AT_START_UP), sorted(imported & set(NOT_AT_START_UP))
+
+
 def test_a_worker_simulates_and_estimates_a_shard_without_pandas(tmp_path):
     """A worker writes Parquet (truth, shard estimates) but never needs pandas, which
     pyarrow would import on its first ``pa.array`` or ``pq.read_table`` (0.26 s a worker)."""

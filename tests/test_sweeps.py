@@ -109,6 +109,8 @@ def test_cli_experiment_applies_overrides(data):
 
 
 def test_cli_aggregate_sweep_writes_one_table_of_all_jobs(data):
+    """The jobs record their runs; the sweep's end writes every run's metrics and the one
+    table (Markdown, CSV, plot, the paper's section), and nothing else under tables/."""
     root, common = data
     run_stage_here("aggregate", "-m", "estimator=lm,nbearings", "scenario.sigma_deg=0.1,0.5",
                    *common)
@@ -116,11 +118,11 @@ def test_cli_aggregate_sweep_writes_one_table_of_all_jobs(data):
     sweep = pd.read_csv(tables / "bearings2d-sweep.csv")
     assert list(zip(sweep.estimator, sweep.sigma_deg, strict=True)) == [
         ("lm", 0.1), ("lm", 0.5), ("nbearings", 0.1), ("nbearings", 0.5)]
-    assert (sweep.n_tracks == 30).all() and (tables / "bearings2d-sweep.png").exists()
-    jobs = [p for p in tables.glob("*.csv")
-            if p.name != "bearings2d-sweep.csv" and not p.name.endswith("_paper.csv")]
-    assert len(jobs) == 4 and all(len(pd.read_csv(p)) == 1 for p in jobs)  # one per job
-    assert len(list(tables.glob("*_paper.csv"))) == 5  # each table beside the paper, sweep too
+    assert (sweep.n_tracks == 30).all()
+    assert sorted(p.name for p in tables.iterdir()) == [  # no job's own table (job_tables)
+        "bearings2d-sweep.csv", "bearings2d-sweep.md", "bearings2d-sweep.png",
+        "bearings2d-sweep_paper.csv"]
+    assert "| lm |" in (tables / "bearings2d-sweep.md").read_text()
     # the metrics of every run: one dataset, with the run's config values as columns
     from tma.stages.aggregate import metrics_dataset  # (imported here: new in this change)
 
@@ -135,9 +137,10 @@ def test_cli_aggregate_sweep_writes_one_table_of_all_jobs(data):
 
 
 def test_cli_experiment_sweep_names_its_tables(data):
+    """``job_tables=true``: each job's own table too, named by its number."""
     root, common = data
     run_stage_here("aggregate", "-m", "experiment=bearings2d_table", "estimator=lm,nbearings",
-            "scenario.sigma_deg=[0.1,0.5]", "table=exp", *common)
+            "scenario.sigma_deg=[0.1,0.5]", "table=exp", "job_tables=true", *common)
     tables = root / "tables"
     assert len(pd.read_csv(tables / "exp.csv")) == 4  # the sweep
     assert [len(pd.read_csv(tables / f"exp-{n}.csv")) for n in (0, 1)] == [2, 2]  # its jobs

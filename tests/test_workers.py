@@ -111,6 +111,10 @@ def test_a_sweep_on_the_joblib_launcher_gives_the_grid_of_one_command(tmp_path):
     table = pd.read_csv(sweep / "tables" / "bearings2d-sweep.csv")
     assert sorted(zip(table.estimator, table.sigma_deg, strict=True)) == [
         ("lm", 0.1), ("lm", 0.5), ("nbearings", 0.1), ("nbearings", 0.5)]
+    assert sorted(p.name for p in (sweep / "tables").iterdir()) == [  # the sweep's only
+        "bearings2d-sweep.csv", "bearings2d-sweep.md", "bearings2d-sweep.png",
+        "bearings2d-sweep_paper.csv"]
+    assert len(list((sweep / "data").glob("runs/*/*/metrics.parquet"))) == 4
     grid = tmp_path / "grid"
     run_cli("table", *small, "scenario.sigma_deg=[0.1,0.5]",
             "+estimator@grid.estimators.lm=lm", "+estimator@grid.estimators.nbearings=nbearings",

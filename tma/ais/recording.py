@@ -13,10 +13,13 @@ same path is another dataset.
 import functools
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from tma.ais.pairs import Pair, PairRules, find_pairs
+if TYPE_CHECKING:  # the pairs' search (and the AIS readers it needs) loads where it is used:
+    # every command registers the config group RealPairs, few read a recording
+    from tma.ais.pairs import Pair, PairRules
 from tma.config import param
 from tma.errors import ConfigError
 from tma.io.atomic import sha256_file
@@ -76,12 +79,14 @@ class RealPairs:
                                  "(0, 3600]")
     max_gap_target_s: float = param(90.0, "longest gap in the target's AIS (s)", "(0, 3600]")
 
-    def rules(self) -> PairRules:
+    def rules(self) -> "PairRules":
+        from tma.ais.pairs import PairRules
+
         return PairRules(self.window_s, self.min_turn_deg, self.min_range_m, self.max_range_m,
                          self.max_gap_own_s, self.max_gap_target_s)
 
 
-def pairs_of(real: RealPairs) -> tuple[AisRecording, list[Pair]]:
+def pairs_of(real: RealPairs) -> tuple[AisRecording, list["Pair"]]:
     """The recording of ``real.file`` and its pairs under ``real``'s rules (ConfigError when
     there is none)."""
     rec = recording_of(real.file)
@@ -94,7 +99,9 @@ def pairs_of(real: RealPairs) -> tuple[AisRecording, list[Pair]]:
 
 
 @functools.lru_cache(maxsize=8)
-def _pairs(path: str, sha256: str, rules: PairRules) -> list[Pair]:
+def _pairs(path: str, sha256: str, rules: "PairRules") -> list["Pair"]:
+    from tma.ais.pairs import find_pairs
+
     return find_pairs(_load(path, sha256).ships, rules)
 
 

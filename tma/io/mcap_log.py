@@ -25,7 +25,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from mcap_protobuf.schema import build_file_descriptor_set
 
 from tma.errors import InputError
 from tma.io.atomic import atomic_path
@@ -87,6 +86,10 @@ class Channel:
     def schema_record(self) -> tuple[str, bytes]:
         """(schema encoding, schema data) as the log embeds them."""
         if self.message_class is not None:
+            # mcap-protobuf-support loads mcap's writer and importlib.metadata (0.08 s): where
+            # a log is written, not in every command's start-up
+            from mcap_protobuf.schema import build_file_descriptor_set
+
             return "protobuf", build_file_descriptor_set(self.message_class).SerializeToString()
         if self.encoding == "protobuf":
             return "protobuf", proto_schema(self.schema).descriptor_set

@@ -92,15 +92,20 @@ class SweepRecord:
 
 
 def run_aggregate(command: Command, table: str | None, default_suffix: str = "custom",
-                  record: SweepRecord | None = None):
+                  record: SweepRecord | None = None, tables: bool = True):
     """The aggregate stage: the paths written, as they are (``tma.stages.aggregate``);
-    ``record``: a job of a multirun records what it read when it is done."""
-    from tma.stages.aggregate import aggregate, sweep_record
+    ``record``: a job of a multirun records what it read when it is done; ``tables``: False
+    for such a job without a table of its own, which only checks that its runs are finished
+    (the sweep's table, when it ends, measures them)."""
+    from tma.stages.aggregate import aggregate, check_runs, sweep_record
 
     jobs, paths = command.jobs(), command.config["paths"]
-    yield from aggregate(paths["data_dir"], paths["tables_dir"], jobs, table=table,
-                         default_suffix=default_suffix, progress=command.get("progress"),
-                         report=command.get("report"))
+    if tables:
+        yield from aggregate(paths["data_dir"], paths["tables_dir"], jobs, table=table,
+                             default_suffix=default_suffix, progress=command.get("progress"),
+                             report=command.get("report"))
+    else:
+        check_runs(paths["data_dir"], jobs)
     if record is not None:
         write_json_atomic(record.path, sweep_record(
             record.sweep, record.job, paths["data_dir"], paths["tables_dir"], jobs,

@@ -3,7 +3,6 @@ before it is trusted (``address_problem``, ``check_scheduler``: one line for a m
 refused, unknown or foreign address), or of a LocalCluster started once per process
 (``dask_client``); closed at exit."""
 
-import asyncio
 import atexit
 import functools
 import logging
@@ -89,6 +88,8 @@ def check_scheduler(address: str, timeout: float, connection_args: dict) -> None
     ``distributed.Client(address, timeout=...)`` alone would wait forever for a service that
     accepts the connection and never speaks Dask's protocol (its handshake read is unbounded);
     an HTTP server reads Dask's first frame as a request line and waits for its end."""
+    import asyncio  # 0.05 s: only where a scheduler is probed, not in every command's start-up
+
     _tcp_reachable(address, timeout)
     probe = asyncio.wait_for(_dask_identity(address, connection_args), timeout)
     try:

@@ -61,13 +61,7 @@ def aggregate(data_dir, tables_dir, jobs, table=None, default_suffix="custom",
     ``progress``: progress bars where a report draws per-contact outputs (None: on a
     terminal only; the stage passes its ``progress`` option); ``report``: the kind of table,
     one the family's report module offers (None: its own)."""
-    check_datasets(ds for ds, _ in jobs)
-    runs = []
-    for dataset, est_cfg in jobs:
-        est_cfg = full_config(dataset, est_cfg)  # no prepare: aggregate trains nothing
-        runs.append((dataset, est_cfg["name"], run_path(data_dir, dataset, est_cfg)))
-        if not (runs[-1][2] / MANIFEST).exists():  # none of these settings: name those made
-            raise InputError(missing_run_line(data_dir, dataset, est_cfg))
+    runs = check_runs(data_dir, jobs)
     opened = in_threads(open_run, [root for _, _, root in runs])  # verified and read
     by_family: dict[str, list[RunEntry]] = {}
     for (dataset, estimator, root), (manifest, estimates) in zip(runs, opened, strict=True):
@@ -100,6 +94,19 @@ def aggregate(data_dir, tables_dir, jobs, table=None, default_suffix="custom",
     for path in written:  # what a killed aggregate left of these files, and nothing else
         remove_stale_temporaries(path.parent, only_dead=True, names=[path.name])
     return written
+
+
+def check_runs(data_dir, jobs) -> list[tuple[Dataset, str, Path]]:
+    """``(dataset, estimator name, run directory)`` of each of ``jobs``, each run finished (an
+    InputError naming the runs made otherwise)."""
+    check_datasets(ds for ds, _ in jobs)
+    runs = []
+    for dataset, est_cfg in jobs:
+        est_cfg = full_config(dataset, est_cfg)  # no prepare: aggregate trains nothing
+        runs.append((dataset, est_cfg["name"], run_path(data_dir, dataset, est_cfg)))
+        if not (runs[-1][2] / MANIFEST).exists():  # none of these settings: name those made
+            raise InputError(missing_run_line(data_dir, dataset, est_cfg))
+    return runs
 
 
 def _import_report(name: str):
