@@ -56,9 +56,9 @@ from tma.families.bearings2d.ncv import (
     _filter,
     _fit,
     _srif,
+    in_units,
     smooth,
     start_track,
-    theta_of_state,
 )
 from tma.runtime.jit import njit
 
@@ -480,14 +480,7 @@ def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_p
                    out["state"], out["cov"], out["innovations"], out["cost_rad2"],
                    out["passes"], out["p_manoeuvre"], out["manoeuvre_s"], TAIL_POINTS,
                    TAIL_CHI2, out["inflation"])
-    out["cov"] *= sigma2[:, None, None]
-    out["innovations"] = out["innovations"] / np.sqrt(sigma2)[:, None]
-    out["theta"], out["cov_theta"] = theta_of_state(out["state"], out["cov"], t[last])
-    out["sigma2"] = sigma2
-    fail = ~np.isfinite(theta_cv).all(axis=1)
-    for key in ("state", "cov", "innovations", "theta", "cov_theta"):
-        out[key][fail] = np.nan
-    return out
+    return in_units(out, sigma2, t[last], theta_cv)
 
 
 def component(t, own_x, own_y, measured_rad, theta_cv, levels, sigma_rad, start=None,

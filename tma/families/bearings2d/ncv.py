@@ -497,6 +497,20 @@ def theta_of_state(state, P, t_now):
     return theta, A @ P @ np.swapaxes(A, 1, 2)
 
 
+def in_units(out, sigma2, t_now, theta_cv):
+    """A kernel's ``out`` (covariance and innovations in units of the noise variance) in
+    physical units under ``sigma2`` (rad^2, (n,)), with ``theta``/``cov_theta`` of the state
+    at ``t_now`` (n,) and NaN for the tracks without a constant-velocity start."""
+    out["cov"] *= sigma2[:, None, None]
+    out["innovations"] = out["innovations"] / np.sqrt(sigma2)[:, None]
+    out["theta"], out["cov_theta"] = theta_of_state(out["state"], out["cov"], t_now)
+    out["sigma2"] = sigma2
+    fail = ~np.isfinite(theta_cv).all(axis=1)
+    for key in ("state", "cov", "innovations", "theta", "cov_theta"):
+        out[key][fail] = np.nan
+    return out
+
+
 def smooth(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_psd, sigma_rad,
            iterate=True):
     """The NCV MAP state at each track's last bearing from the constant-velocity start
@@ -544,11 +558,4 @@ def smooth(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_ps
         if round_ < rounds - 1:
             sigma2 = np.where(known, sigma2, estimated)
     sigma2 = np.where(known, scale2, np.where(count > 0, estimated, scale2))
-    out["cov"] *= sigma2[:, None, None]
-    out["innovations"] = out["innovations"] / np.sqrt(sigma2)[:, None]
-    out["theta"], out["cov_theta"] = theta_of_state(out["state"], out["cov"], t[last])
-    out["sigma2"] = sigma2
-    fail = ~np.isfinite(theta_cv).all(axis=1)
-    for key in ("state", "cov", "innovations", "theta", "cov_theta"):
-        out[key][fail] = np.nan
-    return out
+    return in_units(out, sigma2, t[last], theta_cv)
