@@ -7,6 +7,7 @@ import shutil
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import pytest
@@ -72,3 +73,36 @@ def test_a_read_only_install_and_home_still_import_and_run(tmp_path):
     assert out.returncode == 0, out.stderr
     assert out.stdout.split()[0] == "6.0"
     assert any(p.name.startswith("tma-numba-cache-") for p in temp.iterdir())
+
+
+RACE = """
+import os, sys, time
+import numba  # imported before the start: the processes race to compile, not to import
+from kernel import total
+open(f"ready-{os.getpid()}", "w").close()
+while not os.path.exists("go"):
+    time.sleep(0.001)
+print(total(4), sum(total.stats.cache_misses.values()))
+"""
+
+
+def test_processes_starting_at_once_compile_a_kernel_once(tmp_path):
+    """Issue 32: two processes calling the same kernel at the same moment with an empty cache
+    (two workers of a fresh machine's first ``make table``): one compiles it and says so, the
+    other waits for it and loads it from the cache. Before, both compiled (and said so)."""
+    (tmp_path / "callee.py").write_text(CALLEE.format(factor=1.0))
+    (tmp_path / "kernel.py").write_text(KERNEL)
+    env = {**os.environ, "PYTHONPATH": f"{tmp_path}{os.pathsep}{REPO}",
+           "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    procs = [subprocess.Popen([sys.executable, "-c", RACE], cwd=tmp_path, env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for _ in range(2)]
+    while len(list(tmp_path.glob("ready-*"))) < 2 and all(p.poll() is None for p in procs):
+        time.sleep(0.01)
+    (tmp_path / "go").touch()
+    outs = [p.communicate(timeout=300) for p in procs]
+    assert all(p.returncode == 0 for p in procs), outs
+    assert sorted(out.split()[1] for out, _ in outs) == ["0", "1"]  # compiled once, loaded once
+    assert all(out.split()[0] == "6.0" for out, _ in outs)
+    notes = "".join(err for _, err in outs)
+    assert notes.count("note: compiling kernel kernels (numba), once per machine") == 1, notes

@@ -19,11 +19,22 @@ Two gaps of numba's cache are closed here:
   none is writable (a read-only install and home) it refuses to decorate the function, which
   would fail with a traceback. The cache then moves to a per-user temporary directory, and if
   even that fails the kernel is compiled in every process, uncached.
+
+And one cost: on a machine whose cache is empty, every worker process that calls a kernel
+first would compile it at the same time (two workers: twice the work, on the cores the other
+tasks need). A kernel's first call in a process (``Kernel.__call__``) therefore compiles it
+for its arguments' types under an exclusive file lock beside its cache index
+(``compiling``): one process compiles and saves it, the others wait for the lock and then load
+it from the cache. So each kernel is compiled once per machine, and the note that says so is
+printed once, by the process that compiles (``warm_kernels`` compiles a command's kernels
+ahead, while its first stages run).
 """
 
+import contextlib
 import functools
 import inspect
 import os
+import sys
 import tempfile
 import threading
 
@@ -91,24 +102,65 @@ def _stamp_dependencies(kernel, depends):
 _ANNOUNCED: set[str] = set()
 
 
-def _say_if_compiling(kernel, function):
-    """Say once per process and module, on stderr (worker processes' logging is not the
-    command's), that a module's kernels are about to be compiled: the first run on a machine
-    spends seconds there, silently otherwise. Later runs load them from numba's cache."""
+def _index_path(kernel) -> str | None:
+    """Where numba keeps the cache index of ``kernel`` (None: uncached)."""
     cache_file = getattr(getattr(kernel, "_cache", None), "_cache_file", None)
-    index = getattr(cache_file, "_index_path", None)
+    return getattr(cache_file, "_index_path", None)
+
+
+def _say_compiling(function) -> None:
+    """Say once per process and module, on stderr (worker processes' logging is not the
+    command's), that a module's kernels are being compiled: the first run on a machine spends
+    seconds there, silently otherwise. Later runs load them from numba's cache."""
     module = function.__module__
-    if index is None or os.path.exists(index) or module in _ANNOUNCED:
+    if module in _ANNOUNCED:
         return
     _ANNOUNCED.add(module)
     parts = module.split(".")
     name = module.rsplit(".", 1)[-1].removesuffix("_kernel")
     if parts[:2] == ["tma", "families"] and len(parts) > 3:  # "bearings2d lm"
         name = f"{parts[2]} {name}"
-    import sys
-
     print(f"note: compiling {name} kernels (numba), once per machine: later runs load them "
           "from its cache", file=sys.stderr, flush=True)
+
+
+@contextlib.contextmanager
+def compiling(kernel, function):
+    """Hold the machine-wide lock of ``kernel`` (numba's dispatcher of ``function``), a file
+    ``<its cache index>.lock`` locked with ``flock``, while the block compiles it or loads it
+    from the cache: a second process compiling the same kernel waits, then finds it cached.
+    Without a cache, a lock file or ``flock`` (not POSIX), the block runs unlocked. Announces
+    the compilation (``_say_compiling``) when the kernel's cache index is absent."""
+    index = _index_path(kernel)
+    with contextlib.ExitStack() as stack:
+        if index is not None:
+            try:
+                import fcntl
+
+                handle = stack.enter_context(open(f"{index}.lock", "a"))
+                fcntl.flock(handle, fcntl.LOCK_EX)
+            except (ImportError, OSError):  # a read-only cache, Windows: compile unlocked
+                pass
+            if not os.path.exists(index):
+                _say_compiling(function)
+        yield
+
+
+def _argument_types(dispatcher, function, args) -> tuple | None:
+    """The numba types ``dispatcher`` gives ``args`` when called with them: each argument's
+    type, and ``Omitted(default)`` for each parameter left to its default (as numba's
+    dispatcher folds them); None when one has no numba type (the call itself says so)."""
+    from numba.core import types
+
+    parameters = list(inspect.signature(function).parameters.values())
+    if len(args) > len(parameters) or any(p.default is p.empty
+                                          for p in parameters[len(args):]):
+        return None
+    try:
+        return (*(dispatcher.typeof_pyval(a) for a in args),
+                *(types.Omitted(p.default) for p in parameters[len(args):]))
+    except Exception:  # numba's ValueError or TypeError for a value it cannot type
+        return None
 
 
 class Kernel:
@@ -118,6 +170,7 @@ class Kernel:
 
     def __init__(self, function, options, depends):
         self._dispatcher = None
+        self._called = False  # called from Python in this process (compiled or loaded)
         self._lock = threading.Lock()
         self._options, self._depends = options, tuple(depends)
         self.py_func = function
@@ -130,7 +183,6 @@ class Kernel:
                 if self._dispatcher is None:
                     kernel = _compile(self.py_func, self._options)
                     _stamp_dependencies(kernel, self._depends)
-                    _say_if_compiling(kernel, self.py_func)
                     self._dispatcher = kernel
         return self._dispatcher
 
@@ -139,7 +191,27 @@ class Kernel:
         return self.dispatcher._numba_type_
 
     def __call__(self, *args, **kwargs):
+        if not self._called:
+            self._first_call(args, kwargs)
         return self.dispatcher(*args, **kwargs)
+
+    def _first_call(self, args, kwargs) -> None:
+        """Compile (or load) the kernel for these arguments' types, as numba's first call
+        would, but under the machine-wide lock (``compiling``) and before it runs: a process
+        waits for another's compilation, never for its computation."""
+        dispatcher = self.dispatcher
+        with self._lock:
+            if self._called:
+                return
+            types = None if kwargs else _argument_types(dispatcher, self.py_func, args)
+            if types is not None:
+                with compiling(dispatcher, self.py_func):
+                    getattr(dispatcher, "_compilation_chain_init_hook", lambda: None)()
+                    try:
+                        dispatcher.compile(types)
+                    except Exception:  # a typing error: raised by the call, as numba words it
+                        pass
+            self._called = True
 
     def __getattr__(self, name):
         if name.startswith("__"):  # probes of the protocol (copy, pickle...) are not numba's
