@@ -134,12 +134,16 @@ RUN_DAMAGE = {
     "manifest not JSON": lambda run: (run / "manifest.json").write_text("[1, 2"),
     "manifest key renamed": lambda run: _edit_json(
         run / "manifest.json", lambda m: m.update(filez=m.pop("files"))),
-    "estimates missing": lambda run: (run / "estimates.parquet").unlink(),
-    "shard output garbage": lambda run: (run / "shards" / "shard-00002.parquet").write_bytes(
+    "estimates missing": lambda run: (run / "estimates" / "shard-00000.parquet").unlink(),
+    "shard output garbage": lambda run: (run / "estimates" / "shard-00002.parquet").write_bytes(
         b"garbage"),
     "sidecar damaged": lambda run: (
-        (run / "estimates.parquet").unlink(),
+        (run / "manifest.json").write_text("[1, 2"),  # the run broken, its shards reusable
         (run / "shards" / "shard-00001.parquet.done.json").write_text("[]")),
+    # the folder is read whole: a file that is not the run's would join its estimates
+    "stray file among the estimates": lambda run: (
+        (run / "estimates" / "shard-00001 (copy).parquet").write_bytes(
+            (run / "estimates" / "shard-00001.parquet").read_bytes())),
 }
 
 

@@ -94,7 +94,7 @@ def test_a_command_runs_its_shards_in_forked_workers_and_says_nothing_else(tmp_p
 
 def _estimates(data: Path) -> dict:
     return {p.relative_to(data).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(data.glob("runs/*/*/estimates.parquet"))}
+            for p in sorted(data.glob("runs/*/*/estimates/*.parquet"))}
 
 
 def test_a_sweep_on_the_joblib_launcher_gives_the_grid_of_one_command(tmp_path):
