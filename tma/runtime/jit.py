@@ -120,8 +120,9 @@ def _say_compiling(function) -> None:
     name = module.rsplit(".", 1)[-1].removesuffix("_kernel")
     if parts[:2] == ["tma", "families"] and len(parts) > 3:  # "bearings2d lm"
         name = f"{parts[2]} {name}"
-    print(f"note: compiling {name} kernels (numba), once per machine: later runs load them "
-          "from its cache", file=sys.stderr, flush=True)
+    sys.stderr.write(f"note: compiling {name} kernels (numba), once per machine: later runs "
+                     "load them from its cache\n")  # one write: processes print side by side
+    sys.stderr.flush()
 
 
 @contextlib.contextmanager
@@ -163,6 +164,21 @@ def _argument_types(dispatcher, function, args) -> tuple | None:
         return None
 
 
+_KERNELS: list["Kernel"] = []  # every kernel of the modules imported in this process
+
+
+def compiled_before(package: str) -> bool:
+    """Whether the modules of ``package`` imported in this process have no kernel, or
+    numba's cache holds any of their kernels (a module's kernels that no code path calls are
+    never cached, so not "all"): False on a machine whose cache is empty, or was emptied.
+    Makes their dispatchers (imports numba), compiles none."""
+    kernels = [k for k in _KERNELS
+               if k.__module__ == package or k.__module__.startswith(f"{package}.")]
+    return not kernels or any(
+        (index := _index_path(k.dispatcher)) is not None and os.path.exists(index)
+        for k in kernels)
+
+
 class Kernel:
     """A kernel whose numba dispatcher is made on first use. Called from Python it calls the
     dispatcher; inside another kernel numba types it as that dispatcher (``_numba_type_``);
@@ -175,6 +191,7 @@ class Kernel:
         self._options, self._depends = options, tuple(depends)
         self.py_func = function
         functools.update_wrapper(self, function)
+        _KERNELS.append(self)
 
     @property
     def dispatcher(self):

@@ -151,6 +151,79 @@ def estimate_log(estimator, log):
     return columns_to_table(log.track_id, columns), extras, seconds
 
 
+AHEAD_TRACKS = 2  # tracks of the small log each estimator of a command runs on ahead
+
+
+def compile_ahead(scenarios: list[dict], estimators: list[dict]):
+    """Start compiling the kernels a command will run, in processes of their own forked from
+    the command's worker server (``tma.runtime.forkserver``), while the command goes on
+    (composing, simulating): on a machine whose numba cache is empty, the estimate stage's
+    workers then find the kernels compiled, or wait for the compilation under way
+    (``tma.runtime.jit.compiling``) instead of each compiling them. Each estimator config
+    of ``estimators`` runs in a process of its own (their kernels compile side by side) on a
+    log of ``AHEAD_TRACKS`` tracks of each scenario point of ``scenarios`` of its family (the
+    same code paths, so the same kernels and argument types), unless numba's cache holds
+    kernels of their families already (``compiled_before``: then nothing runs, and a kernel
+    still missing is compiled by the first worker that needs it, once). Nothing is printed
+    and failures are ignored: the stages run as they would without it. Started from a
+    thread, so that the command does not wait for the server to be ready; None (nothing
+    started) without a worker server (a Python session) or without scenarios, else that
+    thread."""
+    from tma.runtime.forkserver import server_started
+
+    if not server_started() or not scenarios or not estimators:
+        return None
+    import multiprocessing
+    import threading
+
+    process = multiprocessing.get_context("forkserver").Process(
+        target=_compile_ahead, args=(scenarios, estimators), daemon=True,
+        name="tma-compile-ahead")
+    thread = threading.Thread(target=process.start, daemon=True)
+    thread.start()
+    return thread
+
+
+def _compile_ahead(scenarios: list[dict], estimators: list[dict]) -> None:
+    import os
+
+    from tma.families import load_scenario
+    from tma.runtime import jit
+
+    built = []
+    for node in estimators:
+        try:
+            built.append(build_estimator(node))  # imports its modules, and so their kernels
+        except Exception:  # the command itself says what is wrong with it
+            continue
+    if all(jit.compiled_before(f"tma.families.{f}") for f in {e.family for e in built}):
+        return  # this machine compiled them before: nothing to do ahead
+    logs = []
+    for node in scenarios:
+        try:
+            module, cfg = load_scenario({**node, "n_tracks": AHEAD_TRACKS,
+                                         "shard_size": AHEAD_TRACKS})
+            logs.append((cfg.own_family(), module.simulate_shard(cfg, 0)[0]))
+        except Exception:
+            continue
+    children = []
+    for i, estimator in enumerate(built):
+        child = os.fork() if i < len(built) - 1 else 0  # the last runs in this process
+        if child:
+            children.append(child)
+            continue
+        for family, log in logs:
+            if family == estimator.family:
+                try:
+                    estimate_log(estimator, log)
+                except Exception:  # e.g. an estimator that needs its prepare (training)
+                    break
+        if i < len(built) - 1:
+            os._exit(0)
+    for child in children:
+        os.waitpid(child, 0)
+
+
 def estimate_shard(task: ShardTask, log) -> dict:
     """Run one estimator over one dataset shard's log and write its output."""
     out = Path(task.out_path)
