@@ -22,12 +22,13 @@ Two gaps of numba's cache are closed here:
 
 And one cost: on a machine whose cache is empty, every worker process that calls a kernel
 first would compile it at the same time (two workers: twice the work, on the cores the other
-tasks need). A kernel's first call in a process (``Kernel.__call__``) therefore compiles it
-for its arguments' types under an exclusive file lock beside its cache index
-(``compiling``): one process compiles and saves it, the others wait for the lock and then load
-it from the cache. So each kernel is compiled once per machine, and the note that says so is
-printed once, by the process that compiles (``warm_kernels`` compiles a command's kernels
-ahead, while its first stages run).
+tasks need). A kernel called from Python with argument types it has no machine code for
+therefore compiles them under an exclusive file lock beside its cache index (``compiling``,
+around numba's ``_compile_for_args``): one process compiles and saves it, the others wait
+for the lock and then load it from the cache. So each kernel is compiled once per machine,
+and the note that says so is printed once, by the process that compiles
+(``tma.stages.estimate.compile_ahead`` compiles a command's kernels ahead, while it
+simulates).
 """
 
 import contextlib
@@ -147,21 +148,18 @@ def compiling(kernel, function):
         yield
 
 
-def _argument_types(dispatcher, function, args) -> tuple | None:
-    """The numba types ``dispatcher`` gives ``args`` when called with them: each argument's
-    type, and ``Omitted(default)`` for each parameter left to its default (as numba's
-    dispatcher folds them); None when one has no numba type (the call itself says so)."""
-    from numba.core import types
+def _locked_compilation(kernel, function) -> None:
+    """Have ``kernel`` (numba's dispatcher of ``function``) compile, for the argument types
+    of a call it has no machine code for, under its machine-wide lock (``compiling``):
+    numba's dispatcher calls its ``_compile_for_args`` then, and runs the code it returns
+    after, so a process waits for another's compilation, never for its computation."""
+    compile_for_args = kernel._compile_for_args
 
-    parameters = list(inspect.signature(function).parameters.values())
-    if len(args) > len(parameters) or any(p.default is p.empty
-                                          for p in parameters[len(args):]):
-        return None
-    try:
-        return (*(dispatcher.typeof_pyval(a) for a in args),
-                *(types.Omitted(p.default) for p in parameters[len(args):]))
-    except Exception:  # numba's ValueError or TypeError for a value it cannot type
-        return None
+    def locked(*args, **kwargs):
+        with compiling(kernel, function):
+            return compile_for_args(*args, **kwargs)
+
+    kernel._compile_for_args = locked
 
 
 _KERNELS: list["Kernel"] = []  # every kernel of the modules imported in this process
@@ -186,7 +184,6 @@ class Kernel:
 
     def __init__(self, function, options, depends):
         self._dispatcher = None
-        self._called = False  # called from Python in this process (compiled or loaded)
         self._lock = threading.Lock()
         self._options, self._depends = options, tuple(depends)
         self.py_func = function
@@ -200,6 +197,7 @@ class Kernel:
                 if self._dispatcher is None:
                     kernel = _compile(self.py_func, self._options)
                     _stamp_dependencies(kernel, self._depends)
+                    _locked_compilation(kernel, self.py_func)
                     self._dispatcher = kernel
         return self._dispatcher
 
@@ -208,27 +206,7 @@ class Kernel:
         return self.dispatcher._numba_type_
 
     def __call__(self, *args, **kwargs):
-        if not self._called:
-            self._first_call(args, kwargs)
         return self.dispatcher(*args, **kwargs)
-
-    def _first_call(self, args, kwargs) -> None:
-        """Compile (or load) the kernel for these arguments' types, as numba's first call
-        would, but under the machine-wide lock (``compiling``) and before it runs: a process
-        waits for another's compilation, never for its computation."""
-        dispatcher = self.dispatcher
-        with self._lock:
-            if self._called:
-                return
-            types = None if kwargs else _argument_types(dispatcher, self.py_func, args)
-            if types is not None:
-                with compiling(dispatcher, self.py_func):
-                    getattr(dispatcher, "_compilation_chain_init_hook", lambda: None)()
-                    try:
-                        dispatcher.compile(types)
-                    except Exception:  # a typing error: raised by the call, as numba words it
-                        pass
-            self._called = True
 
     def __getattr__(self, name):
         if name.startswith("__"):  # probes of the protocol (copy, pickle...) are not numba's
