@@ -352,8 +352,8 @@ def estimate(data, estimator: str | None = None, sigma_deg: float | None = None,
     track's state at its end and status, with its errors against the truth. An estimate that
     is no answer is blank, with its status and a note. The estimator's own columns (what
     ``plot_contact`` and ``write_map`` draw from) are ``results.tma.estimates``."""
-    from tma.stages.estimate import estimate_log
     from tma.families import family
+    from tma.stages.estimate import estimate_log
 
     data = _data(data, "estimate")
     _plain({"sigma_deg": sigma_deg, **options}, "estimate")
