@@ -34,12 +34,14 @@ def ingest_stage(cfg):
 
 def _compile_ahead(cfg):
     """The kernels the table's estimators run, compiled while it simulates, on a machine whose
-    numba cache is empty (``tma.stages.estimate.compile_ahead``; nothing when it is warm)."""
+    numba cache is empty (``tma.stages.estimate.compile_ahead``; nothing when it is warm, or
+    when the shards run on a Dask cluster, whose workers have caches of their own)."""
     from tma.stages.estimate import compile_ahead
 
     try:
         todo = command(cfg)
-        compile_ahead(todo.scenarios(), todo.estimators())
+        if todo.engine().engine != "dask":
+            compile_ahead(todo.scenarios(), todo.estimators())
     except Exception:  # a bad config: the stages say what is wrong with it
         return
 
