@@ -212,14 +212,15 @@ def _compile_ahead(scenarios: list[dict], estimators: list[dict]) -> None:
         if child:
             children.append(child)
             continue
-        for family, log in logs:
-            if family == estimator.family:
-                try:
+        try:
+            for family, log in logs:
+                if family == estimator.family:
                     estimate_log(estimator, log)
-                except Exception:  # e.g. an estimator that needs its prepare (training)
-                    break
-        if i < len(built) - 1:
-            os._exit(0)
+        except Exception:  # e.g. an estimator that needs its prepare (training)
+            pass
+        finally:
+            if i < len(built) - 1:  # a forked process: ends here, whatever happened
+                os._exit(0)
     for child in children:
         os.waitpid(child, 0)
 
