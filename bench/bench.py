@@ -32,10 +32,10 @@
     trace of ``python -m pipeline.table input=LOG``, in a fresh process), per stage.
 (j) The first ``make table`` of a fresh copy against a warm one (issue 32): the default tables
     of ``--first-table`` (those the issue measured: bearings2d, ranges2d, radar2d) run as
-    ``make table`` runs them, on fresh data, first with an empty numba cache (a temporary
-    ``NUMBA_CACHE_DIR``) then again with the cache it left; each table's wall time and the
-    ratio of the sums (target <= 1.3x), best of ``--first-table-repeat`` (1) fresh caches,
-    beside the machine's load average.
+    ``make table`` runs them, on fresh data, each first with an empty numba cache (a
+    temporary ``NUMBA_CACHE_DIR``) then again with the cache it left; each table's wall time
+    and the ratio of the sums (target <= 1.3x), best of ``--first-table-repeat`` (1) fresh
+    caches, beside the machine's load average.
 
 Options: ``--tracks N`` (2000), ``--sigma DEG`` (0.5), ``--runs N`` (30), ``--skip-tables``,
 ``--skip-first-table``, ``--only SECTION`` (lm, tables, ranges2d, filters3d, cmnf, compile,
@@ -465,7 +465,8 @@ def _table_seconds(experiment: str, workdir: Path, cache: str) -> tuple[float, s
 
 def bench_first_table(experiments, repeat: int = 1):
     """The default tables with an empty numba cache, then warm (the cache that run left), each
-    on fresh data; best of ``repeat`` fresh caches on both sides."""
+    on fresh data, each table's warm run right after its cold one (so that a slow spell of a
+    shared machine is shared); best of ``repeat`` fresh caches on both sides."""
     print(f"(j) first `make table` (empty numba cache) against a warm one, best of {repeat} "
           f"(load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores)")
     cold = {e: float("inf") for e in experiments}
@@ -474,21 +475,18 @@ def bench_first_table(experiments, repeat: int = 1):
     cold_sum = warm_sum = float("inf")
     with tempfile.TemporaryDirectory() as work:
         for _ in range(repeat):
+            sums = [0.0, 0.0]
             with tempfile.TemporaryDirectory() as cache:
-                sums = []
-                for side in (cold, warm):
-                    total = 0.0
-                    for experiment in experiments:
+                for experiment in experiments:
+                    for i, side in enumerate((cold, warm)):
                         seconds, stderr = _table_seconds(experiment, Path(work), cache)
                         side[experiment] = min(side[experiment], seconds)
-                        if side is cold:
-                            compiled[experiment] = stderr.count("note: compiling")
-                        total += seconds
-                    sums.append(total)
-                cold_sum, warm_sum = min(cold_sum, sums[0]), min(warm_sum, sums[1])
+                        compiled[experiment] += stderr.count("note: compiling") * (i == 0)
+                        sums[i] += seconds
+            cold_sum, warm_sum = min(cold_sum, sums[0]), min(warm_sum, sums[1])
     for experiment in experiments:
         print(f"    {experiment:24s} cold {cold[experiment]:6.1f} s  warm {warm[experiment]:6.1f} s"
-              f"  {cold[experiment] / warm[experiment]:5.2f}x  ({compiled[experiment]} "
+              f"  {cold[experiment] / warm[experiment]:5.2f}x  ({compiled[experiment] / repeat:g} "
               "'compiling' notes)")
     print(f"    {'first make table':24s} cold {cold_sum:6.1f} s  warm {warm_sum:6.1f} s  "
           f"{cold_sum / warm_sum:5.2f}x  (target <= 1.3x; load average now "
