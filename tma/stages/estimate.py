@@ -152,6 +152,7 @@ def estimate_log(estimator, log):
 
 
 AHEAD_TRACKS = 2  # tracks of the small log each estimator of a command runs on ahead
+_AHEAD: set = set()  # the estimators compile_ahead started in this process
 
 
 def compile_ahead(scenarios: list[dict], estimators: list[dict]):
@@ -167,12 +168,14 @@ def compile_ahead(scenarios: list[dict], estimators: list[dict]):
     still missing is compiled by the first worker that needs it, once). Nothing is printed
     and failures are ignored: the stages run as they would without it. Started from a
     thread, so that the command does not wait for the server to be ready; None (nothing
-    started) without a worker server (a Python session) or without scenarios, else that
-    thread."""
+    started) without a worker server (a Python session), without scenarios or when this
+    process started it for these estimators before, else that thread."""
     from tma.runtime.forkserver import server_started
 
-    if not server_started() or not scenarios or not estimators:
-        return None
+    names = {node.get("name") for node in estimators}
+    if not server_started() or not scenarios or names <= _AHEAD:
+        return None  # e.g. the next job of a multirun in this process: done by the first
+    _AHEAD.update(names)
     import multiprocessing
     import threading
 
