@@ -163,6 +163,25 @@ def test_a_damaged_run_is_a_clear_error_then_recomputed(tmp_path, damage):
     aggregate_stage(cfg)
 
 
+def test_a_run_of_the_previous_format_is_recomputed_without_its_copies(tmp_path):
+    """A run written before its estimates became a folder (format 2: ``estimates.parquet``,
+    the shard outputs in ``shards/``) is computed again in the new layout, and neither its
+    concatenated copy nor its old shard files stay beside the new estimates."""
+    cfg, _, run = _finished_run(tmp_path)
+    before = _tree(run)
+    (run / "estimates.parquet").write_bytes(b"format 2's copy")
+    (run / "shards" / "shard-00000.parquet").write_bytes(b"format 2's shard output")
+    _edit_json(run / "manifest.json", lambda m: m.update(format_version=2))
+    with pytest.raises(IntegrityError, match="format version 2 is not supported"):
+        aggregate_stage(cfg)
+    estimate_stage(cfg)
+    after = _tree(run)
+    assert not (run / "estimates.parquet").exists()
+    assert not (run / "shards" / "shard-00000.parquet").exists()
+    assert {p for p in after if not p.name.endswith(".done.json")} == {
+        p for p in before if not p.name.endswith(".done.json")}
+
+
 def test_kill_leaves_the_old_good_output_and_a_resumable_partial(tmp_path):
     """A ``force=true`` simulate killed half-way: the old dataset is untouched, the partial
     is tma's own, and the next run finishes it without leaving temporaries behind."""

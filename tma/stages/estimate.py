@@ -24,6 +24,7 @@ every use.
 
 import json
 import logging
+import re
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -301,6 +302,11 @@ def finish_run(stage: Path, dataset: Dataset, estimator_config: dict, tasks, rec
     for path in folder.iterdir():  # a damaged run's stray file: it would join the estimates
         if path.name not in ours and not path.name.startswith((".", "_")):
             shutil.rmtree(path) if path.is_dir() and not path.is_symlink() else path.unlink()
+    # what a run of format 2 adopted here left: its concatenated copy and its shard outputs
+    (stage / "estimates.parquet").unlink(missing_ok=True)
+    for path in (stage / SHARDS).glob("shard-*.parquet"):
+        if re.fullmatch(r"shard-\d+\.parquet", path.name):
+            path.unlink()
     n_rows, columns, table = _summary([t.out_path for t in tasks])
     shards = {Path(t.out_path).name: file_record(t.out_path, rows=r["rows"])
               for t, r in zip(tasks, records, strict=True)}
