@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 from scipy.optimize import least_squares
+from scipy.stats import chi2
 
 from tma.families.bearings2d import manoeuvres, ncv
 
@@ -157,6 +158,58 @@ def test_the_mixture_averages_its_components_by_prior_and_likelihood():
               for wi, c, m in zip(w, comps, means, strict=True))
     sd = np.sqrt(np.diag(cov))
     assert np.all(np.abs(mixed["state"][0] - mean) <= 0.1 * sd), (mixed["state"][0], mean)
-    np.testing.assert_allclose(np.sqrt(np.diag(mixed["cov"][0])), sd, rtol=0.1)
+    # the errors stated: the moments' covariance widened until its 95 % ellipsoid holds 95 %
+    # of the mixture, by Monte Carlo over the mixture done by hand
+    draws = _mixture_draws(w, means, [c[2] for c in comps], 200_000)
+    scale = _quantile_95(draws - mean, cov) / chi2.ppf(0.95, 4)
+    assert mixed["inflation"][0] == pytest.approx(max(scale, 1.0), rel=0.05)
+    np.testing.assert_allclose(np.sqrt(np.diag(mixed["cov"][0])),
+                               sd * math.sqrt(mixed["inflation"][0]), rtol=0.1)
     assert mixed["p_manoeuvre"][0] == pytest.approx(1 - w[0], abs=0.01)
     assert mixed["p_manoeuvre"][0] > 0.99  # the turn is plain in the bearings
+
+
+def _mixture_draws(weights, means, covs, n, seed=0):
+    """``n`` draws of the Gaussian mixture (numpy's generator, not the kernel's points)."""
+    rng = np.random.default_rng(seed)
+    which = rng.choice(len(weights), size=n, p=np.asarray(weights) / np.sum(weights))
+    out = np.empty((n, len(means[0])))
+    for c in np.unique(which):
+        rows = which == c
+        out[rows] = rng.multivariate_normal(means[c], covs[c], size=rows.sum())
+    return out
+
+
+def _quantile_95(errors, cov):
+    """The 95 % quantile of the normalised errors (x - mean)^T cov^-1 (x - mean)."""
+    return np.quantile(np.einsum("ni,ij,nj->n", errors, np.linalg.inv(cov), errors), 0.95)
+
+
+@pytest.mark.parametrize("tail_weight, tail_var, shift", [
+    (0.0, 1.0, 0.0),     # one Gaussian: nothing to widen
+    (0.15, 25.0, 0.0),   # a wide tail: the moments' ellipsoid holds too little
+    (0.3, 9.0, 3.0),     # a tail off centre
+    (0.5, 1.0, 1.0),     # two alike: no tail to speak of
+])
+def test_a_mixtures_errors_hold_95_percent_of_it(tail_weight, tail_var, shift):
+    """``_tail_scale`` against Monte Carlo: the factor that makes the 95 % ellipsoid of the
+    mixture's moments hold 95 % of it (never below 1), and the widened ellipsoid then holds
+    95 % of 400,000 draws of the mixture."""
+    weights = np.array([1.0 - tail_weight, tail_weight])
+    means = np.array([np.zeros(4), np.full(4, shift)])
+    covs = np.array([np.diag([1.0, 2.0, 0.5, 1.0]), tail_var * np.eye(4)])
+    mean = weights @ means
+    cov = sum(w * (c + np.outer(m - mean, m - mean))
+              for w, c, m in zip(weights, covs, means, strict=True))
+    s2 = 4.0  # the kernel's covariances are in units of the noise variance
+    scale = manoeuvres._tail_scale(weights, means, covs / s2, 2, mean, cov / s2, s2,
+                                   manoeuvres.TAIL_POINTS, manoeuvres.TAIL_CHI2)
+    draws = _mixture_draws(weights, means, covs, 400_000)
+    reference = max(_quantile_95(draws - mean, cov) / chi2.ppf(0.95, 4), 1.0)
+    assert scale >= 1.0
+    assert scale == pytest.approx(reference, rel=0.04)
+    if tail_weight == 0.0:
+        assert scale == 1.0
+    held = np.mean(np.einsum("ni,ij,nj->n", draws - mean, np.linalg.inv(scale * cov),
+                             draws - mean) <= chi2.ppf(0.95, 4))
+    assert held >= 0.94 if scale > 1.0 else held >= 0.949

@@ -61,8 +61,10 @@ def test_manoeuvres_are_found_and_without_them_in_the_prior_flagged():
 
 
 def test_the_last_leg_is_found():
+    """Assuming no manoeuvres, ``last_leg`` seeks the leg of every track the trend test flags
+    (with manoeuvres in its prior, only where the mixture fails it: below)."""
     log, truth = _manoeuvring(n=150)
-    est = _estimate(log, "last_leg")
+    est = _estimate(log, "last_leg", manoeuvre_rate_per_h=0.0)
     found = est.n_rounds > 0
     assert found.mean() >= 0.9
     # the leg starts after the manoeuvre began, and at most a few minutes after it ended
@@ -104,10 +106,22 @@ def test_a_last_leg_without_own_ship_manoeuvre_is_unobservable():
                  population=PopulationConfig(distance_min_m=5000.0, distance_max_m=10000.0),
                  target=target)
     log, _ = simulate_shard(cfg, 0)
-    est = _estimate(log, "last_leg")
+    est = _estimate(log, "last_leg", manoeuvre_rate_per_h=0.0)
     found = est.n_rounds > 0
     assert found.mean() >= 0.8
     assert np.mean(est.loc[found, "status"] == "unobservable") >= 0.9
+
+
+def test_with_manoeuvres_in_the_prior_a_leg_is_sought_only_where_the_mixture_fails():
+    """The mixture already averages over when the target turned: ``last_leg`` with a
+    recording's manoeuvres in its prior seeks a leg on few of these turning targets (all of
+    them without: ``test_the_last_leg_is_found``), and elsewhere its answer is ``lm``'s."""
+    log, _ = _manoeuvring(n=100)
+    lm, leg = _estimate(log, "lm"), _estimate(log, "last_leg")
+    sought = leg.n_rounds > 0
+    assert sought.mean() <= 0.3
+    for column in ("x0_m", "range_sd_m", "status", "leg_start_s", "p_manoeuvre"):
+        np.testing.assert_array_equal(lm.loc[~sought, column], leg.loc[~sought, column])
 
 
 def test_a_steady_target_is_one_leg():

@@ -42,6 +42,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import chi2, norm, qmc
 
 from tma.families.bearings2d.ncv import (
     MAX_PASSES,
@@ -56,6 +57,7 @@ from tma.families.bearings2d.ncv import (
     _fit,
     _srif,
     smooth,
+    start_track,
     theta_of_state,
 )
 from tma.runtime.jit import njit
@@ -72,6 +74,15 @@ MAX_MANOEUVRES = 3  # in one component
 TOP_SINGLES = 3  # single manoeuvres a second one is sought beside
 REFINE = 3  # components of each level refined to their MAP trajectory
 REFINE_TOL_M = 0.1  # a refinement stops when no position moves more than this (m)
+# fixed standard-normal points of the state's four dimensions, not random (the same bytes
+# whatever the shards): a Halton set's first four coordinates give each its direction, the
+# fifth its radius, at chi-square(4) quantiles (the tails, which decide, as well as the core)
+_HALTON = qmc.Halton(d=5, scramble=False).random(1025)[1:]
+_DIRECTIONS = norm.ppf(_HALTON[:, :4])
+TAIL_POINTS = np.ascontiguousarray(
+    _DIRECTIONS / np.linalg.norm(_DIRECTIONS, axis=1, keepdims=True)
+    * np.sqrt(chi2.ppf(_HALTON[:, 4:], 4)))
+TAIL_CHI2 = float(np.quantile(np.sum(TAIL_POINTS**2, axis=1), 0.95, method="inverted_cdf"))
 
 
 @dataclass(frozen=True)
@@ -190,10 +201,58 @@ def _top(values, count, k, out):
     return found
 
 
-@njit(error_model="numpy", depends=(_screen, _refine, _levels, _top, _srif, _bearing_cost))
+@njit(error_model="numpy")
+def _tail_scale(weights, means, covs, used, mean, P, s2, u, u_q95):
+    """The factor (>= 1) by which the mixture's covariance ``P`` (units of ``s2``) must grow
+    for its 95 % ellipsoid about ``mean`` to hold 95 % of the mixture (``weights`` of the
+    first ``used`` components, ``means`` in m and m/s, ``covs`` in units of ``s2``): the
+    95 % weighted quantile of the normalised error of the points ``means[c] + sqrt(s2) L_c
+    u`` (``u``: fixed standard-normal points, L_c L_c^T = ``covs[c]``) over ``u_q95``, the
+    points' own 95 % quantile of |u|^2 (so a single Gaussian gets exactly 1)."""
+    N = u.shape[0]
+    Pinv = np.linalg.inv(P)
+    total = 0.0
+    for c in range(used):
+        total += weights[c]
+    d = np.empty(used * N)
+    w = np.empty(used * N)
+    count = 0
+    x, L = np.empty(4), np.empty((4, 4))
+    for c in range(used):
+        if not weights[c] > 1e-9 * total:
+            continue
+        vals, vecs = np.linalg.eigh(covs[c])
+        for a in range(4):
+            for b in range(4):
+                L[a, b] = vecs[a, b] * math.sqrt(max(vals[b], 0.0))
+        for k in range(N):
+            for a in range(4):
+                v = (means[c, a] - mean[a]) / math.sqrt(s2)
+                for b in range(4):
+                    v += L[a, b] * u[k, b]
+                x[a] = v
+            q = 0.0
+            for a in range(4):
+                for b in range(4):
+                    q += x[a] * Pinv[a, b] * x[b]
+            d[count], w[count] = q, weights[c] / N
+            count += 1
+    order = np.argsort(d[:count])
+    level = 0.95 * total
+    acc = 0.0
+    for k in order:
+        acc += w[k]
+        if acc >= level:
+            scale = d[k] / u_q95
+            return scale if scale > 1.0 + 1e-9 else 1.0
+    return 1.0
+
+
+@njit(error_model="numpy", depends=(_screen, _refine, _levels, _top, _srif, _bearing_cost,
+                                         _tail_scale, start_track))
 def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q, dv2, taus,
                    durations, log_none, log_each, scale2, p0_pos, max_iter, tol_m, state,
-                   P_last, e, cost, passes, p_manoeuvre, tau_map):
+                   P_last, e, cost, passes, p_manoeuvre, tau_map, u, u_q95, inflation):
     """Per track i the mixture of the module docstring: wander ``q`` and manoeuvres of
     velocity variance ``dv2`` (m^2/s^3, m^2/s^2: (n,)), candidate starts ``taus`` (n, J),
     ``durations`` (D,), the priors ``log_none`` (n,) and ``log_each`` (n, J)
@@ -229,18 +288,8 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
     for i in range(n):
         lo, hi = first[i], last[i]
         z, w = measured[i], (weight[i] if weighted else measured[i])
-        for k in range(K):
-            e[i, k] = np.nan
-        for a in range(4):
-            state[i, a] = np.nan
-            for b in range(4):
-                P_last[i, a, b] = np.nan
+        start_track(i, t, lo, hi, theta, noms[0], state, P_last, e)
         cost[i], p_manoeuvre[i], tau_map[i] = np.nan, np.nan, np.nan
-        for k in range(lo, hi + 1):
-            noms[0, k, 0] = theta[i, 0] + theta[i, 2] * t[k]
-            noms[0, k, 1] = theta[i, 1] + theta[i, 3] * t[k]
-            noms[0, k, 2] = theta[i, 2]
-            noms[0, k, 3] = theta[i, 3]
         s2 = scale2[i]
         p0[0] = p0_pos[i] * p0_pos[i] / s2
         p0[1] = PRIOR_SPEED_M_S * PRIOR_SPEED_M_S / s2
@@ -355,6 +404,13 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
                         v += logw[c] * (covs[c, a, b] + (means[c, a] - state[i, a])
                                         * (means[c, b] - state[i, b]) / s2)
                 P_last[i, a, b] = v / total
+        # a heavy-tailed mixture holds less than 95 % in the 95 % ellipsoid of its moments:
+        # the errors stated are those of the Gaussian (same mean and shape) that holds it
+        inflation[i] = _tail_scale(logw, means, covs, used, state[i], P_last[i], s2, u,
+                                   u_q95)
+        for a in range(4):
+            for b in range(4):
+                P_last[i, a, b] *= inflation[i]
         p_manoeuvre[i] = 1.0 - logw[0] / total
         if count[best] > 0:
             latest = -np.inf
@@ -415,14 +471,15 @@ def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_p
     out = {"state": np.empty((n, 4)), "cov": np.empty((n, 4, 4)),
            "innovations": np.empty((n, K)), "cost_rad2": np.empty(n),
            "passes": np.zeros(n, dtype=np.int64), "p_manoeuvre": np.empty(n),
-           "manoeuvre_s": np.empty(n)}
+           "manoeuvre_s": np.empty(n), "inflation": np.ones(n)}
     mixture_tracks(t, np.ascontiguousarray(own_x, float), np.ascontiguousarray(own_y, float),
                    np.ascontiguousarray(measured_rad, float), weight, weighted, first, last,
                    theta0, q, dv2, np.ascontiguousarray(taus),
                    np.asarray(prior.durations_s, dtype=float), np.ascontiguousarray(log_none),
                    np.ascontiguousarray(log_each), sigma2, p0_pos, MAX_PASSES, REFINE_TOL_M,
                    out["state"], out["cov"], out["innovations"], out["cost_rad2"],
-                   out["passes"], out["p_manoeuvre"], out["manoeuvre_s"])
+                   out["passes"], out["p_manoeuvre"], out["manoeuvre_s"], TAIL_POINTS,
+                   TAIL_CHI2, out["inflation"])
     out["cov"] *= sigma2[:, None, None]
     out["innovations"] = out["innovations"] / np.sqrt(sigma2)[:, None]
     out["theta"], out["cov_theta"] = theta_of_state(out["state"], out["cov"], t[last])

@@ -406,7 +406,25 @@ def _invert_upper(R, Rinv):
     return True
 
 
-@njit(error_model="numpy", depends=(atan2, wrap_angle))
+@njit(error_model="numpy")
+def start_track(i, t, lo, hi, theta, nom, state, P_last, e):
+    """Blank track i's outputs (its state, covariance and innovations NaN until written) and
+    set ``nom`` over lo..hi to its constant-velocity line ``theta[i]``: how every per-track
+    kernel starts a track."""
+    for k in range(e.shape[1]):
+        e[i, k] = np.nan
+    for a in range(4):
+        state[i, a] = np.nan
+        for b in range(4):
+            P_last[i, a, b] = np.nan
+    for k in range(lo, hi + 1):
+        nom[k, 0] = theta[i, 0] + theta[i, 2] * t[k]
+        nom[k, 1] = theta[i, 1] + theta[i, 3] * t[k]
+        nom[k, 2] = theta[i, 2]
+        nom[k, 3] = theta[i, 3]
+
+
+@njit(error_model="numpy", depends=(atan2, wrap_angle, start_track))
 def smooth_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, lam, scale2,
                   p0_pos, max_iter, tol_m, state, P_last, e, cost, passes):
     """Per track i: the NCV MAP trajectory from the constant-velocity ``theta[i]`` with
@@ -428,18 +446,8 @@ def smooth_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, lam
     for i in range(n):
         lo, hi = first[i], last[i]
         z, w = measured[i], (weight[i] if weighted else measured[i])
-        for k in range(K):
-            e[i, k] = np.nan
-        for c in range(4):
-            state[i, c] = np.nan
-            for d in range(4):
-                P_last[i, c, d] = np.nan
+        start_track(i, t, lo, hi, theta, nom, state, P_last, e)
         cost[i] = np.nan
-        for k in range(lo, hi + 1):
-            nom[k, 0] = theta[i, 0] + theta[i, 2] * t[k]
-            nom[k, 1] = theta[i, 1] + theta[i, 3] * t[k]
-            nom[k, 2] = theta[i, 2]
-            nom[k, 3] = theta[i, 3]
         p0[0] = p0_pos[i] * p0_pos[i] / scale2[i]
         p0[1] = PRIOR_SPEED_M_S * PRIOR_SPEED_M_S / scale2[i]
         lam_k[:] = lam[i]

@@ -262,7 +262,7 @@ def noise_fit(cost_rad2, dof, sigma_deg):
 
 def assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t_now_s, own_x_now_m,
            own_y_now_m, cfg, motion_tested=False, undetermined=False,
-           may_manoeuvre=False) -> dict:
+           may_manoeuvre=False, tail_scale=1.0) -> dict:
     """Status and one-sigma errors per track (see the module docstring).
 
     The covariance of theta is jtj^-1 sigma2 (``sigma2`` rad^2 per track); ``fit_p``: the
@@ -273,7 +273,10 @@ def assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t_now_s,
     their errors say (bool per track: ``unobservable`` before any test); ``may_manoeuvre``:
     the answer allows manoeuvres, and then a velocity whose speed sd exceeds
     ``max_speed_rel_sd`` of the speed is ``unobservable`` (a constant-velocity answer keeps
-    its course, however wide); ``cfg`` holds
+    its course, however wide); ``tail_scale`` (per track, >= 1): the factor by which the
+    covariance of a mixture's answer was widened so that its 95 % ellipsoid holds 95 % of the
+    mixture (``manoeuvres._tail_scale``): vagueness is judged on the covariance before it
+    (the answer's core), the errors stated after; ``cfg`` holds
     ``singular_rcond``, ``fit_alpha``, ``motion_alpha``, ``max_range_rel_sd``,
     ``max_speed_rel_sd``. Returns output columns."""
     finite = np.isfinite(theta).all(axis=1)
@@ -285,9 +288,12 @@ def assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t_now_s,
         sd = np.sqrt(np.einsum("nij,njk,nik->ni", G, cov, G))
         poorly_fit = fit_p < cfg.fit_alpha
         drifting = motion_p < cfg.motion_alpha
-        vague = ~(sd[:, 0] <= cfg.max_range_rel_sd * rng)  # a NaN sd counts as vague
+        # whether the answer determines range (and speed) is judged on its core: errors a
+        # mixture's tails widened (``tail_scale``) are stated, not held against it
+        core = sd / np.sqrt(np.broadcast_to(tail_scale, rng.shape))[:, None]
+        vague = ~(core[:, 0] <= cfg.max_range_rel_sd * rng)  # a NaN sd counts as vague
         if may_manoeuvre:  # a target that may have turned since: no velocity, no course
-            vague |= ~(sd[:, 3] <= cfg.max_speed_rel_sd * speed)
+            vague |= ~(core[:, 3] <= cfg.max_speed_rel_sd * speed)
         vague |= motion_tested & np.isnan(motion_p)
     # a geometry that cannot give the range comes first: a fit of the unobservable is
     # anything (a manoeuvring target hugging own-ship fits any bearings)

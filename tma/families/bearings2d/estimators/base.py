@@ -247,6 +247,7 @@ class BearingsEstimator(Estimator):
         follows = motion.moving and self.models_motion
         q, prior = motion.accel_psd_m2_s3, motion.manoeuvres
         motion_p, p_manoeuvre = np.full(n, np.nan), np.full(n, np.nan)
+        tail_scale = np.ones(n)  # how much a mixture's errors were widened for its tails
         undetermined = np.zeros(n, dtype=bool)
         if follows or test:
             # without manoeuvres, a track whose range the constant-velocity fit leaves
@@ -272,6 +273,7 @@ class BearingsEstimator(Estimator):
                 innovations[rows] = fit["innovations"]
                 if "p_manoeuvre" in fit:
                     p_manoeuvre[rows] = fit["p_manoeuvre"]
+                    tail_scale[rows] = fit["inflation"]
                 if iterate:
                     theta, cost, jtj, sigma2, fit_p = (
                         np.array(v, dtype=float) for v in (theta, cost, jtj, sigma2, fit_p))
@@ -298,7 +300,8 @@ class BearingsEstimator(Estimator):
         trust = assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t[last],
                        ox[last], oy[last], cfg, motion_tested=tested,
                        undetermined=undetermined,
-                       may_manoeuvre=prior is not None and self.models_motion)
+                       may_manoeuvre=prior is not None and self.models_motion,
+                       tail_scale=tail_scale)
         columns = {
             "x0_m": theta[:, 0], "y0_m": theta[:, 1], "vx_m_s": theta[:, 2], "vy_m_s": theta[:, 3],
             "n_f_evals": solution.n_f_evals, "n_iter": solution.n_iter,
@@ -315,6 +318,7 @@ class BearingsEstimator(Estimator):
         if prior is not None and self.models_motion:  # (not in the constant-velocity runs)
             columns["manoeuvre_rate_per_h"] = np.full(n, prior.rate_per_h)
             columns["p_manoeuvre"] = p_manoeuvre
+            columns["tail_scale"] = tail_scale
         for i in range(4):
             for j in range(i, 4):
                 columns[f"jtj_{i}{j}"] = jtj[:, i, j]

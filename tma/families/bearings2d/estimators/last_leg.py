@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.config import param, require
-from tma.families.bearings2d import ncv
+from tma.families.bearings2d import manoeuvres, ncv
 from tma.families.bearings2d.estimators.base import Bearings, Solution, TargetMotion
 from tma.families.bearings2d.estimators.lm import MAX_INT, LevenbergMarquardt
 from tma.families.bearings2d.estimators.lm import Config as LmConfig
@@ -68,14 +68,15 @@ class LastLeg(LevenbergMarquardt):
     def solve(self, bearings: Bearings, motion: TargetMotion) -> Solution:
         t, own_x, own_y, measured_rad, valid = (bearings.t, bearings.own_x, bearings.own_y,
                                                 bearings.measured, bearings.valid)
-        q, sigma = motion.accel_psd_m2_s3, bearings.sigma_deg
+        q, sigma, prior = motion.accel_psd_m2_s3, bearings.sigma_deg, motion.manoeuvres
         out = self.fit(t, own_x, own_y, measured_rad, valid, bearings.first, sigma)
         n, K = measured_rad.shape
         present = np.ones((n, K), dtype=bool) if valid is None else valid
         used = present.copy()
         rounds = np.zeros(n, dtype=np.int64)
         todo = np.arange(0) if self.config.motion_test == "off" else np.flatnonzero(
-            self._drifting(t, own_x, own_y, measured_rad, present, out["theta"], q, sigma))
+            self._drifting(t, own_x, own_y, measured_rad, present, out["theta"], q, sigma,
+                           prior))
         for _ in range(self.config.max_rounds):
             if todo.size == 0:
                 break
@@ -92,7 +93,7 @@ class LastLeg(LevenbergMarquardt):
             for key, value in leg.items():
                 out[key][todo] = value
             drifting = self._drifting(t, own_x, own_y, measured_rad[todo], used[todo],
-                                      out["theta"][todo], q, sigma)
+                                      out["theta"][todo], q, sigma, prior)
             todo = todo[drifting]
         out["converged"] = out["stop_reason"] == STOP_F_TOL
         columns = {k: out.pop(k) for k in self.outputs if k in out}
@@ -100,16 +101,23 @@ class LastLeg(LevenbergMarquardt):
         return Solution(**out, bearings_used=used, leg_start_s=t[np.argmax(used, axis=1)],
                         columns=columns)
 
-    def _drifting(self, t, own_x, own_y, measured, used, theta, q, sigma):
-        """Tracks whose residual sequence fails the trend test, under the wander ``q``
-        assumed (``sigma``: the nominal noise, deg; None: unknown)."""
+    def _drifting(self, t, own_x, own_y, measured, used, theta, q, sigma, prior=None):
+        """Tracks whose residual sequence fails the trend test, under the wander ``q`` and
+        the manoeuvres ``prior`` assumed (``sigma``: the nominal noise, deg; None: unknown).
+        With manoeuvres in the prior, the mixture already averages over when the target
+        changed its motion (the Bayesian form of the change-time search below): a leg is
+        sought only where the mixture's own innovations fail the test."""
         if measured.shape[0] == 0:
             return np.zeros(0, dtype=bool)
         first = np.argmax(used, axis=1)
         last = used.shape[1] - 1 - np.argmax(used[:, ::-1], axis=1)
-        fit = ncv.smooth(t, own_x, own_y, measured, used, first, last, theta, q,
-                         np.full(measured.shape[0], np.nan if sigma is None else
-                                 np.deg2rad(sigma)), iterate=q > 0)
+        sigma_rad = np.full(measured.shape[0], np.nan if sigma is None else np.deg2rad(sigma))
+        if prior is None or not self.models_motion:
+            fit = ncv.smooth(t, own_x, own_y, measured, used, first, last, theta, q, sigma_rad,
+                             iterate=q > 0)
+        else:
+            fit = manoeuvres.mixture(t, own_x, own_y, measured, used, first, last, theta, q,
+                                     prior, sigma_rad)
         with np.errstate(invalid="ignore"):
             drifting = trend_test_p(fit["innovations"], t, self.config.motion_terms) \
                 < self.config.motion_alpha
