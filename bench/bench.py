@@ -30,10 +30,17 @@
     measured no more than 1.2x faster on both logs, and removed).
 (i) The files and layers one bearing passes from a CSV to its table (``bench/trace.py``: a
     trace of ``python -m pipeline.table input=LOG``, in a fresh process), per stage.
+(j) The first ``make table`` of a fresh copy against a warm one (issue 32): the default tables
+    of ``--first-table`` (those the issue measured: bearings2d, ranges2d, radar2d) run as
+    ``make table`` runs them, on fresh data, each first with an empty numba cache (a
+    temporary ``NUMBA_CACHE_DIR``) then again with the cache it left; each table's wall time
+    and the ratio of the sums (target <= 1.3x), best of ``--first-table-repeat`` (1) fresh
+    caches, beside the machine's load average.
 
 Options: ``--tracks N`` (2000), ``--sigma DEG`` (0.5), ``--runs N`` (30), ``--skip-tables``,
-``--only SECTION`` (lm, tables, ranges2d, filters3d, cmnf, compile, real_motion, cluster, io,
-trace),
+``--skip-first-table``, ``--only SECTION`` (lm, tables, ranges2d, filters3d, cmnf, compile,
+real_motion, cluster, io, trace, first_table), ``--first-table EXPERIMENTS`` (comma-separated;
+bearings2d_table,ranges2d_table,radar2d_table), ``--first-table-repeat N`` (1),
 ``--paths3d N`` (2500), ``--cmnf-paths N`` (100000), ``--repeat N`` (3).
 """
 
@@ -59,7 +66,8 @@ from tma.runtime.forkserver import keep_freed_memory
 REPO = Path(__file__).resolve().parents[1]
 THETA = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")
 SECTIONS = ("lm", "tables", "ranges2d", "filters3d", "cmnf", "compile", "real_motion", "cluster",
-            "io", "trace")
+            "io", "trace", "first_table")
+FIRST_TABLES = ("bearings2d_table", "ranges2d_table", "radar2d_table")  # as issue 32 measured
 
 
 def timed(function, *args):
@@ -439,12 +447,64 @@ def bench_io(repeat: int = 3):
           f"serializer {theirs * 1e3:6.1f} ms: {theirs / ours:4.1f}x")
 
 
+def _table_seconds(experiment: str, workdir: Path, cache: str) -> tuple[float, str]:
+    """Wall seconds of ``python -m pipeline.table experiment=NAME`` (what ``make table`` runs
+    for it) on fresh data under ``workdir``, with numba's cache in ``cache``; its stderr."""
+    import shutil
+
+    shutil.rmtree(workdir / "data", ignore_errors=True)
+    env = {**os.environ, "NUMBA_CACHE_DIR": cache}
+    start = time.perf_counter()
+    proc = subprocess.run(
+        [sys.executable, "-m", "pipeline.table", f"experiment={experiment}",
+         f"paths.data_dir={workdir / 'data'}", f"paths.tables_dir={workdir / 'tables'}",
+         f"hydra.run.dir={workdir / 'outputs'}", "progress=false"],
+        cwd=REPO, env=env, capture_output=True, text=True, check=True)
+    return time.perf_counter() - start, proc.stderr
+
+
+def bench_first_table(experiments, repeat: int = 1):
+    """The default tables with an empty numba cache, then warm (the cache that run left), each
+    on fresh data, each table's warm run right after its cold one (so that a slow spell of a
+    shared machine is shared); best of ``repeat`` fresh caches on both sides."""
+    print(f"(j) first `make table` (empty numba cache) against a warm one, best of {repeat} "
+          f"(load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores)")
+    cold = {e: float("inf") for e in experiments}
+    warm = dict(cold)
+    compiled = {e: 0 for e in experiments}
+    cold_sum = warm_sum = float("inf")
+    with tempfile.TemporaryDirectory() as work:
+        for _ in range(repeat):
+            sums = [0.0, 0.0]
+            with tempfile.TemporaryDirectory() as cache:
+                for experiment in experiments:
+                    for i, side in enumerate((cold, warm)):
+                        seconds, stderr = _table_seconds(experiment, Path(work), cache)
+                        side[experiment] = min(side[experiment], seconds)
+                        compiled[experiment] += stderr.count("note: compiling") * (i == 0)
+                        sums[i] += seconds
+            cold_sum, warm_sum = min(cold_sum, sums[0]), min(warm_sum, sums[1])
+    for experiment in experiments:
+        print(f"    {experiment:24s} cold {cold[experiment]:6.1f} s  warm {warm[experiment]:6.1f} s"
+              f"  {cold[experiment] / warm[experiment]:5.2f}x  ({compiled[experiment] / repeat:g} "
+              "'compiling' notes)")
+    print(f"    {'first make table':24s} cold {cold_sum:6.1f} s  warm {warm_sum:6.1f} s  "
+          f"{cold_sum / warm_sum:5.2f}x  (target <= 1.3x; load average now "
+          f"{os.getloadavg()[0]:.1f})")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--tracks", type=int, default=2000)
     parser.add_argument("--sigma", type=float, default=0.5)
     parser.add_argument("--runs", type=int, default=30, help="ranges2d repeated runs")
     parser.add_argument("--skip-tables", action="store_true")
+    parser.add_argument("--skip-first-table", action="store_true",
+                        help="(j): skip the first make table against a warm one")
+    parser.add_argument("--first-table", default=",".join(FIRST_TABLES),
+                        help="(j): the experiments, comma-separated")
+    parser.add_argument("--first-table-repeat", type=int, default=1,
+                        help="(j): the best of this many fresh numba caches")
     parser.add_argument("--repeat", type=int, default=3,
                         help="(b): the best of this many runs of each table and its floor")
     parser.add_argument("--only", choices=SECTIONS, default=None, help="one section")
@@ -454,7 +514,9 @@ def main():
     args = parser.parse_args()
 
     def wanted(section):
-        return args.only in (None, section) and not (section == "tables" and args.skip_tables)
+        return args.only in (None, section) and not (
+            (section == "tables" and args.skip_tables)
+            or (section == "first_table" and args.skip_first_table))
 
     if wanted("lm"):
         bench_lm(args.tracks, args.sigma)
@@ -480,6 +542,8 @@ def main():
         bench_io(args.repeat)
     if wanted("trace"):
         subprocess.run([sys.executable, str(REPO / "bench" / "trace.py")], cwd=REPO, check=True)
+    if wanted("first_table"):
+        bench_first_table(args.first_table.split(","), args.first_table_repeat)
 
 
 if __name__ == "__main__":

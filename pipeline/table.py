@@ -10,7 +10,7 @@ from time import perf_counter
 
 from omegaconf import open_dict
 
-from pipeline._common import job_tables, log, plain, run_stage, stage_main, sweep_job
+from pipeline._common import command, job_tables, log, plain, run_stage, stage_main, sweep_job
 from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
 from pipeline.ingest import check_option_keys, with_truth_shorthand
@@ -32,8 +32,24 @@ def ingest_stage(cfg):
         cfg.dataset = root.name
 
 
+def _compile_ahead(cfg):
+    """The kernels the table's estimators run, compiled while it simulates, on a machine whose
+    numba cache is empty (``tma.stages.estimate.compile_ahead``; nothing when it is warm, or
+    when the shards run on a Dask cluster, whose workers have caches of their own)."""
+    from tma.stages.estimate import compile_ahead
+
+    try:
+        todo = command(cfg)
+        if todo.engine().engine != "dask":
+            compile_ahead(todo.scenarios(), todo.estimators())
+    except Exception:  # a bad config: the stages say what is wrong with it
+        return
+
+
 def table_stage(cfg):
     prefetch = None
+    if "input" not in cfg and not cfg.dataset:
+        _compile_ahead(cfg)
     for name, stage in STAGES:
         if name == "simulate" and "input" in cfg:
             name, stage = "ingest", ingest_stage

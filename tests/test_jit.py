@@ -7,6 +7,7 @@ import shutil
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import pytest
@@ -72,3 +73,76 @@ def test_a_read_only_install_and_home_still_import_and_run(tmp_path):
     assert out.returncode == 0, out.stderr
     assert out.stdout.split()[0] == "6.0"
     assert any(p.name.startswith("tma-numba-cache-") for p in temp.iterdir())
+
+
+RACE = """
+import os, sys, time
+import numba  # imported before the start: the processes race to compile, not to import
+from kernel import total
+open(f"ready-{os.getpid()}", "w").close()
+while not os.path.exists("go"):
+    time.sleep(0.001)
+print(total(4), sum(total.stats.cache_misses.values()))
+"""
+
+
+def test_processes_starting_at_once_compile_a_kernel_once(tmp_path):
+    """Issue 32: two processes calling the same kernel at the same moment with an empty cache
+    (two workers of a fresh machine's first ``make table``): one compiles it and says so, the
+    other waits for it and loads it from the cache. Before, both compiled (and said so)."""
+    (tmp_path / "callee.py").write_text(CALLEE.format(factor=1.0))
+    (tmp_path / "kernel.py").write_text(KERNEL)
+    env = {**os.environ, "PYTHONPATH": f"{tmp_path}{os.pathsep}{REPO}",
+           "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    procs = [subprocess.Popen([sys.executable, "-c", RACE], cwd=tmp_path, env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for _ in range(2)]
+    while len(list(tmp_path.glob("ready-*"))) < 2 and all(p.poll() is None for p in procs):
+        time.sleep(0.01)
+    (tmp_path / "go").touch()
+    outs = [p.communicate(timeout=300) for p in procs]
+    assert all(p.returncode == 0 for p in procs), outs
+    assert sorted(out.split()[1] for out, _ in outs) == ["0", "1"]  # compiled once, loaded once
+    assert all(out.split()[0] == "6.0" for out, _ in outs)
+    notes = "".join(err for _, err in outs)
+    assert notes.count("note: compiling kernel kernels (numba), once per machine") == 1, notes
+
+
+AHEAD = """
+from tma.stages import estimate
+run = estimate.estimate_log
+def traced(estimator, log):
+    import sys
+    sys.stdout.write(estimator.name + "\\n")  # one write: the processes run side by side
+    sys.stdout.flush()  # flushed: the forked processes end with os._exit
+    return run(estimator, log)
+estimate.estimate_log = traced
+estimate._compile_ahead([{"family": "bearings2d", "sigma_deg": 0.5}],
+                        [{"name": "lm"}, {"name": "nbearings"}])
+"""
+
+
+def test_a_commands_kernels_are_compiled_ahead_then_only_loaded(tmp_path):
+    """Issue 32: with an empty cache, compiling ahead runs each estimator of a command on a
+    small log of its scenario (side by side), which compiles every kernel the command's
+    workers then need: the table that follows compiles nothing. With the cache warm,
+    compiling ahead runs nothing."""
+    env = {**os.environ, "PYTHONPATH": str(REPO), "NUMBA_CACHE_DIR": str(tmp_path / "cache"),
+           "PYTHONWARNINGS": "ignore"}
+
+    def ahead():
+        return subprocess.run([sys.executable, "-c", AHEAD], cwd=REPO, env=env, check=True,
+                              capture_output=True, text=True, timeout=600)
+
+    cold = ahead()
+    assert sorted(cold.stdout.split()) == ["lm", "nbearings"], cold.stdout
+    assert "note: compiling bearings2d lm kernels" in cold.stderr
+    assert ahead().stdout == ""  # warm: nothing to do ahead
+    table = subprocess.run(
+        [sys.executable, "-m", "pipeline.table", "experiment=bearings2d_table",
+         "scenario.n_tracks=40", "scenario.shard_size=20", "scenario.sigma_deg=[0.0,0.5]",
+         f"paths.data_dir={tmp_path / 'data'}", f"paths.tables_dir={tmp_path / 'tables'}",
+         f"hydra.run.dir={tmp_path / 'outputs'}", "progress=false"],
+        cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
+    assert table.returncode == 0, table.stderr
+    assert "compiling" not in table.stderr, table.stderr

@@ -86,7 +86,7 @@ def test_outputs_do_not_depend_on_n_jobs(tmp_path):
     assert trees[0].keys() == trees[1].keys()
     differing = [str(k) for k in trees[0] if trees[0][k] != trees[1][k]]
     assert differing == []
-    assert any(str(k).endswith("estimates.parquet") for k in trees[0])
+    assert any(k.parent.name == "estimates" for k in trees[0])
 
 
 def test_one_process_table_writes_what_the_three_commands_write(tmp_path):
@@ -108,7 +108,7 @@ def test_one_process_table_writes_what_the_three_commands_write(tmp_path):
         trees.append(_files(root))
     assert trees[0].keys() == trees[1].keys()
     assert [str(k) for k in trees[0] if trees[0][k] != trees[1][k]] == []
-    assert len([k for k in trees[0] if k.name == "estimates.parquet"]) == 4
+    assert len({k.parent for k in trees[0] if k.parent.name == "estimates"}) == 4
 
 
 def test_a_table_whose_estimate_fails_keeps_the_dataset_and_says_one_line(tmp_path):
@@ -126,27 +126,26 @@ def test_rerun_reuses_shards_resumes_and_force_recomputes(paths, tmp_path):
     simulate_stage(cfg)
     estimate_stage(cfg)
     run = next((tmp_path / "data" / "runs").glob("*/lm-*"))
-    shards = sorted((run / "shards").glob("*.parquet"))
-    assert len(shards) == 3
+    shards = sorted((run / "estimates").glob("*.parquet"))
+    assert len(shards) == 3 and not (run / "estimates.parquet").exists()  # no copy
     stamps = {p: os.stat(p).st_mtime_ns for p in shards}
-    before = (run / "estimates.parquet").read_bytes()
+    before = {p: p.read_bytes() for p in shards}
 
-    # a killed run: one shard output lost, the combined file missing
+    # a killed run: one shard output lost
     shards[1].unlink()
-    (run / "estimates.parquet").unlink()
     estimate_stage(cfg)
     assert os.stat(shards[0]).st_mtime_ns == stamps[shards[0]]  # reused
     assert os.stat(shards[2]).st_mtime_ns == stamps[shards[2]]
-    assert (run / "estimates.parquet").read_bytes() == before
+    assert {p: p.read_bytes() for p in shards} == before
 
     # a damaged shard output fails its hash check and is recomputed
     shards[2].write_bytes(b"garbage")
     estimate_stage(cfg)
-    assert (run / "estimates.parquet").read_bytes() == before
+    assert {p: p.read_bytes() for p in shards} == before
 
     estimate_stage(compose_cfg([*overrides, "force=true"]))
     assert os.stat(shards[0]).st_mtime_ns != stamps[shards[0]]
-    assert (run / "estimates.parquet").read_bytes() == before
+    assert {p: p.read_bytes() for p in shards} == before
 
 
 def test_simulate_resumes_after_a_kill(paths, tmp_path):
@@ -210,6 +209,38 @@ def test_the_table_command_loads_the_report_while_the_workers_estimate():
     assert prefetch_report("nosuch") is None
 
 
+def test_a_runs_estimates_are_its_shard_files_read_as_one_dataset(paths, tmp_path):
+    """Issue 32, item 3: a run's estimates are the folder of its shard files, no concatenated
+    copy: pandas and pyarrow read it in one call, rows in shard order (the dataset's track
+    order), the same table aggregate reads; ``metrics_dataset`` reads the folders too."""
+    import pyarrow.dataset as pds
+
+    from tma.io.dataset import Dataset
+    from tma.stages.aggregate import metrics_dataset
+    from tma.stages.estimate import open_run
+
+    cfg = compose_cfg([*SMALL, *paths, "parallel.n_jobs=2"])
+    simulate_stage(cfg)
+    estimate_stage(cfg)
+    run = next((tmp_path / "data" / "runs").glob("*/lm-*"))
+    folder = run / "estimates"
+    manifest, table = open_run(run)
+    assert sorted(p.name for p in folder.iterdir()) == sorted(manifest["shards"]) == [
+        "shard-00000.parquet", "shard-00001.parquet", "shard-00002.parquet"]
+    assert not list(run.glob("*estimates*.parquet"))
+    frame = pd.read_parquet(folder)
+    pd.testing.assert_frame_equal(frame, table.to_pandas())
+    pd.testing.assert_frame_equal(pds.dataset(folder).to_table().to_pandas(), frame)
+    truth = Dataset.open(run.parent.parent.parent / "datasets" / run.parent.name).read_truth()
+    assert frame["track_id"].tolist() == truth["track_id"].tolist() == sorted(
+        truth["track_id"])  # shard order
+    parts = [pd.read_parquet(folder / name) for name in sorted(manifest["shards"])]
+    pd.testing.assert_frame_equal(frame, pd.concat(parts, ignore_index=True))
+    every = metrics_dataset(tmp_path / "data", name="estimates").to_table().to_pandas()
+    ours = every[every["run"] == run.name].reset_index(drop=True)
+    pd.testing.assert_frame_equal(ours[frame.columns], frame)
+
+
 def test_cli_sweep_and_joblib_launcher(tmp_path):
     common = [f"paths.data_dir={tmp_path}", "scenario.n_tracks=30", "scenario.shard_size=15",
               "progress=false"]
@@ -217,9 +248,9 @@ def test_cli_sweep_and_joblib_launcher(tmp_path):
     run_stage_here("estimate", "-m", "estimator=lm,nbearings", "scenario.sigma_deg=0.1,0.5",
                    *common)
     runs = sorted(p.parent.name + "/" + p.name.split("-")[0]
-                  for p in tmp_path.glob("runs/*/*/estimates.parquet"))
+                  for p in tmp_path.glob("runs/*/*/estimates"))
     assert len(runs) == 4
-    stamp = {p: p.stat().st_mtime_ns for p in tmp_path.glob("runs/*/*/shards/*.parquet")}
+    stamp = {p: p.stat().st_mtime_ns for p in tmp_path.glob("runs/*/*/estimates/*.parquet")}
     proc = run_cli("estimate", "-m", "hydra/launcher=parallel", "estimator=lm,nbearings",
                    "scenario.sigma_deg=0.1,0.5", *common)
     output = proc.stdout + proc.stderr

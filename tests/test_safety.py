@@ -134,12 +134,16 @@ RUN_DAMAGE = {
     "manifest not JSON": lambda run: (run / "manifest.json").write_text("[1, 2"),
     "manifest key renamed": lambda run: _edit_json(
         run / "manifest.json", lambda m: m.update(filez=m.pop("files"))),
-    "estimates missing": lambda run: (run / "estimates.parquet").unlink(),
-    "shard output garbage": lambda run: (run / "shards" / "shard-00002.parquet").write_bytes(
+    "estimates missing": lambda run: (run / "estimates" / "shard-00000.parquet").unlink(),
+    "shard output garbage": lambda run: (run / "estimates" / "shard-00002.parquet").write_bytes(
         b"garbage"),
     "sidecar damaged": lambda run: (
-        (run / "estimates.parquet").unlink(),
+        (run / "manifest.json").write_text("[1, 2"),  # the run broken, its shards reusable
         (run / "shards" / "shard-00001.parquet.done.json").write_text("[]")),
+    # the folder is read whole: a file that is not the run's would join its estimates
+    "stray file among the estimates": lambda run: (
+        (run / "estimates" / "shard-00001 (copy).parquet").write_bytes(
+            (run / "estimates" / "shard-00001.parquet").read_bytes())),
 }
 
 
@@ -157,6 +161,25 @@ def test_a_damaged_run_is_a_clear_error_then_recomputed(tmp_path, damage):
         if path.name != "timing.json" and not path.name.endswith(".done.json"):
             assert after[path] == before[path], path
     aggregate_stage(cfg)
+
+
+def test_a_run_of_the_previous_format_is_recomputed_without_its_copies(tmp_path):
+    """A run written before its estimates became a folder (format 2: ``estimates.parquet``,
+    the shard outputs in ``shards/``) is computed again in the new layout, and neither its
+    concatenated copy nor its old shard files stay beside the new estimates."""
+    cfg, _, run = _finished_run(tmp_path)
+    before = _tree(run)
+    (run / "estimates.parquet").write_bytes(b"format 2's copy")
+    (run / "shards" / "shard-00000.parquet").write_bytes(b"format 2's shard output")
+    _edit_json(run / "manifest.json", lambda m: m.update(format_version=2))
+    with pytest.raises(IntegrityError, match="format version 2 is not supported"):
+        aggregate_stage(cfg)
+    estimate_stage(cfg)
+    after = _tree(run)
+    assert not (run / "estimates.parquet").exists()
+    assert not (run / "shards" / "shard-00000.parquet").exists()
+    assert {p for p in after if not p.name.endswith(".done.json")} == {
+        p for p in before if not p.name.endswith(".done.json")}
 
 
 def test_kill_leaves_the_old_good_output_and_a_resumable_partial(tmp_path):

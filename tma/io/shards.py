@@ -17,11 +17,12 @@ def sidecar(path) -> Path:
     return path.with_name(path.name + ".done.json")
 
 
-def finished_record(path, key: str) -> dict | None:
-    """The sidecar record of ``path`` if the output is finished for ``key``, else None."""
+def finished_record(path, key: str, record_path=None) -> dict | None:
+    """The sidecar record of ``path`` (at ``record_path``, by default ``sidecar(path)``) if
+    the output is finished for ``key``, else None."""
     path = Path(path)
     try:
-        record = json.loads(sidecar(path).read_text())
+        record = json.loads(Path(record_path or sidecar(path)).read_text())
         if (isinstance(record, dict) and record.get("key") == key
                 and record.get("sha256") == sha256_file(path)):
             return record
@@ -30,8 +31,10 @@ def finished_record(path, key: str) -> dict | None:
     return None
 
 
-def mark_finished(path, key: str, **info) -> dict:
+def mark_finished(path, key: str, record_path=None, **info) -> dict:
+    """Write the sidecar record of the finished output ``path`` (at ``record_path``, by
+    default ``sidecar(path)``): ``key``, its sha256 and ``info``."""
     path = Path(path)
     record = {"key": key, "sha256": sha256_file(path), **info}
-    write_json_atomic(sidecar(path), record)
+    write_json_atomic(Path(record_path or sidecar(path)), record)
     return record

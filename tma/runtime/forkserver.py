@@ -105,6 +105,11 @@ def preload_workers(modules=()) -> bool:
 
 
 _server = False  # preload_workers started the fork server
+
+
+def server_started() -> bool:
+    """Whether ``preload_workers`` started this command's fork server."""
+    return _server
 PR_SET_PDEATHSIG = 1  # prctl(2)
 
 

@@ -19,11 +19,23 @@ Two gaps of numba's cache are closed here:
   none is writable (a read-only install and home) it refuses to decorate the function, which
   would fail with a traceback. The cache then moves to a per-user temporary directory, and if
   even that fails the kernel is compiled in every process, uncached.
+
+And one cost: on a machine whose cache is empty, every worker process that calls a kernel
+first would compile it at the same time (two workers: twice the work, on the cores the other
+tasks need). A kernel called from Python with argument types it has no machine code for
+therefore compiles them under an exclusive file lock beside its cache index (``compiling``,
+around numba's ``_compile_for_args``): one process compiles and saves it, the others wait
+for the lock and then load it from the cache. So each kernel is compiled once per machine,
+and the note that says so is printed once, by the process that compiles
+(``tma.stages.estimate.compile_ahead`` compiles a command's kernels ahead, while it
+simulates).
 """
 
+import contextlib
 import functools
 import inspect
 import os
+import sys
 import tempfile
 import threading
 
@@ -91,24 +103,78 @@ def _stamp_dependencies(kernel, depends):
 _ANNOUNCED: set[str] = set()
 
 
-def _say_if_compiling(kernel, function):
-    """Say once per process and module, on stderr (worker processes' logging is not the
-    command's), that a module's kernels are about to be compiled: the first run on a machine
-    spends seconds there, silently otherwise. Later runs load them from numba's cache."""
+def _index_path(kernel) -> str | None:
+    """Where numba keeps the cache index of ``kernel`` (None: uncached)."""
     cache_file = getattr(getattr(kernel, "_cache", None), "_cache_file", None)
-    index = getattr(cache_file, "_index_path", None)
+    return getattr(cache_file, "_index_path", None)
+
+
+def _say_compiling(function) -> None:
+    """Say once per process and module, on stderr (worker processes' logging is not the
+    command's), that a module's kernels are being compiled: the first run on a machine spends
+    seconds there, silently otherwise. Later runs load them from numba's cache."""
     module = function.__module__
-    if index is None or os.path.exists(index) or module in _ANNOUNCED:
+    if module in _ANNOUNCED:
         return
     _ANNOUNCED.add(module)
     parts = module.split(".")
     name = module.rsplit(".", 1)[-1].removesuffix("_kernel")
     if parts[:2] == ["tma", "families"] and len(parts) > 3:  # "bearings2d lm"
         name = f"{parts[2]} {name}"
-    import sys
+    sys.stderr.write(f"note: compiling {name} kernels (numba), once per machine: later runs "
+                     "load them from its cache\n")  # one write: processes print side by side
+    sys.stderr.flush()
 
-    print(f"note: compiling {name} kernels (numba), once per machine: later runs load them "
-          "from its cache", file=sys.stderr, flush=True)
+
+@contextlib.contextmanager
+def compiling(kernel, function):
+    """Hold the machine-wide lock of ``kernel`` (numba's dispatcher of ``function``), a file
+    ``<its cache index>.lock`` locked with ``flock``, while the block compiles it or loads it
+    from the cache: a second process compiling the same kernel waits, then finds it cached.
+    Without a cache, a lock file or ``flock`` (not POSIX), the block runs unlocked. Announces
+    the compilation (``_say_compiling``) when the kernel's cache index is absent."""
+    index = _index_path(kernel)
+    with contextlib.ExitStack() as stack:
+        if index is not None:
+            try:
+                import fcntl
+
+                handle = stack.enter_context(open(f"{index}.lock", "a"))
+                fcntl.flock(handle, fcntl.LOCK_EX)
+            except (ImportError, OSError):  # a read-only cache, Windows: compile unlocked
+                pass
+            if not os.path.exists(index):
+                _say_compiling(function)
+        yield
+
+
+def _locked_compilation(kernel, function) -> None:
+    """Have ``kernel`` (numba's dispatcher of ``function``) compile, for the argument types
+    of a call it has no machine code for, under its machine-wide lock (``compiling``):
+    numba's dispatcher calls its ``_compile_for_args`` then, and runs the code it returns
+    after, so a process waits for another's compilation, never for its computation."""
+    compile_for_args = kernel._compile_for_args
+
+    def locked(*args, **kwargs):
+        with compiling(kernel, function):
+            return compile_for_args(*args, **kwargs)
+
+    kernel._compile_for_args = locked
+
+
+_KERNELS: list["Kernel"] = []  # every kernel of the modules imported in this process
+
+
+def compiled_before(package: str) -> bool:
+    """Whether the modules of ``package`` imported in this process have no kernel, or
+    numba's cache holds any of their kernels (a module's kernels that no code path calls are
+    never cached, so not "all"): False on a machine whose cache is empty, or was emptied.
+    Makes their dispatchers (imports numba), compiles none."""
+    kernels = [k for k in _KERNELS
+               if k.__module__ == package or k.__module__.startswith(f"{package}.")]
+    return not kernels or any(
+        (index := _index_path(k.dispatcher)) is not None and os.path.exists(index)
+        for k in kernels)
 
 
 class Kernel:
@@ -122,6 +188,7 @@ class Kernel:
         self._options, self._depends = options, tuple(depends)
         self.py_func = function
         functools.update_wrapper(self, function)
+        _KERNELS.append(self)
 
     @property
     def dispatcher(self):
@@ -130,7 +197,7 @@ class Kernel:
                 if self._dispatcher is None:
                     kernel = _compile(self.py_func, self._options)
                     _stamp_dependencies(kernel, self._depends)
-                    _say_if_compiling(kernel, self.py_func)
+                    _locked_compilation(kernel, self.py_func)
                     self._dispatcher = kernel
         return self._dispatcher
 

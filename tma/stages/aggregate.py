@@ -236,9 +236,19 @@ def _finished_runs(data_dir, family, name="metrics") -> list[tuple[str, bool, bo
     return out
 
 
+def _run_files(run_root: Path, name: str) -> list[Path]:
+    """A run's ``<name>.parquet``, or the shard files of its folder ``<name>/`` (a run's
+    ``estimates``), in shard order; none when it has neither."""
+    if (run_root / f"{name}.parquet").is_file():
+        return [run_root / f"{name}.parquet"]
+    return sorted(p for p in (run_root / name).glob("*.parquet") if not p.name.startswith("."))
+
+
 def metrics_dataset(data_dir="data", name="metrics", family=None) -> "pds.Dataset":
-    """Every run's ``<name>.parquet`` (``metrics``, written by aggregate) under
-    ``<data_dir>/runs/`` as one ``pyarrow.dataset``, nothing loaded yet. Besides the file's
+    """Every run's ``<name>.parquet`` (``metrics``, written by aggregate), or the files of its
+    folder ``<name>`` (``estimates``: a file per shard), under ``<data_dir>/runs/`` as one
+    ``pyarrow.dataset``, nothing loaded yet (runs in name order, each run's files in shard
+    order). Besides the file's
     own columns each row carries its run's ``family``, ``dataset``, ``estimator`` and ``run``
     (directory name) and its config values ``scenario.<key>`` (from the dataset manifest)
     and ``estimator.<key>`` (from the run manifest; nested keys dotted, lists left out),
@@ -258,10 +268,10 @@ def metrics_dataset(data_dir="data", name="metrics", family=None) -> "pds.Datase
         family_of(family)  # a ConfigError naming the families for another name
     constants, paths = [], []
     root = runs_dir(data_dir)
-    for path in sorted(root.glob(f"*/*/{name}.parquet")):
-        run_root = path.parent
-        if run_root.name.startswith(".") or run_root.parent.name.startswith("."):
-            continue  # staging directories
+    for run_root in sorted(path.parent for path in root.glob(f"*/*/{MANIFEST}")):
+        files = _run_files(run_root, name)
+        if not files or run_root.name.startswith(".") or run_root.parent.name.startswith("."):
+            continue  # none of these files, or a staging directory
         manifest = _read_json(run_root / MANIFEST)
         dataset = manifest.get("dataset", {})
         if family is not None and dataset.get("family") != family:
@@ -273,7 +283,8 @@ def metrics_dataset(data_dir="data", name="metrics", family=None) -> "pds.Datase
                           **_flat(manifest.get("config") or {}, "estimator")})
         constants[-1].pop("scenario.family", None)  # the same as family
         constants[-1].pop("estimator.name", None)  # the same as estimator
-        paths.append(path)
+        constants += [constants[-1]] * (len(files) - 1)  # the same run's for each file
+        paths += files
     if not paths:
         recorded = recorded_runs(data_dir, family)
         raise InputError(f"no {name}.parquet in any run under {root}"

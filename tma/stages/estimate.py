@@ -3,10 +3,16 @@
 Layout::
 
     data/runs/<dataset>/<estimator>-<key10>/
-        shards/shard-00000.parquet (+ .done.json)   # one per dataset shard
-        estimates.parquet                            # all tracks, shard order
-        manifest.json                                # config, dataset hash, file hashes
-        timing.json                                  # wall time per shard (not hashed)
+        estimates/shard-00000.parquet    # the estimates: one file per dataset shard
+        shards/shard-00000.parquet.done.json  # each shard's record (key, sha256, wall time)
+        shards/shard-00000.<side>.parquet     # each shard's side tables, if any
+        <side>.parquet                   # a side table of every shard (e.g. covariance)
+        manifest.json                    # config, dataset hash, file hashes
+        timing.json                      # wall time per shard (not hashed)
+
+The run's estimates are the folder ``estimates/``, its shard files read as one Parquet
+dataset in shard order (``pd.read_parquet(folder)``, ``pyarrow.dataset.dataset(folder)``,
+DuckDB's ``read_parquet('folder/*.parquet')``): no concatenated copy is written.
 
 ``key`` hashes the full estimator config (every default included), the dataset's content hash
 and the package version, so a run directory's content is a pure function of its inputs:
@@ -18,6 +24,8 @@ every use.
 
 import json
 import logging
+import re
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from time import perf_counter
@@ -38,9 +46,10 @@ from tma.version import __version__
 
 log = logging.getLogger(__name__)
 RUN_FORMAT = "tma-run"
-RUN_FORMAT_VERSION = 2
+RUN_FORMAT_VERSION = 3  # 3: the estimates are the folder of shard files (2: one file)
 MANIFEST = "manifest.json"
-ESTIMATES = "estimates.parquet"
+ESTIMATES = "estimates"  # the folder of the run's estimates, one Parquet file per shard
+SHARDS = "shards"  # each shard's record and side tables
 TIMING = "timing.json"
 
 
@@ -85,7 +94,15 @@ def columns_to_table(track_id, columns: dict) -> pa.Table:
 
 
 def extra_path(shard_out: Path, name: str) -> Path:
-    return shard_out.with_name(f"{shard_out.stem}.{name}.parquet")
+    """Where the side table ``name`` of the shard whose estimates are ``shard_out`` goes:
+    in ``shards/``, so that ``estimates/`` holds the estimates alone."""
+    return shard_out.parent.parent / SHARDS / f"{shard_out.stem}.{name}.parquet"
+
+
+def record_path(shard_out: Path) -> Path:
+    """The record (``tma.io.shards`` sidecar) of the shard whose estimates are ``shard_out``,
+    in ``shards/``."""
+    return shard_out.parent.parent / SHARDS / f"{shard_out.name}.done.json"
 
 
 @dataclass(frozen=True)
@@ -114,7 +131,7 @@ def estimate_shard_group(tasks: list[ShardTask]) -> list[dict]:
 
 def _finished_record(task: ShardTask):
     """The sidecar record of a finished shard output, if it is whole (else: recompute)."""
-    record = finished_record(task.out_path, task.key)
+    record = finished_record(task.out_path, task.key, record_path(Path(task.out_path)))
     whole = (record is not None and isinstance(record.get("extras"), list)
              and all(isinstance(record.get(k), int) for k in ("rows", "epochs"))
              and isinstance(record.get("seconds"), int | float))
@@ -135,6 +152,83 @@ def estimate_log(estimator, log):
     return columns_to_table(log.track_id, columns), extras, seconds
 
 
+AHEAD_TRACKS = 2  # tracks of the small log each estimator of a command runs on ahead
+_AHEAD: set = set()  # the estimators compile_ahead started in this process
+
+
+def compile_ahead(scenarios: list[dict], estimators: list[dict]):
+    """Start compiling the kernels a command will run, in processes of their own forked from
+    the command's worker server (``tma.runtime.forkserver``), while the command goes on
+    (composing, simulating): on a machine whose numba cache is empty, the estimate stage's
+    workers then find the kernels compiled, or wait for the compilation under way
+    (``tma.runtime.jit.compiling``) instead of each compiling them. Each estimator config
+    of ``estimators`` runs in a process of its own (their kernels compile side by side) on a
+    log of ``AHEAD_TRACKS`` tracks of each scenario point of ``scenarios`` of its family (the
+    same code paths, so the same kernels and argument types), unless numba's cache holds
+    kernels of their families already (``compiled_before``: then nothing runs, and a kernel
+    still missing is compiled by the first worker that needs it, once). Nothing is printed
+    and failures are ignored: the stages run as they would without it. Started from a
+    thread, so that the command does not wait for the server to be ready; None (nothing
+    started) without a worker server (a Python session), without scenarios or when this
+    process started it for these estimators before, else that thread."""
+    from tma.runtime.forkserver import server_started
+
+    names = {node.get("name") for node in estimators}
+    if not server_started() or not scenarios or names <= _AHEAD:
+        return None  # e.g. the next job of a multirun in this process: done by the first
+    _AHEAD.update(names)
+    import multiprocessing
+    import threading
+
+    process = multiprocessing.get_context("forkserver").Process(
+        target=_compile_ahead, args=(scenarios, estimators), daemon=True,
+        name="tma-compile-ahead")
+    thread = threading.Thread(target=process.start, daemon=True)
+    thread.start()
+    return thread
+
+
+def _compile_ahead(scenarios: list[dict], estimators: list[dict]) -> None:
+    import os
+
+    from tma.families import load_scenario
+    from tma.runtime import jit
+
+    built = []
+    for node in estimators:
+        try:
+            built.append(build_estimator(node))  # imports its modules, and so their kernels
+        except Exception:  # the command itself says what is wrong with it
+            continue
+    if all(jit.compiled_before(f"tma.families.{f}") for f in {e.family for e in built}):
+        return  # this machine compiled them before: nothing to do ahead
+    logs = []
+    for node in scenarios:
+        try:
+            module, cfg = load_scenario({**node, "n_tracks": AHEAD_TRACKS,
+                                         "shard_size": AHEAD_TRACKS})
+            logs.append((cfg.own_family(), module.simulate_shard(cfg, 0)[0]))
+        except Exception:
+            continue
+    children = []
+    for i, estimator in enumerate(built):
+        child = os.fork() if i < len(built) - 1 else 0  # the last runs in this process
+        if child:
+            children.append(child)
+            continue
+        try:
+            for family, log in logs:
+                if family == estimator.family:
+                    estimate_log(estimator, log)
+        except Exception:  # e.g. an estimator that needs its prepare (training)
+            pass
+        finally:
+            if i < len(built) - 1:  # a forked process: ends here, whatever happened
+                os._exit(0)
+    for child in children:
+        os.waitpid(child, 0)
+
+
 def estimate_shard(task: ShardTask, log) -> dict:
     """Run one estimator over one dataset shard's log and write its output."""
     out = Path(task.out_path)
@@ -145,8 +239,8 @@ def estimate_shard(task: ShardTask, log) -> dict:
         write_parquet_atomic(extra_path(out, name), arrow.table(side))
     write_parquet_atomic(out, table)
     epochs = int(log.t_s.size)
-    return mark_finished(out, task.key, rows=int(log.n_tracks), epochs=epochs, seconds=seconds,
-                         extras=sorted(extras))
+    return mark_finished(out, task.key, record_path(out), rows=int(log.n_tracks),
+                         epochs=epochs, seconds=seconds, extras=sorted(extras))
 
 
 def dataset_config(dataset: Dataset, estimator_config: dict, keep=()) -> dict:
@@ -171,7 +265,7 @@ def plan_run(data_dir, dataset: Dataset, estimator_config: dict, key: str, stage
     writing into ``stage``."""
     tasks = []
     for shard in dataset.shard_paths:
-        out = stage / "shards" / (Path(shard).stem + ".parquet")
+        out = stage / ESTIMATES / (Path(shard).stem + ".parquet")
         shard_key = sha256_json({"run": key, "shard": shard,
                                  "sha256": dataset.manifest["shards"][shard]["sha256"]})
         tasks.append(ShardTask(str(dataset.root), shard, estimator_config, str(out), shard_key,
@@ -179,21 +273,49 @@ def plan_run(data_dir, dataset: Dataset, estimator_config: dict, key: str, stage
     return tasks
 
 
+def _summary(paths) -> tuple[int, list[str], "pa.Table"]:
+    """Rows, column names and the ``converged``/``status``/``step`` columns of the shard
+    files ``paths`` read as one dataset; a ValueError when their schemas differ (the folder
+    would not read as one table)."""
+    import pyarrow.parquet as pq
+
+    files = [pq.ParquetFile(p) for p in paths]
+    schema = files[0].schema_arrow if files else pa.schema([])
+    for path, f in zip(paths, files, strict=True):
+        if not f.schema_arrow.equals(schema):
+            raise ValueError(f"{path}: its columns differ from the first shard's "
+                             f"({f.schema_arrow} against {schema}): the shards of a run must "
+                             "have one schema")
+    wanted = [c for c in ("converged", "status", "step") if c in schema.names]
+    table = pa.concat_tables([f.read(columns=wanted) for f in files]) if files else pa.table({})
+    return sum(f.metadata.num_rows for f in files), schema.names, table
+
+
 def finish_run(stage: Path, dataset: Dataset, estimator_config: dict, tasks, records) -> None:
-    """Concatenate shard outputs into ``estimates.parquet`` and write the run manifest."""
+    """Write the run manifest (the shard files of ``estimates/`` checked to read as one
+    table) and its side tables, each concatenated over the shards."""
     import pyarrow.compute as pc  # here: a re-run whose runs are all done needs none of it
 
-    table = pa.concat_tables(arrow.read_table(t.out_path) for t in tasks)
-    write_parquet_atomic(stage / ESTIMATES, table)
+    folder = stage / ESTIMATES
+    folder.mkdir(exist_ok=True)  # a dataset without shards: an empty folder
+    ours = {Path(t.out_path).name for t in tasks}
+    for path in folder.iterdir():  # a damaged run's stray file: it would join the estimates
+        if path.name not in ours and not path.name.startswith((".", "_")):
+            shutil.rmtree(path) if path.is_dir() and not path.is_symlink() else path.unlink()
+    # what a run of format 2 adopted here left: its concatenated copy and its shard outputs
+    (stage / "estimates.parquet").unlink(missing_ok=True)
+    for path in (stage / SHARDS).glob("shard-*.parquet"):
+        if re.fullmatch(r"shard-\d+\.parquet", path.name):
+            path.unlink()
+    n_rows, columns, table = _summary([t.out_path for t in tasks])
     shards = {Path(t.out_path).name: file_record(t.out_path, rows=r["rows"])
               for t, r in zip(tasks, records, strict=True)}
-    files = {ESTIMATES: file_record(stage / ESTIMATES, rows=table.num_rows)}
+    files = {}
     for name in sorted({n for r in records for n in r.get("extras", [])}):
         parts = [extra_path(Path(t.out_path), name) for t in tasks]
         extra = pa.concat_tables(arrow.read_table(p) for p in parts if p.exists())
         write_parquet_atomic(stage / f"{name}.parquet", extra)
         files[f"{name}.parquet"] = file_record(stage / f"{name}.parquet", rows=extra.num_rows)
-    columns = table.column_names
     manifest = sealed({
         "format": RUN_FORMAT,
         "format_version": RUN_FORMAT_VERSION,
@@ -204,7 +326,7 @@ def finish_run(stage: Path, dataset: Dataset, estimator_config: dict, tasks, rec
         "package": {"name": "tma", "version": __version__},
         "shards": shards,
         "files": files,
-        "n_tracks": table.num_rows,
+        "n_tracks": n_rows,
         **({"n_converged": int(pc.sum(table["converged"]).as_py() or 0)}
            if "converged" in columns else {}),
         **({"status_counts": dict(sorted(
@@ -306,8 +428,19 @@ def _estimate_locked(outputs, data_dir, planned, *, engine, progress, force):
 
 
 def open_run(root) -> tuple[dict, "pa.Table"]:
-    """A finished run's manifest and estimates, after ``verify_run``."""
-    return verify_run(root), arrow.read_table(Path(root) / ESTIMATES)
+    """A finished run's manifest and estimates (its shard files, in shard order, as one
+    table), after ``verify_run``."""
+    manifest = verify_run(root)
+    return manifest, read_estimates(root, manifest)
+
+
+def read_estimates(root, manifest: dict) -> "pa.Table":
+    """The estimates of the run at ``root``: the shard files of its ``estimates/`` folder
+    that ``manifest`` lists, in shard order, as one table (what ``pd.read_parquet`` of the
+    folder gives)."""
+    folder = Path(root) / ESTIMATES
+    tables = [arrow.read_table(folder / name) for name in sorted(manifest["shards"])]
+    return pa.concat_tables(tables) if tables else pa.table({})
 
 
 def missing_run_line(data_dir, dataset: Dataset, config: dict) -> str:
@@ -364,10 +497,18 @@ def verify_run(root) -> dict:
         raise InputError(f"no finished run at {root}: run `python -m pipeline.estimate` first")
     manifest = read_sealed_manifest(root / MANIFEST, "run", RUN_FORMAT, RUN_FORMAT_VERSION,
                                     remedy)
-    listed = {**{f"shards/{k}": v for k, v in manifest.get("shards", {}).items()},
-              **manifest.get("files", {})}
-    if ESTIMATES not in listed:
+    shards, files = manifest.get("shards"), manifest.get("files")
+    if not isinstance(shards, dict) or not isinstance(files, dict):
         raise IntegrityError(f"{root / MANIFEST}: damaged run manifest; {remedy}")
+    listed = {**{f"{ESTIMATES}/{k}": v for k, v in shards.items()}, **files}
+    # the folder is read whole (pd.read_parquet): a file it holds that is not the run's would
+    # join its estimates (temporaries, hidden, are skipped by the readers)
+    folder = root / ESTIMATES
+    strays = sorted(p.name for p in folder.iterdir() if not p.name.startswith((".", "_"))
+                    and p.name not in shards) if folder.is_dir() else []
+    if strays:
+        raise IntegrityError(f"{folder / strays[0]}: not one of the run's shard files, yet "
+                             f"read with them as its estimates; {remedy}")
     for relpath, record in listed.items():
         path = root / relpath
         if not path.is_file() or file_record(path) | {"rows": record.get("rows")} != record:

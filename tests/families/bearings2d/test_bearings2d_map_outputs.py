@@ -58,7 +58,7 @@ def _estimate_and_aggregate(tmp_path, name):
                        "parallel=serial"])
     estimate_stage(cfg)
     aggregate_stage(cfg)
-    runs = list((tmp_path / "data" / "runs" / name).glob("lm-*/estimates.parquet"))
+    runs = list((tmp_path / "data" / "runs" / name).glob("lm-*/estimates"))
     return (pd.read_csv(tmp_path / "tables" / f"{name}-lm.csv", dtype={"label": str}),
             pd.read_parquet(runs[0]))
 
