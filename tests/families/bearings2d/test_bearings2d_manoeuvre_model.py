@@ -203,7 +203,7 @@ def test_a_mixtures_errors_hold_95_percent_of_it(tail_weight, tail_var, shift):
               for w, c, m in zip(weights, covs, means, strict=True))
     s2 = 4.0  # the kernel's covariances are in units of the noise variance
     scale = manoeuvres._tail_scale(weights, means, covs / s2, 2, mean, cov / s2, s2,
-                                   manoeuvres.TAIL_POINTS, manoeuvres.TAIL_CHI2)
+                                   *manoeuvres.tail_points())
     draws = _mixture_draws(weights, means, covs, 400_000)
     reference = max(_quantile_95(draws - mean, cov) / chi2.ppf(0.95, 4), 1.0)
     assert scale >= 1.0

@@ -38,11 +38,11 @@ have done, at its posterior probability. With lambda = 0 the mixture is the no-m
 component alone: ``ncv.smooth``'s answer, which ``mixture`` then returns.
 """
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import chi2, norm, qmc
 
 from tma.families.bearings2d.ncv import (
     MAX_PASSES,
@@ -74,15 +74,20 @@ MAX_MANOEUVRES = 3  # in one component
 TOP_SINGLES = 3  # single manoeuvres a second one is sought beside
 REFINE = 3  # components of each level refined to their MAP trajectory
 REFINE_TOL_M = 0.1  # a refinement stops when no position moves more than this (m)
-# fixed standard-normal points of the state's four dimensions, not random (the same bytes
-# whatever the shards): a Halton set's first four coordinates give each its direction, the
-# fifth its radius, at chi-square(4) quantiles (the tails, which decide, as well as the core)
-_HALTON = qmc.Halton(d=5, scramble=False).random(1025)[1:]
-_DIRECTIONS = norm.ppf(_HALTON[:, :4])
-TAIL_POINTS = np.ascontiguousarray(
-    _DIRECTIONS / np.linalg.norm(_DIRECTIONS, axis=1, keepdims=True)
-    * np.sqrt(chi2.ppf(_HALTON[:, 4:], 4)))
-TAIL_CHI2 = float(np.quantile(np.sum(TAIL_POINTS**2, axis=1), 0.95, method="inverted_cdf"))
+@functools.cache
+def tail_points() -> tuple[np.ndarray, float]:
+    """Fixed standard-normal points of the state's four dimensions, not random (the same
+    bytes whatever the shards): a Halton set's first four coordinates give each its
+    direction, the fifth its radius at chi-square(4) quantiles (the tails, which decide, as
+    well as the core); and their 95 % quantile of |u|^2 (about chi-square(4)'s 9.49).
+    Built when first needed: scipy.stats loads only then."""
+    from scipy.stats import chi2, norm, qmc
+
+    halton = qmc.Halton(d=5, scramble=False).random(1025)[1:]
+    directions = norm.ppf(halton[:, :4])
+    points = np.ascontiguousarray(directions / np.linalg.norm(directions, axis=1, keepdims=True)
+                                  * np.sqrt(chi2.ppf(halton[:, 4:], 4)))
+    return points, float(np.quantile(np.sum(points**2, axis=1), 0.95, method="inverted_cdf"))
 
 
 @dataclass(frozen=True)
@@ -478,8 +483,8 @@ def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_p
                    np.asarray(prior.durations_s, dtype=float), np.ascontiguousarray(log_none),
                    np.ascontiguousarray(log_each), sigma2, p0_pos, MAX_PASSES, REFINE_TOL_M,
                    out["state"], out["cov"], out["innovations"], out["cost_rad2"],
-                   out["passes"], out["p_manoeuvre"], out["manoeuvre_s"], TAIL_POINTS,
-                   TAIL_CHI2, out["inflation"])
+                   out["passes"], out["p_manoeuvre"], out["manoeuvre_s"], *tail_points(),
+                   out["inflation"])
     return in_units(out, sigma2, t[last], theta_cv)
 
 
