@@ -162,9 +162,9 @@ def test_the_mixture_averages_its_components_by_prior_and_likelihood():
     # of the mixture, by Monte Carlo over the mixture done by hand
     draws = _mixture_draws(w, means, [c[2] for c in comps], 200_000)
     scale = _quantile_95(draws - mean, cov) / chi2.ppf(0.95, 4)
-    assert mixed["inflation"][0] == pytest.approx(max(scale, 1.0), rel=0.05)
+    assert mixed["tail_scale"][0] == pytest.approx(max(scale, 1.0), rel=0.05)
     np.testing.assert_allclose(np.sqrt(np.diag(mixed["cov"][0])),
-                               sd * math.sqrt(mixed["inflation"][0]), rtol=0.1)
+                               sd * math.sqrt(mixed["tail_scale"][0]), rtol=0.1)
     assert mixed["p_manoeuvre"][0] == pytest.approx(1 - w[0], abs=0.01)
     assert mixed["p_manoeuvre"][0] > 0.99  # the turn is plain in the bearings
 

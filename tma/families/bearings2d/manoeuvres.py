@@ -257,7 +257,7 @@ def _tail_scale(weights, means, covs, used, mean, P, s2, u, u_q95):
                                          _tail_scale, start_track))
 def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q, dv2, taus,
                    durations, log_none, log_each, scale2, p0_pos, max_iter, tol_m, state,
-                   P_last, e, cost, passes, p_manoeuvre, tau_map, u, u_q95, inflation):
+                   P_last, e, cost, passes, p_manoeuvre, tau_map, u, u_q95, tail_scale):
     """Per track i the mixture of the module docstring: wander ``q`` and manoeuvres of
     velocity variance ``dv2`` (m^2/s^3, m^2/s^2: (n,)), candidate starts ``taus`` (n, J),
     ``durations`` (D,), the priors ``log_none`` (n,) and ``log_each`` (n, J)
@@ -411,11 +411,11 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
                 P_last[i, a, b] = v / total
         # a heavy-tailed mixture holds less than 95 % in the 95 % ellipsoid of its moments:
         # the errors stated are those of the Gaussian (same mean and shape) that holds it
-        inflation[i] = _tail_scale(logw, means, covs, used, state[i], P_last[i], s2, u,
+        tail_scale[i] = _tail_scale(logw, means, covs, used, state[i], P_last[i], s2, u,
                                    u_q95)
         for a in range(4):
             for b in range(4):
-                P_last[i, a, b] *= inflation[i]
+                P_last[i, a, b] *= tail_scale[i]
         p_manoeuvre[i] = 1.0 - logw[0] / total
         if count[best] > 0:
             latest = -np.inf
@@ -443,8 +443,9 @@ def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_p
     or scalar) and the manoeuvres of ``prior``, from the constant-velocity start
     ``theta_cv`` (n, 4), as ``ncv.smooth`` returns it (``state``, ``cov``, ``theta``,
     ``cov_theta``, ``innovations``, ``sigma2``, ``cost_rad2``, ``passes``) plus
-    ``p_manoeuvre`` (the posterior probability of a manoeuvre since the first bearing) and
-    ``manoeuvre_s`` (the latest start of the most probable component; NaN: none).
+    ``p_manoeuvre`` (the posterior probability of a manoeuvre since the first bearing),
+    ``manoeuvre_s`` (the latest start of the most probable component; NaN: none) and
+    ``tail_scale`` (the factor its covariance was widened by, ``_tail_scale``).
 
     ``sigma_rad`` (n,): the bearing noise, NaN where unknown: then estimated as
     ``ncv.smooth`` does without manoeuvres."""
@@ -476,7 +477,7 @@ def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_p
     out = {"state": np.empty((n, 4)), "cov": np.empty((n, 4, 4)),
            "innovations": np.empty((n, K)), "cost_rad2": np.empty(n),
            "passes": np.zeros(n, dtype=np.int64), "p_manoeuvre": np.empty(n),
-           "manoeuvre_s": np.empty(n), "inflation": np.ones(n)}
+           "manoeuvre_s": np.empty(n), "tail_scale": np.ones(n)}
     mixture_tracks(t, np.ascontiguousarray(own_x, float), np.ascontiguousarray(own_y, float),
                    np.ascontiguousarray(measured_rad, float), weight, weighted, first, last,
                    theta0, q, dv2, np.ascontiguousarray(taus),
@@ -484,7 +485,7 @@ def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_p
                    np.ascontiguousarray(log_each), sigma2, p0_pos, MAX_PASSES, REFINE_TOL_M,
                    out["state"], out["cov"], out["innovations"], out["cost_rad2"],
                    out["passes"], out["p_manoeuvre"], out["manoeuvre_s"], *tail_points(),
-                   out["inflation"])
+                   out["tail_scale"])
     return in_units(out, sigma2, t[last], theta_cv)
 
 

@@ -273,7 +273,7 @@ class BearingsEstimator(Estimator):
                 innovations[rows] = fit["innovations"]
                 if "p_manoeuvre" in fit:
                     p_manoeuvre[rows] = fit["p_manoeuvre"]
-                    tail_scale[rows] = fit["inflation"]
+                    tail_scale[rows] = fit["tail_scale"]
                 if iterate:
                     theta, cost, jtj, sigma2, fit_p = (
                         np.array(v, dtype=float) for v in (theta, cost, jtj, sigma2, fit_p))
