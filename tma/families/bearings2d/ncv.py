@@ -66,8 +66,23 @@ STEP_HALVINGS = 8  # halvings of a Gauss-Newton step whose MAP cost does not fal
 
 
 @njit(error_model="numpy")
-def _predict(m, P, T, lam, mp, Pp):
-    """mp = F m, Pp = F P F^T + lam Q1(T) for the 4-state (x, y, vx, vy)."""
+def step_noise(t, lo, hi, lam, Q):
+    """``Q[k]`` = lam Q1(t_k - t_(k-1)) per axis, (q_pp, q_pv, q_vv) = lam (T^3 / 3, T^2 / 2,
+    T), for the steps into epochs lo + 1..hi (``Q[lo]``: none): white acceleration of
+    level ``lam`` (units of the noise variance)."""
+    for j in range(3):
+        Q[lo, j] = 0.0
+    for k in range(lo + 1, hi + 1):
+        T = t[k] - t[k - 1]
+        Q[k, 0] = lam * T * T * T / 3.0
+        Q[k, 1] = lam * T * T / 2.0
+        Q[k, 2] = lam * T
+
+
+@njit(error_model="numpy")
+def _predict(m, P, T, Qk, mp, Pp):
+    """mp = F m, Pp = F P F^T + Q for the 4-state (x, y, vx, vy), Q per axis the 2 x 2
+    ``Qk`` = (q_pp, q_pv, q_vv) of the step (``step_noise``)."""
     mp[0] = m[0] + T * m[2]
     mp[1] = m[1] + T * m[3]
     mp[2] = m[2]
@@ -82,7 +97,7 @@ def _predict(m, P, T, lam, mp, Pp):
     for i in range(4):  # columns: (F P) F^T
         Pp[i, 0] += T * Pp[i, 2]
         Pp[i, 1] += T * Pp[i, 3]
-    q3, q2, q1 = lam * T * T * T / 3.0, lam * T * T / 2.0, lam * T
+    q3, q2, q1 = Qk[0], Qk[1], Qk[2]
     Pp[0, 0] += q3
     Pp[1, 1] += q3
     Pp[0, 2] += q2
@@ -155,21 +170,19 @@ def _chol_solve(A, b, L, y):
 
 
 @njit(error_model="numpy", depends=(atan2, wrap_angle))
-def _filter(t, ox, oy, z, w, weighted, lo, hi, nom, lam, prior, p0, mf, Pf, Pp, nu, S):
-    """Kalman filter over epochs lo..hi linearised about ``nom`` (K, 4); filtered means and
-    covariances, predicted covariances (index k: the prediction into k) and the innovations
-    (NaN where no bearing). ``lam`` (K,): the process level of the step into each epoch
-    (``lam[k]``: from k - 1 to k); ``p0``: the diffuse prior's (position, velocity)
-    variances about ``prior`` (4,)."""
-    m, mp, P = np.empty(4), np.empty(4), np.zeros((4, 4))
+def filter_on(t, ox, oy, z, w, weighted, k0, hi, nom, Q, m, P, mf, Pf, Pp, nu, S):
+    """The Kalman filter of ``_filter`` over epochs k0..hi from the state (``m``, ``P``:
+    updated in place) filtered at k0 - 1 (predicted into k0 first) or, with k0 < 1, from
+    the prediction at k0 = -k0 itself. Writes mf, Pf, Pp, nu, S over those epochs."""
+    mp = np.empty(4)
     h, kg, tmp, A = np.zeros(4), np.empty(4), np.empty(4), np.empty((4, 4))
+    first = -k0 if k0 < 1 else k0
     for i in range(4):
-        m[i] = prior[i]
-    P[0, 0] = P[1, 1] = p0[0]
-    P[2, 2] = P[3, 3] = p0[1]
-    for k in range(lo, hi + 1):
-        if k > lo:
-            _predict(m, P, t[k] - t[k - 1], lam[k], mp, Pp[k])
+        for j in range(4):
+            Pp[first, i, j] = P[i, j]
+    for k in range(first, hi + 1):
+        if k > first or k0 >= 1:
+            _predict(m, P, t[k] - t[k - 1], Q[k], mp, Pp[k])
             for i in range(4):
                 m[i] = mp[i]
                 for j in range(4):
@@ -182,6 +195,21 @@ def _filter(t, ox, oy, z, w, weighted, lo, hi, nom, lam, prior, p0, mf, Pf, Pp, 
             mf[k, i] = m[i]
             for j in range(4):
                 Pf[k, i, j] = P[i, j]
+
+
+@njit(error_model="numpy", depends=(atan2, wrap_angle))
+def _filter(t, ox, oy, z, w, weighted, lo, hi, nom, Q, prior, p0, mf, Pf, Pp, nu, S):
+    """Kalman filter over epochs lo..hi linearised about ``nom`` (K, 4); filtered means and
+    covariances, predicted covariances (index k: the prediction into k; at lo the prior's)
+    and the innovations (NaN where no bearing). ``Q`` (K, 3): the process noise of the step
+    into each epoch (``Q[k]``: from k - 1 to k, ``step_noise``); ``p0``: the diffuse prior's
+    (position, velocity) variances about ``prior`` (4,)."""
+    m, P = np.empty(4), np.zeros((4, 4))
+    for i in range(4):
+        m[i] = prior[i]
+    P[0, 0] = P[1, 1] = p0[0]
+    P[2, 2] = P[3, 3] = p0[1]
+    filter_on(t, ox, oy, z, w, weighted, -lo, hi, nom, Q, m, P, mf, Pf, Pp, nu, S)
 
 
 @njit(error_model="numpy")
@@ -219,19 +247,21 @@ def _bearing_cost(ox, oy, z, w, weighted, lo, hi, s):
 
 
 @njit(error_model="numpy", depends=(atan2, wrap_angle))
-def _map_cost(t, ox, oy, z, w, weighted, lo, hi, s, lam, prior, p0):
-    """MAP cost (units of sigma^2): squared bearing residuals, the NCV process term of each
-    step with ``lam[k]`` > 0 (K,: the step into epoch k) and the diffuse prior about
-    ``prior`` (4,)."""
+def _map_cost(t, ox, oy, z, w, weighted, lo, hi, s, Q, prior, p0):
+    """MAP cost (units of sigma^2): squared bearing residuals, the process term of each
+    step with noise ``Q[k]`` (K, 3: the step into epoch k; none where zero) and the diffuse
+    prior about ``prior`` (4,)."""
     c = _bearing_cost(ox, oy, z, w, weighted, lo, hi, s)
     for k in range(lo, hi):
-        if lam[k + 1] > 0.0:
+        q11, q12, q22 = Q[k + 1, 0], Q[k + 1, 1], Q[k + 1, 2]
+        det = q11 * q22 - q12 * q12
+        if q11 > 0.0 and det > 0.0:
             T = t[k + 1] - t[k]
-            a11, a12, a22 = 12.0 / (T * T * T), -6.0 / (T * T), 4.0 / T  # Q1(T)^-1
+            a11, a12, a22 = q22 / det, -q12 / det, q11 / det  # the 2 x 2 inverse
             for axis in range(2):
                 dp = s[k + 1, axis] - s[k, axis] - T * s[k, axis + 2]
                 dv = s[k + 1, axis + 2] - s[k, axis + 2]
-                c += (a11 * dp * dp + 2.0 * a12 * dp * dv + a22 * dv * dv) / lam[k + 1]
+                c += a11 * dp * dp + 2.0 * a12 * dp * dv + a22 * dv * dv
     for i in range(4):
         e = s[lo, i] - prior[i]
         c += e * e / p0[0 if i < 2 else 1]
@@ -239,16 +269,16 @@ def _map_cost(t, ox, oy, z, w, weighted, lo, hi, s, lam, prior, p0):
 
 
 @njit(error_model="numpy", depends=(atan2, wrap_angle))
-def _fit(t, ox, oy, z, w, weighted, lo, hi, nom, lam, prior, p0, max_iter, tol_m, mf, Pf,
+def _fit(t, ox, oy, z, w, weighted, lo, hi, nom, Q, prior, p0, max_iter, tol_m, mf, Pf,
          Pp, nu, S, ms, trial):
     """Gauss-Newton (iterated smoother) from ``nom`` (K, 4, updated in place to the MAP
-    trajectory) under the process levels ``lam`` (K,) and the diffuse prior about ``prior``
+    trajectory) under the process noise ``Q`` (K, 3) and the diffuse prior about ``prior``
     (4,) at epoch lo; returns the passes made (-1: a covariance was not positive
     definite)."""
-    cost = _map_cost(t, ox, oy, z, w, weighted, lo, hi, nom, lam, prior, p0)
+    cost = _map_cost(t, ox, oy, z, w, weighted, lo, hi, nom, Q, prior, p0)
     passes = 0
     for _ in range(max_iter):
-        _filter(t, ox, oy, z, w, weighted, lo, hi, nom, lam, prior, p0, mf, Pf, Pp, nu, S)
+        _filter(t, ox, oy, z, w, weighted, lo, hi, nom, Q, prior, p0, mf, Pf, Pp, nu, S)
         passes += 1
         if not _smooth(t, lo, hi, mf, Pf, Pp, ms):
             return -1
@@ -258,7 +288,7 @@ def _fit(t, ox, oy, z, w, weighted, lo, hi, nom, lam, prior, p0, max_iter, tol_m
             for k in range(lo, hi + 1):
                 for i in range(4):
                     trial[k, i] = nom[k, i] + step * (ms[k, i] - nom[k, i])
-            new = _map_cost(t, ox, oy, z, w, weighted, lo, hi, trial, lam, prior, p0)
+            new = _map_cost(t, ox, oy, z, w, weighted, lo, hi, trial, Q, prior, p0)
             if new <= cost:
                 accepted = True
                 break
@@ -310,11 +340,11 @@ def _householder(A, rows, cols):
 
 
 @njit(error_model="numpy", depends=(atan2, wrap_angle))
-def _srif(t, ox, oy, z, w, weighted, lo, hi, nom, lam, e, S, R, r):
+def _srif(t, ox, oy, z, w, weighted, lo, hi, nom, Q, e, S, R, r):
     """Square-root information filter (Bierman, "Factorization Methods for Discrete
     Sequential Estimation", 1977) over epochs lo..hi, linearised about ``nom``, from no
-    prior information at all (exactly diffuse), R = 1, Q = lam[k] Q1 on the step into epoch
-    k. Writes the standardised
+    prior information at all (exactly diffuse), R = 1, process noise ``Q[k]`` (K, 3) on the
+    step into epoch k. Writes the standardised
     innovations ``e`` and their variances ``S`` (inf for a bearing that brought a direction
     the earlier ones left undetermined; NaN where no bearing) and leaves the information
     array (R upper triangular, r) of the last epoch: P = R^-1 R^-T, state R^-1 r.
@@ -335,13 +365,12 @@ def _srif(t, ox, oy, z, w, weighted, lo, hi, nom, lam, e, S, R, r):
             for i in range(4):
                 R[i, 2] -= T * R[i, 0]
                 R[i, 3] -= T * R[i, 1]
-            if lam[k] > 0.0:
+            if Q[k, 0] > 0.0:
                 # x = F^-1 (x' - L u), u ~ N(0, I): rows [I, 0 | 0] and
                 # [-R F^-1 L, R F^-1 | r] in the unknowns (u, x'), triangularised
-                lk = lam[k]
-                l11 = math.sqrt(lk * T * T * T / 3.0)
-                l21 = lk * T * T / 2.0 / l11
-                l22 = math.sqrt(max(lk * T - l21 * l21, 0.0))
+                l11 = math.sqrt(Q[k, 0])
+                l21 = Q[k, 1] / l11
+                l22 = math.sqrt(max(Q[k, 2] - l21 * l21, 0.0))
                 for i in range(8):
                     for j in range(9):
                         A[i, j] = 0.0
@@ -424,17 +453,50 @@ def start_track(i, t, lo, hi, theta, nom, state, P_last, e):
         nom[k, 3] = theta[i, 3]
 
 
-@njit(error_model="numpy", depends=(atan2, wrap_angle, start_track))
+@njit(error_model="numpy", depends=(atan2, wrap_angle))
+def finish_track(i, t, ox, oy, z, w, weighted, lo, hi, nom, Q, noisy, state, P_last, e, cost,
+                 nu, S, S0, R, r, Rinv, none):
+    """About the MAP trajectory ``nom`` of track i under the process noise ``Q`` (K, 3;
+    ``noisy``: any step has some; ``none``: zeros of Q's shape), the exactly diffuse
+    square-root information pass (``_srif``): writes the state at the last bearing and its
+    covariance (units of s^2; NaN if singular), the normalised innovations ``e`` (the
+    diffuse ones left out) and the squared bearing residuals of ``nom`` (rad^2): how every
+    per-track kernel ends a track."""
+    # the diffuse bearings are those of the information structure, which process noise
+    # does not change (a pass with q = 0 finds them; with q > 0 every variance is larger
+    # and, for a tiny sigma, all would pass MAX_S)
+    if noisy:
+        _srif(t, ox, oy, z, w, weighted, lo, hi, nom, none, nu, S0, R, r)
+    _srif(t, ox, oy, z, w, weighted, lo, hi, nom, Q, nu, S, R, r)
+    for k in range(lo, hi + 1):
+        if nu[k] == nu[k] and (S0[k] if noisy else S[k]) <= MAX_S:
+            e[i, k] = nu[k]
+    if _invert_upper(R, Rinv):
+        for c in range(4):
+            v = 0.0
+            for d in range(c, 4):
+                v += Rinv[c, d] * r[d]
+            state[i, c] = v
+            for d in range(4):
+                v = 0.0
+                for m in range(max(c, d), 4):
+                    v += Rinv[c, m] * Rinv[d, m]
+                P_last[i, c, d] = v
+    cost[i] = _bearing_cost(ox, oy, z, w, weighted, lo, hi, nom)
+
+
+@njit(error_model="numpy", depends=(atan2, wrap_angle, start_track, step_noise, finish_track))
 def smooth_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, lam, scale2,
                   p0_pos, max_iter, tol_m, state, P_last, e, cost, passes):
     """Per track i: the NCV MAP trajectory from the constant-velocity ``theta[i]`` with
     lam[i] = q / s^2 (``scale2[i]`` = s^2, rad^2: the noise variance the units refer to;
     ``max_iter`` 0: about the constant-velocity line itself, no iteration), then its
-    exactly diffuse square-root information pass (``_srif``). Writes the state at the last
-    bearing (4,) and its covariance in units of s^2 (NaN if singular), the innovations over
-    the root of their variance in units of s^2 (``e``, rad: sd s under the model; NaN where
-    no bearing and for the diffuse ones), the squared bearing residuals of the trajectory
-    (rad^2) and the Gauss-Newton passes (-1: a covariance was not positive definite)."""
+    exactly diffuse square-root information pass (``finish_track``). Writes the state at
+    the last bearing (4,) and its covariance in units of s^2 (NaN if singular), the
+    innovations over the root of their variance in units of s^2 (``e``, rad: sd s under
+    the model; NaN where no bearing and for the diffuse ones), the squared bearing residuals
+    of the trajectory (rad^2) and the Gauss-Newton passes (-1: a covariance was not positive
+    definite)."""
     n, K = measured.shape
     nom = np.empty((K, 4))
     mf, ms, trial = np.empty((K, 4)), np.empty((K, 4)), np.empty((K, 4))
@@ -442,7 +504,7 @@ def smooth_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, lam
     nu, S, S0 = np.empty(K), np.empty(K), np.empty(K)
     R, r, Rinv = np.empty((4, 4)), np.empty(4), np.empty((4, 4))
     p0, prior = np.empty(2), np.empty(4)
-    lam_k, none = np.empty(K), np.zeros(K)  # per step: this track's level; no process noise
+    Q, none = np.empty((K, 3)), np.zeros((K, 3))  # per step: this track's noise; none
     for i in range(n):
         lo, hi = first[i], last[i]
         z, w = measured[i], (weight[i] if weighted else measured[i])
@@ -450,34 +512,15 @@ def smooth_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, lam
         cost[i] = np.nan
         p0[0] = p0_pos[i] * p0_pos[i] / scale2[i]
         p0[1] = PRIOR_SPEED_M_S * PRIOR_SPEED_M_S / scale2[i]
-        lam_k[:] = lam[i]
+        step_noise(t, lo, hi, lam[i], Q)
         prior[:] = nom[lo]
-        made = _fit(t, ox, oy, z, w, weighted, lo, hi, nom, lam_k, prior, p0, max_iter, tol_m,
+        made = _fit(t, ox, oy, z, w, weighted, lo, hi, nom, Q, prior, p0, max_iter, tol_m,
                     mf, Pf, Pp, nu, S, ms, trial)
         passes[i] = made
         if made < 0:
             continue
-        # the diffuse bearings are those of the information structure, which process noise
-        # does not change (a pass with q = 0 finds them; with q > 0 every variance is larger
-        # and, for a tiny sigma, all would pass MAX_S)
-        if lam[i] > 0.0:
-            _srif(t, ox, oy, z, w, weighted, lo, hi, nom, none, nu, S0, R, r)
-        _srif(t, ox, oy, z, w, weighted, lo, hi, nom, lam_k, nu, S, R, r)
-        for k in range(lo, hi + 1):
-            if nu[k] == nu[k] and (S0[k] if lam[i] > 0.0 else S[k]) <= MAX_S:
-                e[i, k] = nu[k]
-        if _invert_upper(R, Rinv):
-            for c in range(4):
-                v = 0.0
-                for d in range(c, 4):
-                    v += Rinv[c, d] * r[d]
-                state[i, c] = v
-                for d in range(4):
-                    v = 0.0
-                    for m in range(max(c, d), 4):
-                        v += Rinv[c, m] * Rinv[d, m]
-                    P_last[i, c, d] = v
-        cost[i] = _bearing_cost(ox, oy, z, w, weighted, lo, hi, nom)
+        finish_track(i, t, ox, oy, z, w, weighted, lo, hi, nom, Q, lam[i] > 0.0, state,
+                     P_last, e, cost, nu, S, S0, R, r, Rinv, none)
 
 
 MAX_PASSES = 30  # Gauss-Newton passes

@@ -248,7 +248,9 @@ class BearingsEstimator(Estimator):
         q, prior = motion.accel_psd_m2_s3, motion.manoeuvres
         motion_p, p_manoeuvre = np.full(n, np.nan), np.full(n, np.nan)
         tail_scale = np.ones(n)  # how much a mixture's errors were widened for its tails
+        extra = {}
         undetermined = np.zeros(n, dtype=bool)
+        start = first  # from when the answer holds
         if follows or test:
             # without manoeuvres, a track whose range the constant-velocity fit leaves
             # undetermined stays so: wander could only widen it (and its MAP would shrink
@@ -259,6 +261,14 @@ class BearingsEstimator(Estimator):
             follow = np.zeros(n, dtype=bool)
             if follows and prior is not None:
                 follow = np.isfinite(theta).all(axis=1)
+                # the answer rests on the recent past, where the manoeuvres it weighs are few
+                # enough to be weighed (manoeuvres.window_s): from when it holds
+                start = np.maximum(first, np.searchsorted(
+                    t, t[last] - manoeuvres.window_s(prior), side="left"))
+                if np.any(start > first):
+                    inside = np.arange(t.size)[None, :] >= start[:, None]
+                    use = inside if use is None else use & inside
+                    n_bearings = use.sum(axis=1)
             elif follows:
                 follow = range_rel_sd(theta, jtj, sigma2, t[last], ox[last], oy[last],
                                       cfg.singular_rcond) <= cfg.max_range_rel_sd
@@ -269,11 +279,15 @@ class BearingsEstimator(Estimator):
                     continue
                 fit = self._motion_fit(b, use, theta, rows, q if follows else 0.0,
                                        prior if follows else None, sigma2, iterate,
-                                       b.sigma_deg is None and iterate, own_fit_test)
+                                       b.sigma_deg is None and iterate, own_fit_test,
+                                       start[rows])
                 innovations[rows] = fit["innovations"]
                 if "p_manoeuvre" in fit:
                     p_manoeuvre[rows] = fit["p_manoeuvre"]
                     tail_scale[rows] = fit["tail_scale"]
+                for key in ("p_omitted", "n_manoeuvres"):
+                    if key in fit:
+                        extra.setdefault(key, np.full(n, np.nan))[rows] = fit[key]
                 if iterate:
                     theta, cost, jtj, sigma2, fit_p = (
                         np.array(v, dtype=float) for v in (theta, cost, jtj, sigma2, fit_p))
@@ -311,7 +325,8 @@ class BearingsEstimator(Estimator):
             "n_bearings": n_bearings.astype(np.int64),
             "t_last_s": t[last], "own_x_last_m": ox[last], "own_y_last_m": oy[last],
             **trust,
-            "leg_start_s": t[first] if solution.leg_start_s is None else solution.leg_start_s,
+            "leg_start_s": t[start] if solution.leg_start_s is None else np.maximum(
+                solution.leg_start_s, t[start]),
             "accel_psd_m2_s3": np.full(n, float(q) if self.models_motion else 0.0),
             "motion_p_value": motion_p,
         }
@@ -319,6 +334,7 @@ class BearingsEstimator(Estimator):
             columns["manoeuvre_rate_per_h"] = np.full(n, prior.rate_per_h)
             columns["p_manoeuvre"] = p_manoeuvre
             columns["tail_scale"] = tail_scale
+            columns.update(extra)
         for i in range(4):
             for j in range(i, 4):
                 columns[f"jtj_{i}{j}"] = jtj[:, i, j]
@@ -326,16 +342,16 @@ class BearingsEstimator(Estimator):
 
     @staticmethod
     def _motion_fit(b: Bearings, use, theta, rows, q, prior, sigma2, iterate, sigma_unknown,
-                    robust):
+                    robust, first):
         """The motion fit of tracks ``rows``: ``ncv.smooth`` (``iterate`` False: about their
-        constant-velocity line), or with a manoeuvre ``prior`` ``manoeuvres.mixture``; a
-        robust fit's (``robust``) bearings more than ``GROSS_SIGMAS`` off the motion fit are
-        outliers: dropped, and fitted again."""
+        constant-velocity line), or with a manoeuvre ``prior`` ``manoeuvres.mixture``, from
+        each track's bearing ``first``; a robust fit's (``robust``) bearings more than
+        ``GROSS_SIGMAS`` off the motion fit are outliers: dropped, and fitted again."""
         part = None if use is None else use[rows]
         sigma_rad = np.full(rows.size, np.nan) if sigma_unknown else np.sqrt(sigma2[rows])
 
         def fit_of(part):
-            args = (b.t, b.own_x, b.own_y, b.measured[rows], part, b.first[rows], b.last[rows],
+            args = (b.t, b.own_x, b.own_y, b.measured[rows], part, first, b.last[rows],
                     theta[rows], q)
             if prior is None or not iterate:
                 return ncv.smooth(*args, sigma_rad, iterate=iterate)
