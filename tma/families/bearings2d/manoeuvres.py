@@ -76,6 +76,7 @@ MIN_LEVELS = 3  # levels searched whatever their mass (two manoeuvres may explai
 # cannot: a level's mass says little of the next one's)
 BASES = 3  # components of a level the next level extends
 KEEP = 64  # extensions of a level kept in the mixture
+SIZES = (0.5, 1.0, 2.0)  # a manoeuvre's velocity change: these times the prior's sd, alike
 REFINE = 2  # of which refined to their MAP trajectory
 LOG_STOP = math.log(1e-3)  # a level holding less of the mixture's mass ends the search
 LOG_SCREEN = math.log(1e-2)  # an extension screened below this share of the mass is left out
@@ -131,6 +132,16 @@ def start_cells(t_first, t_last, step_s):
     return lo, np.maximum(hi, lo)
 
 
+def manoeuvre_options(prior: ManoeuvrePrior):
+    """The manoeuvres a cell may hold, equally likely: every duration of ``prior`` with every
+    size, its velocity change's sd per axis ``prior.dv_m_s`` times ``SIZES`` (turns of 20
+    to 120 deg change the velocity by 0.35 to 1.7 times the speed: a velocity change is
+    heavier-tailed than one Gaussian); durations (s) and sds (m/s), (O,) each."""
+    D = np.asarray(prior.durations_s, dtype=float)
+    sizes = prior.dv_m_s * np.asarray(SIZES)
+    return np.repeat(D, sizes.size), np.tile(sizes, D.size)
+
+
 def cell_priors(prior: ManoeuvrePrior, t, first, last):
     """Per track and cell (n, J): the manoeuvre's start (the cell's centre, s), the first epoch
     after it (where a filter from the start takes it in) and the prior probability of no
@@ -144,12 +155,12 @@ def cell_priors(prior: ManoeuvrePrior, t, first, last):
     a, b = start_cells(t[first], t[last], prior.step_s)
     tau = 0.5 * (a + b)
     inside = (b > a) & (last > first)[:, None]
-    D = np.asarray(prior.durations_s, dtype=float)
+    D, dv = manoeuvre_options(prior)
     seen = np.clip((t[last][:, None, None] - tau[:, :, None]) / D, 0.0, 1.0)  # (n, J, D)
     centre = tau[:, :, None] + 0.5 * seen * D
     epoch = np.clip(np.searchsorted(t, centre), (first + 1)[:, None, None],
                     last[:, None, None])
-    shock = prior.dv_m_s**2 * seen[..., None] * np.stack(
+    shock = (dv**2 * seen)[..., None] * np.stack(
         [(seen * D) ** 2 / 12.0, np.zeros_like(seen), np.ones_like(seen)], axis=-1)
     after = np.clip(np.searchsorted(t, tau, side="right"), (first + 1)[:, None],
                     last[:, None]).astype(np.int64)
@@ -635,8 +646,8 @@ def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_p
                                                   last, theta_cv, q, sigma)["sigma2"])
     sigma2 = np.maximum(sigma2, MIN_SIGMA_RAD**2)
     taus, starts, ends, p_none, epochs, shocks = cell_priors(prior, t, first, last)
-    durations = np.asarray(prior.durations_s, dtype=float)
-    burst = prior.dv_m_s**2 / durations[None, :] / sigma2[:, None]
+    durations, dv = manoeuvre_options(prior)
+    burst = dv**2 / durations[None, :] / sigma2[:, None]
     out = {"state": np.empty((n, 4)), "cov": np.empty((n, 4, 4)),
            "innovations": np.empty((n, K)), "cost_rad2": np.empty(n),
            "passes": np.zeros(n, dtype=np.int64), "p_manoeuvre": np.empty(n),
