@@ -80,7 +80,7 @@ SIZES = (0.5, 1.0, 2.0)  # a manoeuvre's velocity change: these times the prior'
 REFINE = 2  # of which refined to their MAP trajectory
 LOG_STOP = math.log(1e-3)  # a level holding less of the mixture's mass ends the search
 LOG_SCREEN = math.log(1e-2)  # an extension screened below this share of the mass is left out
-REFINE_TOL_M = 1.0  # a refinement stops when no position moves more than this (m)
+REFINE_TOL_M = 0.1  # a refinement stops when no position moves more than this (m)
 WINDOW_MANOEUVRES = 3.0  # the answer rests on the span of this many manoeuvres (expected)...
 MIN_WINDOW_S = 1200.0  # ...or of this much time (s), whichever is longer
 
@@ -160,8 +160,11 @@ def cell_priors(prior: ManoeuvrePrior, t, first, last):
     centre = tau[:, :, None] + 0.5 * seen * D
     epoch = np.clip(np.searchsorted(t, centre), (first + 1)[:, None, None],
                     last[:, None, None])
-    shock = (dv**2 * seen)[..., None] * np.stack(
-        [(seen * D) ** 2 / 12.0, np.zeros_like(seen), np.ones_like(seen)], axis=-1)
+    # the shock at the centre, carried to that epoch (x' = x + T' v: the same for any grid
+    # of epochs, bearings or none, between them)
+    lag = t[epoch] - centre
+    pp, vv = (dv**2 * seen) * (seen * D) ** 2 / 12.0, dv**2 * seen
+    shock = np.stack([pp + lag * lag * vv, lag * vv, vv], axis=-1)
     after = np.clip(np.searchsorted(t, tau, side="right"), (first + 1)[:, None],
                     last[:, None]).astype(np.int64)
     end = np.clip(np.searchsorted(t, tau[:, :, None] + D, side="left"), after[:, :, None],
@@ -662,3 +665,41 @@ def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_p
                    out["p_omitted"], out["n_manoeuvres"], *tail_points(), out["tail_scale"],
                    out["path_m"], out["log_evidence"])
     return in_units(out, sigma2, t[last], theta_cv)
+
+
+def component(t, own_x, own_y, measured_rad, theta_cv, levels, sigma_rad, start=None,
+              prior_state=None):
+    """One track's component under the process levels ``levels`` (K,: the density q_k of the
+    step into each epoch, m^2/s^3), refined to its MAP trajectory from the constant-velocity
+    ``theta_cv`` (4,) or the trajectory ``start`` (K, 4), with bearing noise ``sigma_rad``
+    and the weak prior about ``prior_state`` (4,; default: the start at the first epoch):
+    (log likelihood up to a constant that depends on sigma and the prior alone, state at the
+    last bearing (4,), its covariance (4, 4), the MAP trajectory (K, 4)). What
+    ``mixture_tracks`` computes for each component it refines, for tests and diagnosis."""
+    t = np.ascontiguousarray(t, dtype=float)
+    K = t.size
+    s2 = sigma_rad**2
+    nom = np.empty((K, 4))
+    nom[:, 0] = theta_cv[0] + theta_cv[2] * t
+    nom[:, 1] = theta_cv[1] + theta_cv[3] * t
+    nom[:, 2:] = theta_cv[2:]
+    if start is not None:
+        nom[:] = start
+    prior = np.array(nom[0] if prior_state is None else prior_state, dtype=float)
+    start_range = math.hypot(theta_cv[0] - own_x[0], theta_cv[1] - own_y[0])
+    p0 = np.array([max(PRIOR_RANGES * start_range, MIN_PRIOR_M) ** 2, PRIOR_SPEED_M_S**2]) / s2
+    T = np.diff(t, prepend=t[0])
+    lam = np.asarray(levels, dtype=float) / s2
+    Q = np.column_stack([lam * T**3 / 3.0, lam * T**2 / 2.0, lam * T])
+    Q[0] = 0.0
+    work = [np.empty((K, 4)), np.empty((K, 4, 4)), np.empty((K, 4, 4)), np.empty(K),
+            np.empty(K)]
+    mean, cov = np.empty(4), np.empty((4, 4))
+    ox, oy = np.ascontiguousarray(own_x, float), np.ascontiguousarray(own_y, float)
+    z = np.ascontiguousarray(measured_rad, float)
+    if _fit(t, ox, oy, z, np.empty(0), False, 0, K - 1, nom, Q, prior, p0, MAX_PASSES,
+            REFINE_TOL_M, *work, np.empty((K, 4)), np.empty((K, 4))) < 0:
+        return -np.inf, np.full(4, np.nan), np.full((4, 4), np.nan), nom
+    loglik = _laplace(t, ox, oy, z, np.empty(0), False, 0, K - 1, nom, Q, prior, p0, s2, *work,
+                      mean, cov)
+    return loglik, mean, cov * s2, nom
