@@ -202,9 +202,9 @@ def _quantile_95(errors, cov):
     (0.5, 1.0, 1.0),     # two alike: no tail to speak of
 ])
 def test_a_mixtures_errors_hold_95_percent_of_it(tail_weight, tail_var, shift):
-    """``mixture_tails.tail_scale`` against Monte Carlo: the factor that makes the 95 % ellipsoid of the
-    mixture's moments hold 95 % of it (never below 1), and the widened ellipsoid then holds
-    95 % of 400,000 draws of the mixture."""
+    """``mixture_tails.tail_scale`` against Monte Carlo: the factor that makes the 95 %
+    ellipsoid of the mixture's moments hold 95 % of it (never below 1), and the widened
+    ellipsoid then holds 95 % of 400,000 draws of the mixture."""
     weights = np.array([1.0 - tail_weight, tail_weight])
     means = np.array([np.zeros(4), np.full(4, shift)])
     covs = np.array([np.diag([1.0, 2.0, 0.5, 1.0]), tail_var * np.eye(4)])
