@@ -92,7 +92,9 @@ def test_mcap_ingest_in_own_schema(tmp_path):
     report = _estimate_and_report(tmp_path, "rec")
     np.testing.assert_allclose(report.sigma_used_deg, 0.1)
     speed = np.hypot(truth.vx_m_s, truth.vy_m_s)
-    assert np.all(np.abs(report.speed_m_s - speed) < 5 * report.speed_sd_m_s)
+    shown = report.speed_m_s.notna()  # (blank where the heading is not determined)
+    assert shown.sum() >= 2 and (shown | (report.status == "position_only")).all()
+    assert np.all(np.abs(report.speed_m_s - speed)[shown] < 5 * report.speed_sd_m_s[shown])
 
 
 def test_tracks_with_different_own_ships_get_their_own_shards(tmp_path):
@@ -179,7 +181,7 @@ def test_a_log_in_radians_is_refused_unless_its_units_are_stated(tmp_path):
     ingest(tmp_path / "rad.csv", data_dir=tmp_path / "data", options={"bearing": {"units": "rad"}},
            name="rec")
     report = _estimate_and_report(tmp_path, "rec")
-    assert (report.status == "ok").all()
+    assert report.status.isin(["ok", "position_only"]).all()  # (a recording: may manoeuvre)
     np.testing.assert_allclose(report.sqrt_ka_deg, 0.2, rtol=0.15)
 
 
@@ -276,7 +278,7 @@ def test_cli_reading_options_reach_the_readers(tmp_path):
     assert manifest["epoch_utc_ns"] is None and manifest["time_origin_s"] == 0.0
     assert manifest["shards"]["log/shard-00000.mcap"]["tracks"] == 3
     report = _estimate_and_report(tmp_path, "rec")
-    assert (report.status == "ok").all()
+    assert report.status.isin(["ok", "position_only"]).all()  # (a recording: may manoeuvre)
 
 
 # -- what the manifest records --------------------------------------------------------------

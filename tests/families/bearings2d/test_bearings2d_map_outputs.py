@@ -183,6 +183,43 @@ def test_estimated_tracks_mcap_in_foxglove_schema(mapped):
                                    rtol=0, atol=1e-9)
 
 
+def test_a_position_only_contact_is_drawn_and_mapped_at_its_position_now(mapped, tmp_path):
+    """A contact whose heading is not determined (``position_only``, its course and speed
+    blank as the report leaves them): the map holds one fix, its position now with its
+    covariance, at its last bearing; the plot draws that point alone and says so, where the
+    others keep their track."""
+    from tma.families.bearings2d.report import blank_headings
+
+    _, log, _, report, estimates = mapped
+    report = report.copy()
+    report.loc[1, "status"] = "position_only"
+    blank_headings(report)
+    path = write_map_mcap(tmp_path / "po.mcap", report, estimates, [log], EPOCH_NS, ORIGIN,
+                          {"dataset": "sea"})
+    _, messages, _ = _decoded(path)
+    (fix,) = [f for _, f in messages[f"/tma/estimate/{SHOWN[1]}"]]
+    k = np.flatnonzero(np.isfinite(log.bearing_deg[1]))
+    t = log.t_s[k[-1]]
+    assert fix.timestamp.seconds * 10**9 + fix.timestamp.nanos == EPOCH_NS + round(t * 1e9)
+    np.testing.assert_allclose([fix.latitude, fix.longitude],
+                               report.loc[1, ["lat_now_deg", "lon_now_deg"]].to_numpy(float),
+                               rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.reshape(fix.position_covariance, (3, 3))[:2, :2],
+                               _covariance_now(estimates.iloc[[1]], np.array([t]))[0],
+                               rtol=1e-6)
+    assert len(messages[f"/tma/estimate/{SHOWN[0]}"]) == np.isfinite(log.bearing_deg[0]).sum()
+    figure = map_outputs.contact_figure(report, estimates, [log], LABELS[1])
+    lines = {ln.get_label(): ln for ln in figure.axes[0].lines}
+    assert "estimated track" not in lines
+    x, y = lines["estimated position now (heading not determined)"].get_data()
+    np.testing.assert_allclose(np.column_stack([x, y]) * 1e3,
+                               report.loc[[1], ["x_now_m", "y_now_m"]].to_numpy(float),
+                               rtol=1e-9)
+    assert "course and speed not determined" in figure.axes[0].get_title()
+    figure = map_outputs.contact_figure(report, estimates, [log], LABELS[0])
+    assert {ln.get_label() for ln in figure.axes[0].lines} >= {"estimated track"}
+
+
 def _png_size(path):
     data = path.read_bytes()
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and data[12:16] == b"IHDR"
@@ -268,6 +305,13 @@ def test_many_contacts_warn_once_per_status_and_show_progress(tmp_path, caplog, 
     table = pd.read_csv(tmp_path / "tables" / "many-nbearings.csv")
     counts = table.status.value_counts()
     assert "ok" not in counts and counts.min() > 1
+    # besides: the map's one line naming the contacts whose estimate is not shown (here
+    # biased answers off where their last bearings point, status.not_an_answer)
+    blank = table.label[table.range_now_m.isna()]
+    off_map = [w for w in warnings if not w.startswith("many: ")]
+    assert off_map == ([] if blank.empty else [next(w for w in warnings if w.endswith(
+        f"for {', '.join(blank)}: not in the map"))])
+    warnings = [w for w in warnings if w not in off_map]
     assert sorted(warnings) == sorted(
         next(w for w in warnings if w.startswith(f"many: {n} tracks {status} ("))
         for status, n in counts.items())

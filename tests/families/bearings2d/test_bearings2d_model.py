@@ -127,8 +127,10 @@ def test_estimates_with_missing_bearings_equal_those_without_them(name):
         # more than manoeuvres.REFINE_TOL_M, which the sds follow to about 1e-4)
         for column in ("cost_rad2", "range_sd_m", "course_sd_deg"):
             np.testing.assert_allclose(together[column][i], alone[column][0], rtol=1e-3)
-        # nbearings is biased by design: its errors are never honest, so never ok
-        assert together["status"][i] == alone["status"][0] == (
-            "ok" if estimator.honest_errors else "approximate")
+        # nbearings is biased by design: its errors are never honest, so never ok (lm's log
+        # is a recording's, whose target may manoeuvre: its heading may not be determined)
+        assert together["status"][i] == alone["status"][0]
+        assert together["status"][i] in (("ok", "position_only") if estimator.honest_errors
+                                         else ("approximate",))
         # the residuals are those of the noise (0.005 rad): no pi^2 of a missing bearing
         assert together["cost_rad2"][i] < 4 * keep.sum() * 0.005**2

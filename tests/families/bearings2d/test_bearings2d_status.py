@@ -10,10 +10,18 @@ from scipy.stats import chi2
 from tma.families import build_estimator
 from tma.families.bearings2d.log import BearingsLog
 from tma.families.bearings2d.metrics import NEES_95, summary_row, track_metrics
-from tma.families.bearings2d.report import status_note, track_report
+from tma.families.bearings2d.report import (
+    HEADING_COLUMNS,
+    NOT_DETERMINED,
+    status_note,
+    track_report,
+    write_success_table,
+    write_track_report,
+)
 from tma.families.bearings2d.scenario import Config, LegConfig, ObserverConfig, PopulationConfig
 from tma.families.bearings2d.scenario import simulate_shard as simulate
 from tma.families.bearings2d.status import STATUSES, kinematics_now, runs_test_p
+from tma.families.bearings2d.target_motion import ManoeuvreConfig, TargetConfig
 
 
 def _run(cfg: Config, estimator="lm", sigma_known=True, edit=None, **params):
@@ -220,3 +228,102 @@ def test_poor_fit_notes_name_the_test_that_decided():
     assert "chi-square p = 2.0e-06" in known and "sigma_deg understated" in known
     (unknown,) = status_note(report, sigma_known=False)
     assert "runs test" in unknown and "p = 2.0e-06" in unknown and "chi-square" not in unknown
+
+
+# -- a course that means something (issue 36, item 3) ---------------------------------------
+
+MANOEUVRING = Config(n_tracks=60, shard_size=60, sigma_deg=0.5, seed=12, target=TargetConfig(
+    accel_psd_m2_s3=1e-4, manoeuvres=ManoeuvreConfig(rate_per_h=3.0)))
+POSITION = ["range_now_m", "range_sd_m", "bearing_now_deg", "bearing_sd_deg", "x_now_m",
+            "x_sd_m", "y_now_m", "y_sd_m"]
+
+
+@pytest.fixture(scope="module")
+def heading_gates():
+    """lm on targets that wander and manoeuvre (as the log declares), with the heading gates
+    by default (course sd 30 deg, speed sd half the speed) and opened wide."""
+    gated, truth = _run(MANOEUVRING)
+    wide, _ = _run(MANOEUVRING, max_course_sd_deg=360.0, max_speed_rel_sd=1e6)
+    return gated, wide, truth
+
+
+def test_an_ok_course_means_something(heading_gates):
+    """Every ok track has a course sd of at most 30 deg and a speed sd of at most half its
+    speed; the gates (two estimator options) make exactly the tracks beyond them that would
+    be ok position_only, and change no other status."""
+    gated, wide, _ = heading_gates
+    ok, only = gated.status == "ok", gated.status == "position_only"
+    assert ok.sum() >= 15 and only.sum() >= 5, gated.status.value_counts()
+    assert (gated.course_sd_deg[ok] <= 30).all()
+    assert (gated.speed_sd_m_s[ok] <= 0.5 * gated.speed_m_s[ok]).all()
+    beyond = (wide.course_sd_deg > 30) | (wide.speed_sd_m_s > 0.5 * wide.speed_m_s)
+    assert (only == ((wide.status == "ok") & beyond)).all()
+    assert (gated.status[~only] == wide.status[~only]).all()
+    assert "position_only" not in set(wide.status)
+    # the bearings fix its position now: range within max_range_rel_sd
+    assert (gated.range_sd_m[only] <= 0.2 * gated.range_now_m[only]).all()
+
+
+def test_position_only_shows_the_position_now_and_no_heading(heading_gates, tmp_path):
+    """The report (CSV, Markdown, the Python API's results): a position_only track's range,
+    bearing and x/y now with their errors, its course and speed blank ("not determined" in
+    the Markdown), and a note that says why with the numbers; an ok track keeps both."""
+    gated, _, truth = heading_gates
+    report = track_report(gated, recorded=False)
+    only = (report.status == "position_only").to_numpy()
+    assert report.loc[only, POSITION].notna().all().all()
+    assert report.loc[only, HEADING_COLUMNS].isna().all().all()
+    assert report.loc[report.status == "ok", POSITION + HEADING_COLUMNS].notna().all().all()
+    for note, row in zip(report.note[only], gated[only].itertuples(), strict=True):
+        assert note == (f"course sd {row.course_sd_deg:.0f} deg, speed sd "
+                        f"{row.speed_sd_m_s:.3g} m/s at {row.speed_m_s:.3g} m/s: where it is "
+                        "heading is not determined (a manoeuvre too recent for the bearings "
+                        "to show where it led?)")
+    write_track_report(report, tmp_path, "po", "simulated")
+    lines = (tmp_path / "po.md").read_text().splitlines()
+    for label, status in report[["label", "status"]].itertuples(index=False):
+        (line,) = [ln for ln in lines if ln.startswith(f"| {label} |")]
+        cells = [c.strip() for c in line.split("|")]
+        assert (cells.count(NOT_DETERMINED) == 2) == (status == "position_only"), line
+    # its position is as honest as an ok track's: range within 3 sd of the truth
+    true_range = _true_range(gated, truth)
+    z = (gated.range_now_m - true_range) / gated.range_sd_m
+    assert (np.abs(z[only]) < 3).mean() >= 0.9
+
+
+def test_a_target_declared_at_constant_velocity_keeps_its_course():
+    """A log declaring its targets at constant velocity (the paper's tables): a wide course
+    or speed is honest there (the target held it all along) and the track stays ok."""
+    est, _ = _run(Config(n_tracks=500, shard_size=500, sigma_deg=1.0, seed=8))
+    beyond = (est.course_sd_deg > 30) | (est.speed_sd_m_s > 0.5 * est.speed_m_s)
+    assert beyond.sum() >= 5
+    assert (est.status[beyond] == "ok").all() and "position_only" not in set(est.status)
+
+
+def _metrics_of(statuses):
+    n = len(statuses)
+    return pd.DataFrame({**{r: [True] * n for r in ("ref1", "ref2", "ref3", "ref4")},
+                         "sqrt_ka_deg": [0.5] * n, "n_f_evals": [10.0] * n,
+                         "n_iter": [8.0] * n, "converged": [True] * n, "status": statuses,
+                         "nees": [2.0] * n})
+
+
+def test_the_table_counts_position_only_only_where_a_row_has_one(tmp_path):
+    """The comparison table of a constant-velocity run (no position_only) is as before
+    (its CSV columns and status header); a row with one adds its count to both."""
+    steady = [summary_row(_metrics_of(["ok", "poor_fit"]), "lm", s) for s in (0.1, 0.5)]
+    write_success_table(steady, tmp_path / "a", "t")
+    csv = pd.read_csv(tmp_path / "a" / "t.csv")
+    assert "n_position_only" not in csv and list(csv.n_approximate) == [0, 0]
+    md = (tmp_path / "a" / "t.md").read_text()
+    assert "| status ok / not_conv / poor_fit / unobs / manoeuv / approx |" in md
+    assert "| 1 / 0 / 1 / 0 / 0 / 0 |" in md and "position_only" not in md
+    moving = steady[:1] + [summary_row(_metrics_of(["ok", "position_only", "position_only"]),
+                                       "lm", 0.5)]
+    write_success_table(moving, tmp_path / "b", "t")
+    csv = pd.read_csv(tmp_path / "b" / "t.csv")
+    assert list(csv.n_position_only) == [0, 2] and list(csv.columns[-4:]) == [
+        "n_position_only", "consistent", "consistent_lo", "consistent_hi"]
+    md = (tmp_path / "b" / "t.md").read_text()
+    assert "| status ok / not_conv / poor_fit / unobs / manoeuv / approx / pos_only |" in md
+    assert "| 1 / 0 / 0 / 0 / 0 / 0 / 2 |" in md and "approximate / position_only" in md

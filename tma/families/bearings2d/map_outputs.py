@@ -38,6 +38,7 @@ from tma.families.bearings2d.log import (  # noqa: E402
     BearingsLog,
     read_bearings_log,
 )
+from tma.families.bearings2d.status import HEADING_UNDETERMINED  # noqa: E402
 from tma.io.mcap_log import Channel, LogWriter  # noqa: E402
 from tma.io.mcap_values import json_record  # noqa: E402
 from tma.io.mcap_writer import Encoded  # noqa: E402
@@ -93,6 +94,13 @@ def shown_estimates(report: pd.DataFrame, estimates: pd.DataFrame):
     hidden = ~np.isfinite(report["range_now_m"].to_numpy(float))
     theta[hidden], cov[hidden] = np.nan, np.nan
     return theta, cov
+
+
+def now_only(report: pd.DataFrame) -> np.ndarray:
+    """Per track whether only its position now is drawn: where its status says where it is
+    heading is not determined (``status.HEADING_UNDETERMINED``, ``position_only``), the line
+    back from now along its velocity would draw a past the bearings do not give."""
+    return report["status"].isin(HEADING_UNDETERMINED).to_numpy()
 
 
 def position_covariance(theta_cov: np.ndarray, t_s) -> np.ndarray:
@@ -159,14 +167,16 @@ class _TrackPlots:
         ax.grid(True, alpha=0.3)
         self.fig.subplots_adjust(left=0.1, right=0.97, bottom=0.07, top=0.91)
 
-    def draw(self, title: str, lg: BearingsLog, row: int, theta, cov_now, t_from=-np.inf):
+    def draw(self, title: str, lg: BearingsLog, row: int, theta, cov_now, t_from=-np.inf,
+             position_only=False):
         """One contact: own-ship's whole path, every bearing's line, the estimated track
         from ``t_from`` (where its solution holds: ``leg_start_s``; ``last_leg`` solves a
         later leg) and its 95 % ellipse now (km); no track where ``theta`` is NaN (no
-        estimate shown)."""
+        estimate shown), the position now alone where ``position_only`` (``now_only``)."""
         valid = np.flatnonzero(np.isfinite(lg.bearing_deg[row]))
         held = valid[lg.t_s[valid] >= t_from]  # the bearings the solution rests on
         held = held if held.size else valid
+        held = held[-1:] if position_only else held
         own = np.column_stack([lg.own_x_m, lg.own_y_m])
         track = theta[:2] + np.outer(lg.t_s[held], theta[2:])  # estimated positions then
         finite = np.isfinite(track).all()
@@ -192,6 +202,9 @@ class _TrackPlots:
         else:
             shown.append(end)
         self.track.set_data(track.T / 1e3 if finite else ([], []))
+        self.track.set_label("estimated position now (heading not determined)"
+                             if position_only else "estimated track")
+        self.track.set_marker("o" if position_only else "None")
         self.track_now.set_data(track[-1, :, None] / 1e3 if finite else ([], []))
         self.ring.set_data(ring.T / 1e3)
         box = np.concatenate(shown) / 1e3  # a square view of everything but the bearing lines
@@ -217,6 +230,7 @@ def write_track_plots(report: pd.DataFrame, estimates: pd.DataFrame, logs, table
     only)."""
     theta, theta_cov = shown_estimates(report, estimates)
     cov_now = position_covariance(theta_cov, estimates["t_last_s"].to_numpy(float))
+    headless = now_only(report)
     where = {int(i): (lg, row) for lg in logs for row, i in enumerate(lg.track_id)}
     shown = shown_labels(report["label"])
     if len(report) > MAX_PLOTS:
@@ -238,7 +252,7 @@ def write_track_plots(report: pd.DataFrame, estimates: pd.DataFrame, logs, table
             used.add(part)
             path = Path(tables_dir) / fit_file_name(name, part, ".png")
             save_figure(plots.draw(plot_title(name, shown[n], r), lg, row, theta[n],
-                                   cov_now[n], r.leg_start_s), path)
+                                   cov_now[n], r.leg_start_s, headless[n]), path)
             paths.append(path)
     finally:
         plots.close()
@@ -255,6 +269,10 @@ def plot_title(name: str, shown: str, r) -> str:
     if not np.isfinite(r.range_now_m):
         return (f"{name}: contact {shown}, status {r.status}\nno estimate shown (the table's "
                 f"note says why), last bearing at {when}")
+    if not np.isfinite(r.course_deg):  # position_only: where it is heading is not determined
+        return (f"{name}: contact {shown}, status {r.status}\nrange {r.range_now_m / 1e3:.2f} "
+                f"km, bearing {r.bearing_now_deg:.1f} deg, course and speed not determined at "
+                f"{when}")
     return (f"{name}: contact {shown}, status {r.status}\nrange {r.range_now_m / 1e3:.2f} km, "
             f"course {r.course_deg:.1f} deg, speed {r.speed_m_s:.2f} m/s at {when}")
 
@@ -280,7 +298,7 @@ def contact_figure(report: pd.DataFrame, estimates: pd.DataFrame, logs, label,
     cov_now = position_covariance(theta_cov, estimates["t_last_s"].to_numpy(float)[[n]])[0]
     plots = _TrackPlots()
     return plots.draw(plot_title(name, shown_labels(report["label"])[n], r), *place,
-                      theta[0], cov_now, r.leg_start_s)
+                      theta[0], cov_now, r.leg_start_s, now_only(report.iloc[[n]])[0])
 
 
 # -- the estimated tracks as an MCAP ---------------------------------------------------------
@@ -293,6 +311,7 @@ def write_map_mcap(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, ep
     left out (logged). ``truth_track``: the contacts' ships from their AIS
     (``tma.ais.truth``), beside the estimates (``truth_parts``)."""
     theta, theta_cov = shown_estimates(report, estimates)
+    headless = now_only(report)
     where = {int(i): (k, row) for k, lg in enumerate(logs) for row, i in enumerate(lg.track_id)}
     own_topics = ([OWNSHIP_FIX_TOPIC] if len(logs) == 1
                   else [f"/ownship/{k}/location_fix" for k in range(len(logs))])
@@ -309,6 +328,7 @@ def write_map_mcap(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, ep
         t = logs[k].t_s[np.isfinite(logs[k].bearing_deg[row])]
         held = t >= r.leg_start_s
         t = t[held] if held.any() else t  # where the solution holds (its leg)
+        t = t[-1:] if headless[n] else t  # its position now alone (now_only)
         x, y = (theta[n, :2, None] + theta[n, 2:, None] * t)
         lat, lon = local_to_geodetic(x, y, origin_deg)
         if not np.isfinite(lat).all():  # no estimate shown, or one farther than a map
@@ -322,7 +342,9 @@ def write_map_mcap(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, ep
         cov = enu_covariance(cov) if np.isfinite(cov).all() else None
         channels.append(Channel.protobuf(topic, LocationFix, {
             "track_id": str(r.track_id), "status": r.status,
-            "estimate": "the estimator's track over the bearings its solution rests on (from "
+            "estimate": "its position at the last bearing alone (where it is heading is not "
+                        "determined); covariance as in the report" if headless[n] else
+                        "the estimator's track over the bearings its solution rests on (from "
                         "leg_start_s); covariance as in the report"}))
         parts.append((t, lat.tolist(), lon.tolist(), cov, f"contact {shown[n]}"))
     if truth_track is not None:

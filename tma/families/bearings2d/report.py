@@ -39,7 +39,11 @@ from tma.families.bearings2d.metrics import (  # noqa: E402
     summary_row,
     track_metrics,
 )
-from tma.families.bearings2d.status import STATUSES, not_an_answer  # noqa: E402
+from tma.families.bearings2d.status import (  # noqa: E402
+    HEADING_UNDETERMINED,
+    STATUSES,
+    not_an_answer,
+)
 from tma.families.bearings2d.truth_report import (  # noqa: E402
     coverage_text,
     dataset_truth,
@@ -59,7 +63,7 @@ region (bearing and distance at the end of the observation, course, speed; Ref1 
 strictest), with the 95 % Wilson interval. sqrt(Ka) = sqrt(F(theta_hat)/n) in degrees: a
 good maximum-likelihood fit gives sqrt(Ka) close to sigma. Nf: evaluations of F, Iter:
 accepted LM steps (medians; direct estimators have none). Status: tracks per verdict
-(ok / not_converged / poor_fit / unobservable / manoeuvring / approximate, see the README).
+({statuses}, see the README).
 Consistent: share of the ok tracks whose normalised error (theta_hat - theta)^T Sigma^-1
 (theta_hat - theta), Sigma = (J^T J)^-1 sigma^2, lies below the chi-square(4) 95 % point;
 about 95 % for honest one-sigma errors. Every number is read from the run files under
@@ -81,13 +85,26 @@ def _num(x, fmt="{:.3g}"):
     return "-" if pd.isna(x) else fmt.format(x)
 
 
+# the statuses' names in the table's status column
+STATUS_ABBREVIATIONS = {"ok": "ok", "not_converged": "not_conv", "poor_fit": "poor_fit",
+                        "unobservable": "unobs", "manoeuvring": "manoeuv",
+                        "approximate": "approx", "position_only": "pos_only"}
+# counted (a column of the CSV, a count in the status column) only where some row has one: a
+# status only targets that may manoeuvre get, which a constant-velocity table never shows
+COUNTED_WHERE_SEEN = ("position_only",)
+
+
 def write_success_table(rows: list[dict], tables_dir, name="bearings2d",
                         paper_section=None) -> list[Path]:
     """Write ``<name>.csv``, ``<name>.md`` (with ``paper_section``, ``tables.write_table``)
-    and ``<name>.png``; returns their paths."""
+    and ``<name>.png``; returns their paths. A status of ``COUNTED_WHERE_SEEN`` is counted
+    only where some row has one."""
     tables_dir = Path(tables_dir)
     table = pd.DataFrame(rows, columns=TABLE_COLUMNS).sort_values(
         ["estimator", "sigma_deg"], kind="stable").reset_index(drop=True)
+    statuses = [s for s in STATUSES
+                if s not in COUNTED_WHERE_SEEN or table[f"n_{s}"].fillna(0).any()]
+    table = table.drop(columns=[f"n_{s}" for s in STATUSES if s not in statuses])
 
     shown = pd.DataFrame({
         "estimator": table["estimator"],
@@ -99,13 +116,14 @@ def write_success_table(rows: list[dict], tables_dir, name="bearings2d",
         "sqrt(Ka) median (deg)": table["sqrt_ka_median"].map(_num),
         "Nf median": table["nf_median"].map(lambda x: _num(x, "{:g}")),
         "Iter median": table["iter_median"].map(lambda x: _num(x, "{:g}")),
-        "status ok / not_conv / poor_fit / unobs / manoeuv / approx": [
-            " / ".join(str(v) for v in r) for r in table[[f"n_{s}" for s in STATUSES]].to_numpy()],
+        "status " + " / ".join(STATUS_ABBREVIATIONS[s] for s in statuses): [
+            " / ".join(str(v) for v in r) for r in table[[f"n_{s}" for s in statuses]].to_numpy()],
         "consistent (ok)": [_pct(*v) if pd.notna(v[0]) else "-" for v in
                             table[["consistent", "consistent_lo", "consistent_hi"]].to_numpy()],
     })
     paths = write_table(tables_dir, name, "Bearings-only TMA: success rates by estimator and "
-                        "noise", INTRO, table, shown, float_format="%.6g",
+                        "noise", INTRO.format(statuses=" / ".join(statuses)), table, shown,
+                        float_format="%.6g",
                         notes="Success regions:\n" + REGION_NOTE, paper=paper_section)
     paths.append(tables_dir / f"{name}.png")
 
@@ -182,11 +200,10 @@ def status_note(report: pd.DataFrame, stop_reason=None, sigma_known=True) -> lis
         elif status == "not_converged":
             note = (NOT_CONVERGED.get(stop, SINGULAR) if stop is not None else
                     "the estimator stopped before converging")
-        elif status == "unobservable" and row.speed_sd_m_s >= row.speed_m_s and not (
-                row.range_sd_m > row.range_now_m):
-            note = (f"speed sd {row.speed_sd_m_s:.3g} m/s at {row.speed_m_s:.3g} m/s: the "
-                    "velocity, and so the course, is not determined (a manoeuvre too recent "
-                    "for the bearings to show where it led?)")
+        elif status == "position_only":
+            note = (f"course sd {row.course_sd_deg:.0f} deg, speed sd {row.speed_sd_m_s:.3g} "
+                    f"m/s at {row.speed_m_s:.3g} m/s: where it is heading is not determined (a "
+                    "manoeuvre too recent for the bearings to show where it led?)")
         elif status == "unobservable":
             note = ((f"range sd {row.range_sd_m / row.range_now_m:.0%} of the range: "
                      if np.isfinite(row.range_sd_m) else "range ") +
@@ -203,20 +220,29 @@ def status_note(report: pd.DataFrame, stop_reason=None, sigma_known=True) -> lis
 
 
 # what a report shows of an estimate: blank, all of it, where it is no answer
-# (``status.not_an_answer``)
+# (``status.not_an_answer``); its heading (course, speed) blank where the status says that it
+# is not determined (``status.HEADING_UNDETERMINED``: ``position_only``)
+HEADING_COLUMNS = ["course_deg", "course_sd_deg", "speed_m_s", "speed_sd_m_s"]
 ESTIMATE_COLUMNS = ["x_now_m", "x_sd_m", "y_now_m", "y_sd_m", "lat_now_deg", "lon_now_deg",
                     "range_now_m", "range_sd_m", "bearing_now_deg", "bearing_sd_deg",
-                    "course_deg", "course_sd_deg", "speed_m_s", "speed_sd_m_s"]
+                    *HEADING_COLUMNS]
+END_BEARING_COLUMNS = ["end_bearing_deg", "end_bearing_sd_deg"]  # the estimate stage's
+NOT_DETERMINED = "not determined"  # a heading cell of the Markdown where it is blank so
 
 
-def blank_non_answers(report: pd.DataFrame, max_range_rel_sd=None,
-                      recorded=True) -> np.ndarray:
+def blank_non_answers(report: pd.DataFrame, max_range_rel_sd=None, recorded=True,
+                      end_bearing=None) -> np.ndarray:
     """Blank (NaN) every estimated number of the tracks whose estimate is no answer
-    (``status.not_an_answer``: diverged, collapsed, or without a one-sigma error), in place,
-    and add why to their note; their status stays (the cause). Returns the mask."""
+    (``status.not_an_answer``: diverged, collapsed, without a one-sigma error, or off where
+    its last bearings point: ``end_bearing``, the estimate stage's ``END_BEARING_COLUMNS``,
+    None: not checked), in place, and add why to their note; their status stays (the
+    cause). Returns the mask."""
+    bearings = None if end_bearing is None else {
+        "bearing_now_deg": report["bearing_now_deg"], "bearing_sd_deg": report["bearing_sd_deg"],
+        **end_bearing}
     why = not_an_answer(report["range_now_m"], report["range_sd_m"], report["speed_m_s"],
                         *(() if max_range_rel_sd is None else (max_range_rel_sd,)),
-                        recorded=recorded)
+                        recorded=recorded, bearings=bearings)
     blank = why != ""
     if blank.any():
         for column in ESTIMATE_COLUMNS:
@@ -228,15 +254,27 @@ def blank_non_answers(report: pd.DataFrame, max_range_rel_sd=None,
     return blank
 
 
+def blank_headings(report: pd.DataFrame) -> np.ndarray:
+    """Blank (NaN) course and speed and their errors of the tracks whose status says where
+    they are heading is not determined (``status.HEADING_UNDETERMINED``), in place; their
+    position now stays, and their note says why. Returns the mask."""
+    headless = report["status"].isin(HEADING_UNDETERMINED).to_numpy()
+    if headless.any():
+        for column in HEADING_COLUMNS:
+            report[column] = report[column].astype(float).mask(headless)
+    return headless
+
+
 def track_report(estimates: pd.DataFrame, epoch_utc_ns=None, origin_deg=None,
                  labels=None, sigma_known=True, max_range_rel_sd=None,
                  recorded=True) -> pd.DataFrame:
     """Per-track state and kinematics at each track's last bearing ("now") with 1-sigma
     errors and the status, as the estimator computed them; a note says why a track is not ok.
-    An estimate that is no answer (``status.not_an_answer``: diverged, collapsed, or without
-    a one-sigma error) is blank, with its status and a note that says so
-    (``max_range_rel_sd``: the estimator's, where above 1; ``recorded``: a recording, whose
-    targets are real vessels).
+    An estimate that is no answer (``status.not_an_answer``: diverged, collapsed, without a
+    one-sigma error, or off where its last bearings point) is blank, with its status and a
+    note that says so (``max_range_rel_sd``: the estimator's, where above 1; ``recorded``: a
+    recording, whose targets are real vessels); a ``position_only`` track's course and speed
+    are blank (``blank_headings``), its position now shown.
 
     ``label``: the contact's name (``labels``: track id -> text; else the id);
     ``t_now_s``: the last bearing, in seconds from the log's start (its first bearing, the
@@ -276,7 +314,10 @@ def track_report(estimates: pd.DataFrame, epoch_utc_ns=None, origin_deg=None,
         "converged": e["converged"].astype(bool),
     })
     report["note"] = status_note(report, e["stop_reason"].to_numpy(), sigma_known)
-    blank_non_answers(report, max_range_rel_sd, recorded)
+    blank_non_answers(report, max_range_rel_sd, recorded,
+                      {c: e[c].to_numpy(float) for c in END_BEARING_COLUMNS}
+                      if all(c in e for c in END_BEARING_COLUMNS) else None)
+    blank_headings(report)
     return report
 
 
@@ -286,9 +327,15 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str,
     blank estimate as ``-``); ``geographic``: the log has a geographic origin (a column of
     latitude and longitude; None: where the report has any)."""
 
-    def pm(value, sd, fmt):  # blank ("-") where the estimate is no answer (its note says)
-        return [f"{v:{fmt}} ± {e:{fmt}}" if np.isfinite(v) and np.isfinite(e) else "-"
-                for v, e in report[[value, sd]].to_numpy(float)]
+    headless = (report["status"].isin(HEADING_UNDETERMINED)
+                & report["range_now_m"].notna()).to_numpy()
+
+    def pm(value, sd, fmt, heading=False):  # blank ("-") where the estimate is no answer
+        # (its note says), "not determined" where its heading is not (position_only)
+        return [f"{v:{fmt}} ± {e:{fmt}}" if np.isfinite(v) and np.isfinite(e) else
+                NOT_DETERMINED if heading and h else "-"
+                for (v, e), h in zip(report[[value, sd]].to_numpy(float), headless,
+                                     strict=True)]
 
     def position():
         if not (report["lat_now_deg"].notna().any() if geographic is None else geographic):
@@ -304,8 +351,8 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str,
         **position(),
         "range now (m)": pm("range_now_m", "range_sd_m", ".0f"),
         "bearing now (deg)": pm("bearing_now_deg", "bearing_sd_deg", ".2f"),
-        "course (deg)": pm("course_deg", "course_sd_deg", ".1f"),
-        "speed (m/s)": pm("speed_m_s", "speed_sd_m_s", ".2f"),
+        "course (deg)": pm("course_deg", "course_sd_deg", ".1f", heading=True),
+        "speed (m/s)": pm("speed_m_s", "speed_sd_m_s", ".2f", heading=True),
         **shown_columns(report),  # against the AIS truth, when the log has one
         "sqrt(Ka) (deg)": report["sqrt_ka_deg"].map("{:.3g}".format),
         "holds from": (report["leg_start_s"].map("t = {:.1f} s".format)
@@ -323,9 +370,11 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str,
              "includes the "
              "target's own motion (accel_psd_m2_s3: a nearly-constant-velocity target) for "
              "`lm`; 'holds from' is the first bearing the solution rests on. "
-             "Trust only `ok` tracks; 'why' says what is wrong with the others, and why an "
-             "estimate that is no answer (diverged, collapsed onto own-ship, or without a "
-             "one-sigma error) is not shown ('-'). The CSV also "
+             "Trust only `ok` tracks, and the position now of `position_only` ones (their course "
+             f"and speed: '{NOT_DETERMINED}'); 'why' says what is wrong with the others, and "
+             "why an estimate that is no answer (diverged, collapsed onto own-ship, without a "
+             "one-sigma error, or off where its last bearings point) is not shown ('-'). The "
+             "CSV also "
              "holds the position now in local metres (x east, y north) with its one-sigma "
              f"errors; `{name}-<track>.png` shows each contact on a plan (the first "
              f"{MAX_PLOTS}).")
@@ -344,6 +393,7 @@ STATUS_WHY = {  # a verdict in a few words, for the one warning line of its trac
     "poor_fit": "the residuals are not the declared noise",
     "unobservable": "the range is not determined from this geometry",
     "approximate": "the estimator's one-sigma errors are not honest here",
+    "position_only": "where they are heading is not determined (their position now holds)",
 }
 LISTED = 10  # contacts named in a warning line
 
@@ -453,6 +503,7 @@ def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) 
 # the metrics of a simulated track that are numbers of its estimate: blank where it is blank
 SIMULATED_ERRORS = ["bearing_err_deg", "distance_rel_err", "course_err_deg", "speed_rel_err",
                     "nees"]
+HEADING_ERRORS = ["course_err_deg", "speed_rel_err"]  # blank where the heading is
 
 
 def results(run) -> tuple[pd.DataFrame, dict]:
@@ -460,9 +511,9 @@ def results(run) -> tuple[pd.DataFrame, dict]:
     aggregate writes (``contact_report``), then against the AIS of a recording its truth
     columns (``truth_report.with_truth``), against a simulation's truth its metrics
     (``metrics.track_metrics``, as ``tma.runs`` gives them; the errors and ``nees`` blank
-    where the estimate is). Tables: ``estimates``, the estimator's own columns (``x0_m``..,
-    ``jtj_ij``, ``t_last_s``: what the plot and the map draw from), ``x0_m``.. blank where the
-    report's estimate is."""
+    where the estimate is, the course and speed errors where its heading is). Tables:
+    ``estimates``, the estimator's own columns (``x0_m``.., ``jtj_ij``, ``t_last_s``: what the
+    plot and the map draw from), ``x0_m``.. blank where the report's estimate is."""
     est = run.estimates
     report = contact_report(est, run.logs, "estimate",
                             getattr(run.estimator.config, "max_range_rel_sd", None),
@@ -473,6 +524,8 @@ def results(run) -> tuple[pd.DataFrame, dict]:
     elif run.truth is not None:  # a simulation
         metrics = track_metrics(est, run.truth)
         metrics.loc[blank, SIMULATED_ERRORS] = np.nan
+        metrics.loc[report["status"].isin(HEADING_UNDETERMINED).to_numpy(),
+                    HEADING_ERRORS] = np.nan
         report = pd.concat([report, metrics.drop(columns=[c for c in metrics
                                                           if c in report])], axis=1)
     estimates = est.copy()

@@ -27,14 +27,22 @@ course and speed at each track's last bearing ("now") by their Jacobians (delta 
 - ``unobservable``: J^T J is numerically singular (scaled by its diagonal, smallest over
   largest eigenvalue <= ``singular_rcond``), or range_sd / range > ``max_range_rel_sd``
   (range is not determined well enough to use: no own-ship manoeuvre, a target too far
-  away, too much unmodelled target motion), or, for a target that may manoeuvre,
-  speed_sd / speed > ``max_speed_rel_sd`` (the velocity is not determined, so neither is
-  the course: a manoeuvre too recent for the bearings to show its outcome), or the trend
-  test was due but too few bearings remain to run it (the motion cannot be checked);
+  away, too much unmodelled target motion), or the trend test was due but too few bearings
+  remain to run it (the motion cannot be checked);
 - ``approximate``: the fit passed every test, but its one-sigma errors are not honest by
   construction: the estimator is biased (``nbearings``), or it assumes a constant-velocity
   target where the log's targets are not known to move so (``accel_psd`` > 0);
-- ``ok`` otherwise: the estimate and its one-sigma errors can be used.
+- ``position_only``: for a target that may wander or manoeuvre (the log declares so, or a
+  recording), the bearings fix its position now but not where it is heading: the course
+  sd exceeds ``max_course_sd_deg`` or the speed sd ``max_speed_rel_sd`` of the speed (a
+  manoeuvre too recent for the bearings to show where it led). Its position now (range,
+  bearing, x/y, lat/lon) and their errors can be used; its course and speed are no answer,
+  and every output leaves them blank (``HEADING_UNDETERMINED``). A target declared at
+  constant velocity (the paper's tables) has held its course all along: its course and
+  speed errors are honest however wide, and stay ``ok``;
+- ``ok`` otherwise: the estimate and its one-sigma errors can be used; for a target that may
+  wander or manoeuvre, its course sd is at most ``max_course_sd_deg`` and its speed sd at
+  most ``max_speed_rel_sd`` of its speed.
 
 The ``_sd`` columns are blank only where J^T J is singular (no uncertainty can be given),
 which is never an ``ok`` track.
@@ -53,7 +61,10 @@ from tma.runtime.jit import njit
 # compute a status
 
 # (in the order of the tables' columns; the rules' order is in the module docstring)
-STATUSES = ("ok", "not_converged", "poor_fit", "unobservable", "manoeuvring", "approximate")
+STATUSES = ("ok", "not_converged", "poor_fit", "unobservable", "manoeuvring", "approximate",
+            "position_only")
+# the statuses whose course and speed are no answer: every output leaves them blank
+HEADING_UNDETERMINED = ("position_only",)
 NOISELESS_RMS_DEG = 1e-4  # far above round-off, far below any real bearing sensor
 
 
@@ -262,7 +273,7 @@ def noise_fit(cost_rad2, dof, sigma_deg):
 
 def assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t_now_s, own_x_now_m,
            own_y_now_m, cfg, motion_tested=False, undetermined=False,
-           may_manoeuvre=False, tail_scale=1.0) -> dict:
+           moving=False, tail_scale=1.0) -> dict:
     """Status and one-sigma errors per track (see the module docstring).
 
     The covariance of theta is jtj^-1 sigma2 (``sigma2`` rad^2 per track); ``fit_p``: the
@@ -270,15 +281,16 @@ def assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t_now_s,
     few innovations); ``motion_tested``: whether the trend test was due (then a NaN, a
     motion the bearings cannot check, is ``unobservable``); ``approximate``: bool per
     track; ``undetermined``: tracks whose range the geometry does not determine, whatever
-    their errors say (bool per track: ``unobservable`` before any test); ``may_manoeuvre``:
-    the answer allows manoeuvres, and then a velocity whose speed sd exceeds
-    ``max_speed_rel_sd`` of the speed is ``unobservable`` (a constant-velocity answer keeps
-    its course, however wide); ``tail_scale`` (per track, >= 1): the factor by which the
-    covariance of a mixture's answer was widened so that its 95 % ellipsoid holds 95 % of the
-    mixture (``manoeuvres._tail_scale``): vagueness is judged on the covariance before it
-    (the answer's core), the errors stated after; ``cfg`` holds
+    their errors say (bool per track: ``unobservable`` before any test); ``moving``: the
+    targets may wander or manoeuvre, and then a course sd above ``max_course_sd_deg`` or a
+    speed sd above ``max_speed_rel_sd`` of the speed is ``position_only`` (a target declared
+    at constant velocity keeps its course, however wide); ``tail_scale`` (per track, >= 1):
+    the factor by which the covariance of a mixture's answer was widened so that its 95 %
+    ellipsoid holds 95 % of the mixture (``manoeuvres._tail_scale``): whether range is
+    determined is judged on the covariance before it (the answer's core), whether course and
+    speed are on the errors stated (those a reader reads); ``cfg`` holds
     ``singular_rcond``, ``fit_alpha``, ``motion_alpha``, ``max_range_rel_sd``,
-    ``max_speed_rel_sd``. Returns output columns."""
+    ``max_course_sd_deg``, ``max_speed_rel_sd``. Returns output columns."""
     finite = np.isfinite(theta).all(axis=1)
     cov, singular = scaled_inverse(np.where(finite[:, None, None], jtj, np.nan),
                                    cfg.singular_rcond)
@@ -288,19 +300,22 @@ def assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t_now_s,
         sd = np.sqrt(np.einsum("nij,njk,nik->ni", G, cov, G))
         poorly_fit = fit_p < cfg.fit_alpha
         drifting = motion_p < cfg.motion_alpha
-        # whether the answer determines range (and speed) is judged on its core: errors a
-        # mixture's tails widened (``tail_scale``) are stated, not held against it
+        # whether the answer determines range is judged on its core: errors a mixture's
+        # tails widened (``tail_scale``) are stated, not held against it
         core = sd / np.sqrt(np.broadcast_to(tail_scale, rng.shape))[:, None]
         vague = ~(core[:, 0] <= cfg.max_range_rel_sd * rng)  # a NaN sd counts as vague
-        if may_manoeuvre:  # a target that may have turned since: no velocity, no course
-            vague |= ~(core[:, 3] <= cfg.max_speed_rel_sd * speed)
         vague |= motion_tested & np.isnan(motion_p)
+        # where the target may have turned or wandered since, a wide course or speed says
+        # that where it is heading is not determined (a NaN sd counts as wide)
+        headless = moving & ~((sd[:, 2] <= np.deg2rad(cfg.max_course_sd_deg))
+                              & (sd[:, 3] <= cfg.max_speed_rel_sd * speed))
     # a geometry that cannot give the range comes first: a fit of the unobservable is
-    # anything (a manoeuvring target hugging own-ship fits any bearings)
+    # anything (a manoeuvring target hugging own-ship fits any bearings); an answer whose
+    # errors are not honest (approximate) promises no position either
     status = np.select([~converged, undetermined, drifting, poorly_fit, singular | vague,
-                        approximate],
+                        approximate, headless],
                        ["not_converged", "unobservable", "manoeuvring", "poor_fit",
-                        "unobservable", "approximate"], "ok")
+                        "unobservable", "approximate", "position_only"], "ok")
     return {
         "range_now_m": rng, "range_sd_m": sd[:, 0],
         "bearing_now_deg": np.rad2deg(bearing) % 360.0, "bearing_sd_deg": np.rad2deg(sd[:, 1]),
@@ -319,10 +334,26 @@ MIN_RANGE_M = 10.0  # own-ship's GNSS fixes err by metres: closer, a bearing has
 MAX_RANGE_M = 2e6  # as far as the local plane maps (tma.geo.MAX_MAPPED_M)
 MAX_SPEED_M_S = 343.0  # the speed of sound in air: no ship (50 m/s at most), few aircraft
 COLLAPSED_REL_SD = 1.0  # a range sd above the range itself: own-ship within one sigma
+END_SIGMAS = 6.0  # an answer's bearing now this many (combined) sd off its last bearings'
+END_COLUMNS = ("bearing_now_deg", "bearing_sd_deg", "end_bearing_deg", "end_bearing_sd_deg")
+
+
+def off_the_last_bearings(bearings):
+    """Per track the answer's bearing now, the bearing its last bearings point to
+    (``end_bearing``) and how far (deg, wrapped, signed) the first lies off the second where
+    that is more than ``END_SIGMAS`` times their one-sigma errors combined (NaN elsewhere);
+    ``bearings`` maps ``END_COLUMNS`` to arrays. None where it lacks one."""
+    if bearings is None or any(c not in bearings for c in END_COLUMNS):
+        return None
+    now, now_sd, end, end_sd = (np.asarray(bearings[c], dtype=float) for c in END_COLUMNS)
+    off = (now - end + 180.0) % 360.0 - 180.0
+    with np.errstate(invalid="ignore"):
+        far = np.abs(off) > END_SIGMAS * np.hypot(now_sd, end_sd)
+    return now, end, np.where(far, off, np.nan)
 
 
 def not_an_answer(range_m, range_sd_m, speed_m_s, max_range_rel_sd=COLLAPSED_REL_SD,
-                  recorded=True) -> np.ndarray:
+                  recorded=True, bearings=None) -> np.ndarray:
     """Why each estimate is no answer to show (an empty string where it is one): the one rule
     every output (tables, CSV, plots, map, the Python API's results) applies before it shows
     an estimate. The status says how far an answer can be trusted and why (it stays); this
@@ -347,7 +378,17 @@ def not_an_answer(range_m, range_sd_m, speed_m_s, max_range_rel_sd=COLLAPSED_REL
       speed beyond ``MAX_SPEED_M_S`` (343 m/s: faster than any vessel and most aircraft):
       a fit run away to where bearings barely constrain it (seen at 1e10-1e13 m and
       1e3-1e10 m/s). A simulated log declares its own scale (distances of 1e-9 m to 1e9 m,
-      speeds up to 1e4 m/s are valid scenarios), so only the rules on information apply.
+      speeds up to 1e4 m/s are valid scenarios), so only the rules on information apply;
+    - its bearing now more than ``END_SIGMAS`` (6) times the combined one-sigma errors off
+      the bearing the log's own bearings point to at the last bearing time
+      (``end_bearing``, their straight line in time over the last 10: ``bearings`` maps
+      ``END_COLUMNS`` to arrays, the estimate's ``bearing_now_deg`` and ``bearing_sd_deg``
+      and the estimate stage's ``end_bearing_deg`` and ``end_bearing_sd_deg``; no check
+      without them): no answer may put the target where the last bearings do not point (a
+      fit run to the mirror side of own-ship was seen ``ok`` at 172.0 +- 0.1 deg, the last
+      bearings near 352 deg). The bound leaves room for the straight line's misfit where the
+      bearing bends within the window; on honest fits of simulated steady and manoeuvring
+      targets it never fires (``tests/families/bearings2d/test_bearings2d_answers.py``).
     """
     rng, sd, speed = (np.asarray(a, dtype=float) for a in (range_m, range_sd_m, speed_m_s))
     limit = max(COLLAPSED_REL_SD, float(max_range_rel_sd))
@@ -360,6 +401,9 @@ def not_an_answer(range_m, range_sd_m, speed_m_s, max_range_rel_sd=COLLAPSED_REL
             recorded & (rng > MAX_RANGE_M),
             recorded & (speed > MAX_SPEED_M_S),
         ]
+        end = off_the_last_bearings(bearings)
+        off = np.full(rng.shape, np.nan) if end is None else end[2]
+        conditions.append(np.isfinite(off))
     reasons = [
         "there is no finite estimate",
         "no one-sigma error can be given (J^T J is singular, or own-ship's motion cannot "
@@ -370,5 +414,10 @@ def not_an_answer(range_m, range_sd_m, speed_m_s, max_range_rel_sd=COLLAPSED_REL
         "own-ship's navigation fixes)",
         f"it diverged beyond {MAX_RANGE_M / 1e3:g} km, farther than a bearing reaches",
         f"it diverged to a speed beyond {MAX_SPEED_M_S:g} m/s, faster than a vessel goes",
+        "",  # (below, with its numbers)
     ]
-    return np.select(conditions, reasons, "").astype(object)
+    why = np.select(conditions, reasons, "").astype(object)
+    for k in np.flatnonzero(np.isfinite(off) & (why == "")):
+        why[k] = (f"its bearing now, {end[0][k]:.1f} deg, is {abs(off[k]):.1f} deg off the "
+                  f"{end[1][k]:.1f} deg its last bearings point to")
+    return why

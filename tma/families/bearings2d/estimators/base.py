@@ -16,6 +16,7 @@ from tma.config import param
 from tma.errors import InputError
 from tma.estimator import Estimator, EstimatorConfig
 from tma.families.bearings2d import manoeuvres, ncv
+from tma.families.bearings2d.end_bearing import end_bearing
 from tma.families.bearings2d.log import BearingsLog
 from tma.families.bearings2d.manoeuvres import RECORDED_MANOEUVRES, ManoeuvrePrior
 from tma.families.bearings2d.model import BearingTerms
@@ -55,8 +56,12 @@ class BearingsConfig(EstimatorConfig):
     min_bearings: int = param(5, "bearings a track needs (4 unknowns)", "[4, inf)")
     max_range_rel_sd: float = param(0.2, "unobservable above this range sd / range",
                                     "(0, inf)")
-    max_speed_rel_sd: float = param(1.0, "unobservable above this speed sd / speed (the "
-                                    "course is then not determined)", "(0, inf)")
+    max_course_sd_deg: float = param(30.0, "position_only above this course sd (deg), for "
+                                     "targets that may wander or manoeuvre (where the target "
+                                     "is heading is then not determined)", "(0, 360]")
+    max_speed_rel_sd: float = param(0.5, "position_only above this speed sd / speed, for "
+                                    "targets that may wander or manoeuvre (where the target "
+                                    "is heading is then not determined)", "(0, inf)")
     fit_alpha: float = param(1e-3, "poor_fit below this p-value of the noise test (chi-square)",
                              "(0, 1)")
     singular_rcond: float = param(1e-12, "J^T J is singular at or below this scaled "
@@ -313,9 +318,10 @@ class BearingsEstimator(Estimator):
         approximate |= motion.moving and not self.models_motion
         trust = assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t[last],
                        ox[last], oy[last], cfg, motion_tested=tested,
-                       undetermined=undetermined,
-                       may_manoeuvre=prior is not None and self.models_motion,
+                       undetermined=undetermined, moving=motion.moving,
                        tail_scale=tail_scale)
+        # where the log's own last bearings point now, for status.not_an_answer's rule
+        trust.update(end_bearing(t, b.measured, b.valid, last, np.sqrt(sigma2)))
         columns = {
             "x0_m": theta[:, 0], "y0_m": theta[:, 1], "vx_m_s": theta[:, 2], "vy_m_s": theta[:, 3],
             "n_f_evals": solution.n_f_evals, "n_iter": solution.n_iter,
