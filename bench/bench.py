@@ -36,12 +36,24 @@
     temporary ``NUMBA_CACHE_DIR``) then again with the cache it left; each table's wall time
     and the ratio of the sums (target <= 1.3x), best of ``--first-table-repeat`` (1) fresh
     caches, beside the machine's load average.
+(k) The manoeuvre-aware fit against the NCV smoother (issue 36, item 7): ``lm`` as
+    ``tma.estimate`` runs it on a simulated log whose targets may manoeuvre (wander 1e-3
+    m^2/s^3, 10 manoeuvres an hour, declared: the recorded-log prior) against ``lm`` with
+    ``manoeuvre_rate_per_h=0`` (the same wander: the nearly-constant-velocity smoother) on the
+    same tracks, CPU time per track of the estimator alone (not the simulation), one thread,
+    compiled first, best of ``--repeat`` (3): the cost ratio, and the exponents of the cost's
+    growth with the number of bearings (20 minutes, a bearing every 8, 4, 2, 1 s) and with the
+    duration (a bearing every 10 s, 20 to 160 minutes, own-ship zig-zagging every 15 minutes,
+    targets 5-15 km away at 3-6 m/s), each the least-squares slope of log(cost) on
+    log(size), beside the smoother's.
+    ``--manoeuvre-tracks N`` (50) tracks per point (fewer for the long logs).
 
 Options: ``--tracks N`` (2000), ``--sigma DEG`` (0.5), ``--runs N`` (30), ``--skip-tables``,
 ``--skip-first-table``, ``--only SECTION`` (lm, tables, ranges2d, filters3d, cmnf, compile,
-real_motion, cluster, io, trace, first_table), ``--first-table EXPERIMENTS`` (comma-separated;
-bearings2d_table,ranges2d_table,radar2d_table), ``--first-table-repeat N`` (1),
-``--paths3d N`` (2500), ``--cmnf-paths N`` (100000), ``--repeat N`` (3).
+real_motion, cluster, io, trace, first_table, manoeuvres), ``--first-table EXPERIMENTS``
+(comma-separated; bearings2d_table,ranges2d_table,radar2d_table), ``--first-table-repeat N``
+(1), ``--paths3d N`` (2500), ``--cmnf-paths N`` (100000), ``--repeat N`` (3),
+``--manoeuvre-tracks N`` (50).
 """
 
 import argparse
@@ -66,7 +78,7 @@ from tma.runtime.forkserver import keep_freed_memory
 REPO = Path(__file__).resolve().parents[1]
 THETA = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")
 SECTIONS = ("lm", "tables", "ranges2d", "filters3d", "cmnf", "compile", "real_motion", "cluster",
-            "io", "trace", "first_table")
+            "io", "trace", "first_table", "manoeuvres")
 FIRST_TABLES = ("bearings2d_table", "ranges2d_table", "radar2d_table")  # as issue 32 measured
 
 
@@ -493,6 +505,112 @@ def bench_first_table(experiments, repeat: int = 1):
           f"{os.getloadavg()[0]:.1f})")
 
 
+# (k): the recorded-log prior (issue 36): wander 1e-3 m^2/s^3 and 10 manoeuvres an hour, declared
+MANOEUVRING = {"accel_psd_m2_s3": 1e-3, "manoeuvres": {"rate_per_h": 10.0}}
+NCV_SMOOTHER = {"manoeuvre_rate_per_h": 0.0}  # the same wander (the log's), no manoeuvres
+BEARING_PERIODS_S = (8.0, 4.0, 2.0, 1.0)  # over the scenario's 20 minutes of own-ship legs
+DURATIONS_MIN = (20, 40, 80, 160)  # a bearing every LONG_PERIOD_S, own-ship zig-zagging
+DURATION_TRACKS = (1.0, 1.0, 0.6, 0.4)  # of --manoeuvre-tracks: the long logs cost the most
+LONG_PERIOD_S = 10.0
+LONG_POPULATION = {"distance_min_m": 5000.0, "distance_max_m": 15000.0, "speed_min_m_s": 3.0,
+                   "speed_max_m_s": 6.0}  # issue 36's long logs: a watch on nearby ships
+
+
+def zigzag_legs(duration_s: float, leg_s: float = 900.0, courses_deg=(45.0, 135.0),
+                rate_deg_s: float = 0.5) -> list[dict]:
+    """Own-ship legs (``tma.maths.path``) of ``duration_s`` in all that change course every
+    ``leg_s`` (a straight leg, then a turn at ``rate_deg_s`` to the other of ``courses_deg``),
+    so that the target's range stays observable however long the log; the last leg is cut
+    at ``duration_s`` (straight where a whole turn does not fit)."""
+    turn_s = abs(courses_deg[1] - courses_deg[0]) / rate_deg_s
+    legs, t, k = [], 0.0, 0
+    while duration_s - t > 1e-9:
+        straight = min(leg_s - turn_s, duration_s - t)
+        legs.append({"course_deg": courses_deg[k % 2], "duration_s": straight})
+        t += straight
+        if duration_s - t >= turn_s:
+            legs.append({"turn_to_deg": courses_deg[(k + 1) % 2], "rate_deg_s": rate_deg_s,
+                         "direction": "right" if courses_deg[(k + 1) % 2] > courses_deg[k % 2]
+                         else "left"})
+            t += turn_s
+        elif duration_s - t > 1e-9:
+            legs.append({"duration_s": duration_s - t})
+            t = duration_s
+        k += 1
+    return legs
+
+
+def growth_exponent(sizes, costs) -> float:
+    """The least-squares slope of log(cost) on log(size): cost ~ size^exponent."""
+    return float(np.polyfit(np.log(sizes), np.log(costs), 1)[0])
+
+
+def _cost_per_track(estimators: dict, n_tracks: int, sigma_deg: float, repeat: int,
+                    **scenario) -> tuple[int, dict]:
+    """(bearings per track, {name: CPU seconds per track}) of each estimator on the same
+    ``n_tracks`` simulated manoeuvring targets (the estimator alone: simulated before the
+    clock starts), best of ``repeat``."""
+    import tma
+
+    data = tma.simulate("bearings2d", n_tracks=n_tracks, shard_size=n_tracks,
+                        sigma_deg=sigma_deg, target=MANOEUVRING, **scenario)
+    cost = {}
+    for name, estimator in estimators.items():
+        runs = [timed(lambda e=estimator: [e.estimate(lg) for lg in data.logs])[1]
+                for _ in range(repeat)]
+        cost[name] = min(runs) / n_tracks
+    return data.logs[0].t_s.size, cost
+
+
+def bench_manoeuvres(n_tracks: int, sigma_deg: float, repeat: int = 3):
+    """Issue 36, item 7: the manoeuvre-aware ``lm`` (``tma.estimate``'s default on a log
+    that declares manoeuvres) against the NCV smoother on the same tracks; only options of
+    the public estimator, so it measures whatever inference ``lm`` runs."""
+    import tma
+
+    keep_freed_memory()
+    estimators = {"aware": build_estimator({"name": "lm"}),
+                  "ncv": build_estimator({"name": "lm", **NCV_SMOOTHER})}
+    print(f"(k) manoeuvre-aware lm (the log's prior: wander 1e-3 m^2/s^3, 10 manoeuvres/h) "
+          "against the NCV smoother\n    (manoeuvre_rate_per_h=0, the same wander) on the same "
+          f"tracks, sigma {sigma_deg} deg; CPU ms per track, one thread, compiled first, best "
+          f"of {repeat}")
+    with threadpool_limits(limits=1):
+        warm = tma.simulate("bearings2d", n_tracks=2, shard_size=2, target=MANOEUVRING)
+        for estimator in estimators.values():  # compiles (or loads) every kernel
+            estimator.estimate(warm.logs[0])
+        series = {"bearings": [], "duration": []}
+        for period in BEARING_PERIODS_S:
+            n, cost = _cost_per_track(estimators, n_tracks, sigma_deg, repeat,
+                                      sample_period_s=period)
+            series["bearings"].append((n, cost))
+            print(f"    20 min, a bearing every {period:g} s ({n:4d} bearings), {n_tracks:3d} "
+                  f"tracks: aware {1e3 * cost['aware']:7.1f}  NCV {1e3 * cost['ncv']:6.2f}  "
+                  f"{cost['aware'] / cost['ncv']:5.1f}x")
+        for minutes, share in zip(DURATIONS_MIN, DURATION_TRACKS, strict=True):
+            tracks = max(2, round(share * n_tracks))
+            n, cost = _cost_per_track(
+                estimators, tracks, sigma_deg, repeat, sample_period_s=LONG_PERIOD_S,
+                population=LONG_POPULATION,
+                observer={"legs": zigzag_legs(60.0 * minutes)})
+            series["duration"].append((minutes, cost))
+            print(f"    {minutes:3d} min zig-zag, a bearing every {LONG_PERIOD_S:g} s ({n:4d} "
+                  f"bearings), {tracks:3d} tracks: aware {1e3 * cost['aware']:7.1f}  NCV "
+                  f"{1e3 * cost['ncv']:6.2f}  {cost['aware'] / cost['ncv']:5.1f}x")
+    ratios = [c["aware"] / c["ncv"] for points in series.values() for _, c in points]
+    default = series["bearings"][BEARING_PERIODS_S.index(2.0)][1]
+    print(f"    cost ratio aware / NCV smoother, the default 20 min every 2 s: "
+          f"{default['aware'] / default['ncv']:.1f}x (all points {min(ratios):.1f}-"
+          f"{max(ratios):.1f}x; issue 36's target <= 8x)")
+    for what, label in (("bearings", "bearings at 20 min"),
+                        ("duration", f"duration at a bearing every {LONG_PERIOD_S:g} s")):
+        sizes = [size for size, _ in series[what]]
+        aware, ncv = (growth_exponent(sizes, [c[k] for _, c in series[what]])
+                      for k in ("aware", "ncv"))
+        print(f"    growth exponent with the {label} ({sizes[0]}-{sizes[-1]}): aware "
+              f"{aware:.2f}, NCV smoother {ncv:.2f} (issue 36's target <= 1)")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--tracks", type=int, default=2000)
@@ -506,8 +624,10 @@ def main():
     parser.add_argument("--first-table-repeat", type=int, default=1,
                         help="(j): the best of this many fresh numba caches")
     parser.add_argument("--repeat", type=int, default=3,
-                        help="(b): the best of this many runs of each table and its floor")
+                        help="(b), (h), (k): the best of this many runs")
     parser.add_argument("--only", choices=SECTIONS, default=None, help="one section")
+    parser.add_argument("--manoeuvre-tracks", type=int, default=50,
+                        help="(k): tracks per point (fewer for the long logs)")
     parser.add_argument("--paths3d", type=int, default=2500, help="3D filter benchmark paths")
     parser.add_argument("--cmnf-paths", type=int, default=100_000,
                         help="CMNF training size for the memory measurement")
@@ -544,6 +664,8 @@ def main():
         subprocess.run([sys.executable, str(REPO / "bench" / "trace.py")], cwd=REPO, check=True)
     if wanted("first_table"):
         bench_first_table(args.first_table.split(","), args.first_table_repeat)
+    if wanted("manoeuvres"):
+        bench_manoeuvres(args.manoeuvre_tracks, args.sigma, args.repeat)
 
 
 if __name__ == "__main__":

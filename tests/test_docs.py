@@ -262,7 +262,11 @@ class Session:
                 table = compose_cfg([f"experiment={name}"]).table
                 assert (self.root / "tables" / f"{table}.md").exists(), name
             return
-        if target == "bench":  # the bench's first section, on a few tracks
+        if target == "bench":  # the manoeuvres section if named, else the first; few tracks
+            if "--only manoeuvres" in args:
+                check_manoeuvre_bench(self.make_here(
+                    ["bench", "ARGS=--only manoeuvres --manoeuvre-tracks 2 --repeat 1"]))
+                return
             self.make_here(["bench", "ARGS=--only lm --tracks 20"])
             return
         if target == "clean":  # here, not in the repository
@@ -287,6 +291,30 @@ class Session:
                               timeout=1200)
         assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
         return proc.stdout
+
+
+def check_manoeuvre_bench(out: str):
+    """``make bench``'s section (k): a point per sample period (20 minutes of the default
+    legs) and per duration (own-ship's zig-zag at a bearing every 10 s), each with the
+    bearings that make, and growth exponents that are the slopes of the costs printed."""
+    from scipy.stats import linregress
+
+    points = re.findall(r"(\d+) min(?: zig-zag)?, a bearing every (\d+) s \( *(\d+) bearings\)"
+                        r", +\d+ tracks: aware +([\d.]+) +NCV +([\d.]+) +([\d.]+)x", out)
+    got = [(int(m), int(p), int(n)) for m, p, n, *_ in points]
+    assert got == [(20, 8, 151), (20, 4, 301), (20, 2, 601), (20, 1, 1201), (20, 10, 121),
+                   (40, 10, 241), (80, 10, 481), (160, 10, 961)], out
+    aware, ncv, ratio = (np.array([float(p[k]) for p in points]) for k in (3, 4, 5))
+    assert np.allclose(ratio, aware / ncv, rtol=0.05, atol=0.1), out
+    exponents = re.findall(r"growth exponent with the (?:bearings|duration).*: aware "
+                           r"(-?[\d.]+), NCV smoother (-?[\d.]+)", out)
+    assert len(exponents) == 2, out
+    for (printed_aware, printed_ncv), sizes, rows in (
+            (exponents[0], [151, 301, 601, 1201], slice(0, 4)),
+            (exponents[1], [20, 40, 80, 160], slice(4, 8))):
+        for printed, cost in ((printed_aware, aware[rows]), (printed_ncv, ncv[rows])):
+            slope = linregress(np.log(sizes), np.log(cost)).slope  # of the rounded costs
+            assert abs(float(printed) - slope) < 0.05, (printed, slope, out)
 
 
 @pytest.mark.parametrize("where, commands", BLOCKS, ids=[w for w, _ in BLOCKS])
