@@ -286,7 +286,7 @@ def assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t_now_s,
     speed sd above ``max_speed_rel_sd`` of the speed is ``position_only`` (a target declared
     at constant velocity keeps its course, however wide); ``tail_scale`` (per track, >= 1):
     the factor by which the covariance of a mixture's answer was widened so that its 95 %
-    ellipsoid holds 95 % of the mixture (``manoeuvres._tail_scale``): whether range is
+    ellipsoid holds 95 % of the mixture (``mixture_tails.tail_scale``): whether range is
     determined is judged on the covariance before it (the answer's core), whether course and
     speed are on the errors stated (those a reader reads); ``cfg`` holds
     ``singular_rcond``, ``fit_alpha``, ``motion_alpha``, ``max_range_rel_sd``,
