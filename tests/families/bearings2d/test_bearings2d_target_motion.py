@@ -126,3 +126,26 @@ def test_bad_target_options_are_refused():
                    TargetConfig(manoeuvres=ManoeuvreConfig(turn_rate_min_deg_s=0.0))):
         with pytest.raises(ConfigError, match="target"):
             Config(target=target)
+
+
+def test_the_truth_counts_the_manoeuvres_started_within_the_observation():
+    """``n_manoeuvres``: three manoeuvres early in the window all start within it; three from
+    99 % of it on (each at least 20 s long: the next starts when one ends) only the first; a
+    Poisson process of short manoeuvres (20 deg at 1 deg/s, no speed change: hardly ever
+    delayed) counts as Poisson(rate x duration); targets that did not manoeuvre, 0."""
+    def truth(**manoeuvres):
+        return _sim(manoeuvres=ManoeuvreConfig(**manoeuvres))[1].to_pandas()
+
+    early = truth(prob=0.5, count=3, start_frac=0.1, end_frac=0.3, turn_rate_min_deg_s=1.0,
+                  turn_rate_max_deg_s=1.0, course_change_max_deg=30.0, speed_change_rel=0.0)
+    np.testing.assert_array_equal(early.n_manoeuvres, np.where(early.manoeuvring, 3, 0))
+    late = truth(prob=1.0, count=3, start_frac=0.99, end_frac=0.99)
+    assert (late.n_manoeuvres == 1).all()
+    log, poisson = _sim(manoeuvres=ManoeuvreConfig(
+        rate_per_h=6.0, course_change_min_deg=20.0, course_change_max_deg=20.0,
+        turn_rate_min_deg_s=1.0, turn_rate_max_deg_s=1.0, speed_change_rel=0.0))
+    counts = poisson.to_pandas().n_manoeuvres.to_numpy()
+    mean = 6.0 / 3600.0 * (log.t_s[-1] - log.t_s[0])
+    assert abs(counts.mean() - mean) <= 4 * np.sqrt(mean / counts.size)
+    assert abs(counts.var() - mean) <= 4 * mean * np.sqrt(2.0 / counts.size) + 0.1
+    assert ((counts > 0) == poisson.to_pandas().manoeuvring).all()

@@ -18,7 +18,10 @@ One row per (estimator, motion) over the simulated targets of one dataset:
 - rates with 95 % Wilson intervals.
 
 The plot gives the detection rate against the size of the manoeuvre (|course change|,
-binned), per estimator, and the share ok with its consistency per motion.
+binned), per estimator, and the share ok with its consistency per motion. A second table,
+``<name>-calibration``, says whether the ok tracks' errors are honest both ways, per
+quantity (range, course, speed) and by cell (range now, manoeuvres made, ``p_manoeuvre``):
+``calibration.py``.
 """
 
 import logging
@@ -31,6 +34,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from tma.families.bearings2d import calibration  # noqa: E402
 from tma.families.bearings2d.benchmark import _pct, estimator_label  # noqa: E402
 from tma.families.bearings2d.metrics import (  # noqa: E402
     NEES_95,
@@ -159,6 +163,33 @@ def manoeuvre_tables(entries) -> tuple[pd.DataFrame, pd.DataFrame]:
     return table, pd.DataFrame(detections)
 
 
+def calibration_table(entries) -> pd.DataFrame:
+    """The calibration table (``calibration.COLUMNS``) of the runs ``entries``: per
+    estimator and motion, its cells (``calibration.calibration_rows``)."""
+    rows = []
+    for entry, truth in _entries_with_truth(entries):
+        config = entry.dataset.manifest["config"]
+        label = estimator_label(entry.estimator, entry.manifest.get("config") or {})
+        rows += calibration.calibration_rows(label, motion_label(config), config["sigma_deg"],
+                                             entry.estimates, truth)
+    return pd.DataFrame(rows, columns=calibration.COLUMNS).sort_values(
+        ["estimator", "motion"], kind="stable").reset_index(drop=True)
+
+
+def write_calibration_table(entries, tables_dir, name: str) -> list[Path]:
+    """Write ``<name>.csv`` and ``<name>.md``: the calibration table of the runs ``entries``
+    (none without a simulated dataset)."""
+    table = calibration_table(entries)
+    if table.empty:
+        return []
+    cells = calibration.shown_cells(table)
+    notes = ("By cell (true range at the last bearing; manoeuvres made over the observation; "
+             "`p_manoeuvre`):\n\n" + markdown_table(cells)) if len(cells) else ""
+    return write_table(tables_dir, name, "Bearings-only TMA of targets that move like ships: "
+                       "are the ok answers' errors honest?", calibration.INTRO, table,
+                       calibration.shown_rows(table), float_format="%.6g", notes=notes)
+
+
 def shown_table(table: pd.DataFrame) -> pd.DataFrame:
     shown = {"estimator": table["estimator"], "motion": table["motion"],
              "sigma (deg)": table["sigma_deg"].map("{:g}".format), "N": table["n_tracks"]}
@@ -216,8 +247,8 @@ def _plot(table: pd.DataFrame, detections: pd.DataFrame, path: Path):
 
 def write_manoeuvre_table(entries, tables_dir, name: str) -> list[Path]:
     """Write ``<name>.csv``, ``<name>.md`` and ``<name>.png`` (and the detection rates as
-    ``<name>_detection.csv``) from the runs ``entries`` of simulated datasets; none without
-    one."""
+    ``<name>_detection.csv``, the calibration table as ``<name>-calibration.csv`` and
+    ``.md``) from the runs ``entries`` of simulated datasets; none without one."""
     table, detections = manoeuvre_tables(entries)
     if table.empty:
         return []
@@ -234,9 +265,13 @@ def write_manoeuvre_table(entries, tables_dir, name: str) -> list[Path]:
         detection_md = ("Detection rate on the manoeuvring targets by manoeuvre size:\n\n"
                         + markdown_table(shown[["estimator", "motion", "|course change| (deg)",
                                                 "n", "detected %"]]))
+    calibrated = write_calibration_table(entries, tables_dir, f"{name}-calibration")
+    if calibrated:
+        detection_md += (f"\nWhether the ok tracks' errors are honest, per quantity and by cell "
+                         f"(range now, manoeuvres made, p_manoeuvre): `{calibrated[1].name}`.\n")
     paths = write_table(tables_dir, name, "Bearings-only TMA of targets that move like ships",
                         INTRO, table, shown_table(table), float_format="%.6g",
                         notes=detection_md)
     paths.append(tables_dir / f"{name}.png")
     _plot(table, detections, paths[-1])
-    return paths + extra
+    return paths + extra + calibrated

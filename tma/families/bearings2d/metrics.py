@@ -187,7 +187,8 @@ def crlb_now(log, truth: pd.DataFrame) -> pd.DataFrame:
 
 def errors_now(estimates: pd.DataFrame, truth: pd.DataFrame) -> pd.DataFrame:
     """Per track the absolute errors at its last bearing: ``range_err_m``,
-    ``bearing_err_deg``, ``course_err_deg`` (wrapped), ``speed_err_m_s``."""
+    ``bearing_err_deg``, ``course_err_deg`` (wrapped), ``speed_err_m_s``; and the true range
+    then, ``range_true_m``."""
     df = _with_truth(estimates, truth)
     est, tru = _now(df)
     return pd.DataFrame({
@@ -196,6 +197,7 @@ def errors_now(estimates: pd.DataFrame, truth: pd.DataFrame) -> pd.DataFrame:
         "bearing_err_deg": wrap_to_180(np.rad2deg(est[1] - tru[1])),
         "course_err_deg": wrap_to_180(np.rad2deg(est[2] - tru[2])),
         "speed_err_m_s": est[3] - tru[3],
+        "range_true_m": tru[0],
     })
 
 

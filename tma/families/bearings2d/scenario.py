@@ -21,8 +21,9 @@ accel_psd_m2_s3``: 0 for constant velocity) unless the targets manoeuvre or
 ``target.declared`` is false: estimators then treat it as a recording. Targets that move
 (``target.moving``) have as truth their state at the last bearing: ``x0_m``... ``vy_m_s``
 are the straight line through it, ``course_deg``, ``speed_m_s`` their values then, and the
-truth adds ``manoeuvring`` and the last manoeuvre's ``manoeuvre_start_s``,
-``manoeuvre_end_s``, ``course_change_deg`` (signed, > 0 right) and ``speed_change_rel``.
+truth adds ``manoeuvring``, the last manoeuvre's ``manoeuvre_start_s``,
+``manoeuvre_end_s``, ``course_change_deg`` (signed, > 0 right) and ``speed_change_rel``, and
+``n_manoeuvres``, how many started within the observation.
 """
 
 from dataclasses import dataclass

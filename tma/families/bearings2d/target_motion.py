@@ -221,7 +221,8 @@ def wander(q, t, n, rng):
 def target_paths(cfg: TargetConfig, x0, y0, course0, speed0, t, manoeuvre_rng, wander_rng):
     """Positions (n, K) of the targets at the bearing times ``t`` and their velocity at the
     last one (n, 2), and per target its last manoeuvre (start, end s; turn deg, speed
-    factor; NaN where none)."""
+    factor; NaN where none) and ``n_manoeuvres``, how many manoeuvres started within the
+    observation (one delayed past its end by the one before is not counted)."""
     n = x0.size
     duration = float(t[-1] - t[0])
     plan = manoeuvre_plan(cfg.manoeuvres, duration, speed0, manoeuvre_rng)
@@ -261,7 +262,10 @@ def target_paths(cfg: TargetConfig, x0, y0, course0, speed0, t, manoeuvre_rng, w
     last_end = last_start + np.maximum(of("turn_s"), of("dv_s"))
     before = np.arange(plan["dv"].shape[0])[:, None] < j
     speed_before = speed0 + np.sum(np.where(before, plan["dv"], 0.0), axis=0)
+    # (read from the plan: no draw added, every other column as before)
+    started = np.where(plan["manoeuvres"], np.sum(plan["start"] <= t[-1], axis=0), 0)
     last = {"manoeuvre_start_s": last_start, "manoeuvre_end_s": last_end,
             "course_change_deg": np.where(on, np.rad2deg(of("turn")), np.nan),
-            "speed_change_rel": np.where(on, of("dv") / speed_before, np.nan)}
+            "speed_change_rel": np.where(on, of("dv") / speed_before, np.nan),
+            "n_manoeuvres": started.astype(np.int64)}
     return x, y, v_end, last

@@ -1,0 +1,264 @@
+"""Whether the one-sigma errors of ``ok`` answers are honest both ways (neither too narrow
+nor too wide), per quantity a user reads and where it matters: the calibration table of the
+manoeuvre experiment (``manoeuvre_table.write_calibration_table``; issue 36, item 2).
+
+Over the ``ok`` tracks of one estimator on one dataset, in the cell ``all`` and in cells:
+
+- per quantity at the last bearing (range, course, speed): z = (estimate - truth) / the
+  stated sd (the course error wrapped to [-180, 180) deg), and the shares with |z| <= 1 and
+  |z| <= 2: 68.3 and 95.4 % for honest Gaussian errors; the targets 60-76 % and 92-98 %
+  (``WITHIN_TARGETS``);
+- the 4D consistency: the share whose NEES (theta_hat - theta)^T Sigma^-1 (theta_hat - theta)
+  lies at or below the chi-square(4) 95 % point (target 88-98 %, ``CONSISTENT_TARGET``), and
+  the mean NEES beside the central 95 % interval of the mean of N chi-square(4) draws
+  (``tma.maths.stats.chi2_mean_interval``): below it the errors are too wide, above it too
+  narrow.
+
+The cells (``cells``): the target's true range at the last bearing (< 15, 15-30, > 30 km);
+the manoeuvres it made over the observation (truth ``n_manoeuvres``: 0, 1, 2, 3+; simulated
+targets that move); and the posterior probability of a manoeuvre the answer states
+(``p_manoeuvre``: < 0.5, 0.5-0.99, > 0.99; ``lm`` with manoeuvres in its prior). A cell
+without the column its split needs is absent, one without tracks left out. Cells with at
+least ``GRADED_MIN_OK`` ``ok`` tracks are graded: their consistency against its target, and
+in the cell ``all`` (the whole row) the per-quantity shares too; ``outside`` names the
+figures of a graded cell that miss their targets. Shares come with 95 % Wilson intervals.
+"""
+
+import numpy as np
+import pandas as pd
+
+from tma.families.bearings2d.metrics import NEES_95, THETA, errors_now, normalised_error
+from tma.maths.stats import chi2_mean_interval, wilson_interval
+
+# quantity: (error column of ``errors_now``, the estimate's stated one-sigma error)
+QUANTITIES = {"range": ("range_err_m", "range_sd_m"),
+              "course": ("course_err_deg", "course_sd_deg"),
+              "speed": ("speed_err_m_s", "speed_sd_m_s")}
+WITHIN_TARGETS = {1: (0.60, 0.76), 2: (0.92, 0.98)}  # |z| <= k sd: honest 68.3 %, 95.4 %
+CONSISTENT_TARGET = (0.88, 0.98)  # NEES <= chi-square(4) 95 % point: honest 95 %
+GRADED_MIN_OK = 100  # ok tracks a cell needs to be graded
+RANGE_EDGES_KM = (15.0, 30.0)
+P_MANOEUVRE_EDGES = (0.5, 0.99)
+MANOEUVRES_MAX = 3  # the last cell of manoeuvres made is this many or more
+NEES_DOF = 4
+
+ROW_KEYS = ["estimator", "motion", "sigma_deg"]
+COLUMNS = [
+    *ROW_KEYS, "cell_group", "cell", "n_tracks", "n_ok", "graded",
+    *[f"{q}_within_{k}sd{s}" for q in QUANTITIES for k in WITHIN_TARGETS
+      for s in ("", "_lo", "_hi")],
+    "consistent", "consistent_lo", "consistent_hi", "mean_nees", "mean_nees_lo",
+    "mean_nees_hi", "outside",
+]
+
+
+def track_calibration(estimates: pd.DataFrame, truth: pd.DataFrame) -> pd.DataFrame:
+    """Per track of ``estimates``: ``status``, ``range_z``, ``course_z``, ``speed_z``
+    (estimate - truth at the last bearing over the stated sd), ``nees`` (NaN where the
+    estimate has none), ``range_true_m``, and ``n_manoeuvres`` (where the truth has it) and
+    ``p_manoeuvre`` (where the estimates have it)."""
+    errors = errors_now(estimates, truth)  # (checks that the truth holds every track)
+    out = pd.DataFrame({"track_id": errors["track_id"],
+                        "status": estimates["status"].to_numpy()})
+    for q, (err, sd) in QUANTITIES.items():
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out[f"{q}_z"] = errors[err].to_numpy() / estimates[sd].to_numpy(dtype=float)
+    merged = estimates.merge(truth[["track_id", *THETA]], on="track_id", how="left",
+                             suffixes=("", "_true"))
+    out["nees"] = normalised_error(merged)
+    out["range_true_m"] = errors["range_true_m"].to_numpy()
+    if "n_manoeuvres" in truth:
+        out["n_manoeuvres"] = merged["track_id"].map(
+            truth.set_index("track_id")["n_manoeuvres"]).to_numpy()
+    if "p_manoeuvre" in estimates:
+        out["p_manoeuvre"] = estimates["p_manoeuvre"].to_numpy(dtype=float)
+    return out
+
+
+def _share(k, n, name) -> dict:
+    lo, hi = wilson_interval(k, n)
+    return {name: k / n if n else np.nan, f"{name}_lo": float(lo), f"{name}_hi": float(hi)}
+
+
+def within_shares(z, name: str) -> dict:
+    """``<name>_within_1sd`` and ``_2sd`` (each with ``_lo``, ``_hi``): the shares of the
+    finite ``z`` with |z| <= 1 and <= 2, with 95 % Wilson intervals."""
+    z = np.abs(np.asarray(z, dtype=float))
+    z = z[np.isfinite(z)]
+    row = {}
+    for k in WITHIN_TARGETS:
+        row.update(_share(int(np.sum(z <= k)), z.size, f"{name}_within_{k}sd"))
+    return row
+
+
+def nees_figures(nees) -> dict:
+    """Over the finite ``nees``: ``consistent`` (the share at or below the chi-square(4)
+    95 % point, with its Wilson interval) and ``mean_nees`` with ``mean_nees_lo``,
+    ``mean_nees_hi``, where the mean of that many chi-square(4) draws lies 95 % of the
+    time."""
+    nees = np.asarray(nees, dtype=float)
+    nees = nees[np.isfinite(nees)]
+    lo, hi = chi2_mean_interval(nees.size, NEES_DOF)
+    return {**_share(int(np.sum(nees <= NEES_95)), nees.size, "consistent"),
+            "mean_nees": float(nees.mean()) if nees.size else np.nan,
+            "mean_nees_lo": float(lo), "mean_nees_hi": float(hi)}
+
+
+def _three_bins(values, edges, labels):
+    """(label, mask) of ``values`` below ``edges[0]``, between the two edges (both
+    included) and above ``edges[1]``; a NaN in none."""
+    values = np.asarray(values, dtype=float)
+    (a, b), (below, between, above) = edges, labels
+    return [(below, values < a), (between, (values >= a) & (values <= b)), (above, values > b)]
+
+
+def cells(tracks: pd.DataFrame) -> list[tuple[str, str, np.ndarray]]:
+    """(group, cell, mask over ``tracks``) of every cell (module docstring): ``all``, then
+    by the true range now, the manoeuvres made and ``p_manoeuvre`` where those columns are
+    there."""
+    a, b = RANGE_EDGES_KM
+    out = [("all", "all", np.ones(len(tracks), dtype=bool))]
+    out += [("range_km", label, mask) for label, mask in _three_bins(
+        tracks["range_true_m"] / 1e3, RANGE_EDGES_KM, [f"<{a:g}", f"{a:g}-{b:g}", f">{b:g}"])]
+    if "n_manoeuvres" in tracks:
+        made = tracks["n_manoeuvres"].to_numpy()
+        out += [("manoeuvres", str(m), made == m) for m in range(MANOEUVRES_MAX)]
+        out.append(("manoeuvres", f"{MANOEUVRES_MAX}+", made >= MANOEUVRES_MAX))
+    if "p_manoeuvre" in tracks:
+        a, b = P_MANOEUVRE_EDGES
+        out += [("p_manoeuvre", label, mask) for label, mask in _three_bins(
+            tracks["p_manoeuvre"], P_MANOEUVRE_EDGES, [f"<{a:g}", f"{a:g}-{b:g}", f">{b:g}"])]
+    return out
+
+
+def cell_row(tracks: pd.DataFrame, mask) -> dict:
+    """The figures of one cell (``COLUMNS`` from ``n_tracks`` on, ``outside`` for the cell
+    ``all``) over the tracks ``mask`` selects, of which the ``ok`` ones count."""
+    mask = np.asarray(mask, dtype=bool)
+    ok = mask & (tracks["status"] == "ok").to_numpy()
+    row = {"n_tracks": int(mask.sum()), "n_ok": int(ok.sum()),
+           "graded": bool(ok.sum() >= GRADED_MIN_OK)}
+    for q in QUANTITIES:
+        row.update(within_shares(tracks[f"{q}_z"].to_numpy()[ok], q))
+    row.update(nees_figures(tracks["nees"].to_numpy()[ok]))
+    return row
+
+
+def outside_targets(row: dict, per_quantity: bool) -> list[str]:
+    """The figures of a graded cell ``row`` (``cell_row``) outside their targets, e.g.
+    ``"consistent 67.1 % < 88 %"``; with ``per_quantity``, the shares within 1 and 2 sd
+    too. None for a cell not graded."""
+    if not row["graded"]:
+        return []
+    checks = [("consistent", "consistent", CONSISTENT_TARGET)]
+    if per_quantity:
+        checks = [(f"{q}_within_{k}sd", f"{q} within {k} sd", WITHIN_TARGETS[k])
+                  for q in QUANTITIES for k in WITHIN_TARGETS] + checks
+    out = []
+    for key, name, (lo, hi) in checks:
+        share = row[key]
+        if share < lo or share > hi:
+            side, bound = ("<", lo) if share < lo else (">", hi)
+            out.append(f"{name} {_beside(100 * share, 100 * bound)} % {side} {100 * bound:g} %")
+    return out
+
+
+def _beside(value, bound) -> str:
+    """``value`` with one decimal, or as many more as tell it from ``bound`` (87.96 against
+    88, not 88.0)."""
+    for decimals in range(1, 6):
+        text = f"{value:.{decimals}f}"
+        if float(text) != bound:
+            return text
+    return f"{value:g}"
+
+
+def calibration_rows(label: str, motion: str, sigma_deg: float, estimates: pd.DataFrame,
+                     truth: pd.DataFrame) -> list[dict]:
+    """The table's rows (``COLUMNS``) of one run: one per cell with tracks."""
+    tracks = track_calibration(estimates, truth)
+    rows = []
+    for group, cell, mask in cells(tracks):
+        if not mask.any():
+            continue
+        row = {"estimator": label, "motion": motion, "sigma_deg": sigma_deg,
+               "cell_group": group, "cell": cell, **cell_row(tracks, mask)}
+        row["outside"] = "; ".join(outside_targets(row, per_quantity=group == "all"))
+        rows.append(row)
+    return rows
+
+
+# -- the Markdown ------------------------------------------------------------------------------
+
+INTRO = """Whether the one-sigma errors of `ok` answers are honest both ways (neither too narrow
+nor too wide), per quantity a user reads and where it matters
+(`tma/families/bearings2d/calibration.py`). Over the `ok` tracks of each estimator and target
+motion: per quantity at the last bearing (range, course, speed), z = (estimate - truth) /
+stated sd (course error wrapped), the share within 1 sd and within 2 sd (honest Gaussian
+errors: 68.3 and 95.4 %; targets 60-76 % and 92-98 %); the 4D consistency, the share whose
+NEES lies at or below the chi-square(4) 95 % point (honest: 95 %; target 88-98 %); and the
+mean NEES beside the interval where the mean of that many chi-square(4) draws lies 95 % of
+the time (low: errors too wide; high: too narrow). Cells: the true range at the last bearing,
+the manoeuvres the target made over the observation, and the probability of a manoeuvre the
+answer states (`p_manoeuvre`, `lm` with manoeuvres in its prior). A cell with at least 100
+`ok` tracks is graded (consistency, and for the whole row the per-quantity shares, against
+their targets); "outside" names what misses. N: tracks in the cell, ok: the `ok` ones (cells
+without `ok` tracks are in the CSV only, which has every number with 95 % Wilson
+intervals)."""
+
+GROUP_TITLES = {"all": "all", "range_km": "range {} km", "manoeuvres": "manoeuvres made: {}",
+                "p_manoeuvre": "p_manoeuvre {}"}
+
+
+def _pct(x) -> str:
+    return "-" if pd.isna(x) else f"{100 * x:.1f}"
+
+
+def _mean_nees(row) -> str:
+    mean, lo, hi = row["mean_nees"], row["mean_nees_lo"], row["mean_nees_hi"]
+    if pd.isna(mean):
+        return "-"
+    side = " low" if mean < lo else " high" if mean > hi else ""
+    return f"{mean:.3g} ({lo:.3g}-{hi:.3g}){side}"
+
+
+def _within(table, k) -> list[str]:
+    return [" / ".join(_pct(v) for v in row) for row in
+            table[[f"{q}_within_{k}sd" for q in QUANTITIES]].to_numpy()]
+
+
+def shown_rows(table: pd.DataFrame) -> pd.DataFrame:
+    """The Markdown's first table: the cell ``all`` of each estimator and motion."""
+    rows = table[table["cell_group"] == "all"]
+    return pd.DataFrame({
+        "estimator": rows["estimator"], "motion": rows["motion"], "N": rows["n_tracks"],
+        "ok": rows["n_ok"],
+        "within 1 sd %: range / course / speed": _within(rows, 1),
+        "within 2 sd %: range / course / speed": _within(rows, 2),
+        "consistent (ok) %": [f"{_pct(a)} ({_pct(b)}-{_pct(c)})" if pd.notna(a) else "-"
+                              for a, b, c in rows[["consistent", "consistent_lo",
+                                                   "consistent_hi"]].to_numpy()],
+        "mean NEES (95 % if honest)": [_mean_nees(r) for _, r in rows.iterrows()],
+        "outside the targets": [v or ("-" if not g else "none") for v, g in
+                                rows[["outside", "graded"]].to_numpy()],
+    })
+
+
+def shown_cells(table: pd.DataFrame) -> pd.DataFrame:
+    """The Markdown's second table: every other cell with ``ok`` tracks (the CSV has those
+    without too)."""
+    rows = table[(table["cell_group"] != "all") & (table["n_ok"] > 0)]
+    return pd.DataFrame({
+        "estimator": rows["estimator"], "motion": rows["motion"],
+        "cell": [GROUP_TITLES[g].format(c) for g, c in rows[["cell_group", "cell"]].to_numpy()],
+        "N": rows["n_tracks"], "ok": rows["n_ok"],
+        "graded (>= 100 ok)": rows["graded"].map({True: "yes", False: "no"}),
+        "consistent (ok) %": [f"{_pct(a)} ({_pct(b)}-{_pct(c)})" if pd.notna(a) else "-"
+                              for a, b, c in rows[["consistent", "consistent_lo",
+                                                   "consistent_hi"]].to_numpy()],
+        "mean NEES (95 % if honest)": [_mean_nees(r) for _, r in rows.iterrows()],
+        "within 1 / 2 sd %: range, course, speed": [
+            f"{a}; {b}" for a, b in zip(_within(rows, 1), _within(rows, 2), strict=True)],
+        "outside": [v or ("-" if not g else "none") for v, g in
+                    rows[["outside", "graded"]].to_numpy()],
+    })
