@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.errors import InputError
-from tma.families.bearings2d.manoeuvres import ManoeuvrePrior
+from tma.families.bearings2d.manoeuvre_prior import ManoeuvrePrior
 from tma.io.grid import epochs, scatter
 from tma.io.mcap_log import (
     COMPRESSION,

@@ -35,10 +35,27 @@ of the mixture; with lambda = 0 the mixture is the no-manoeuvre component alone:
 """
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
+from tma.families.bearings2d.manoeuvre_components import (  # noqa: F401 (component: tests)
+    REFINE_TOL_M,
+    _component_noise,
+    _extension,
+    _insert,
+    _laplace,
+    _logaddexp,
+    _pool,
+    _same_set,
+    component,
+)
+from tma.families.bearings2d.manoeuvre_prior import (  # noqa: F401 (the prior's home is there)
+    RECORDED_MANOEUVRES,
+    ManoeuvrePrior,
+    cell_priors,
+    manoeuvre_options,
+    window_s,
+)
 from tma.families.bearings2d.mixture_tails import tail_points, tail_scale
 from tma.families.bearings2d.ncv import (
     MAX_PASSES,
@@ -48,291 +65,22 @@ from tma.families.bearings2d.ncv import (
     PRIOR_SPEED_M_S,
     _filter,
     _fit,
-    _predict,
-    filter_on,
     finish_track,
     in_units,
     smooth,
     start_track,
 )
-from tma.families.bearings2d.shocks import (
-    backward_pass,
-    shift_posterior,
-    shock_posterior,
-    state_with_shock,
-)
+from tma.families.bearings2d.shocks import backward_pass, shock_posterior, state_with_shock
 from tma.runtime.jit import njit
 
-# manoeuvres assumed of a recording's targets (which declares none), measured from the AIS
-# positions of the vessels underway in two recordings, the Solent and New York Harbor
-# (tests/data/ais/motion_stats.py, docs/manoeuvres.md): 9.6 an hour (turns over 15 deg,
-# speed changes over 25 %, stops and starts), velocity changes of 4.6 m/s RMS per axis,
-# durations 88 / 119 / 181 s (quartiles)
-RECORDED_RATE_PER_H = 10.0
-RECORDED_DV_M_S = 4.6
-RECORDED_DURATIONS_S = (75.0, 120.0, 230.0)
 MAX_LEVEL = 6  # manoeuvres in one component at most
 MIN_LEVELS = 3  # levels searched whatever their mass (two manoeuvres may explain what one
 # cannot: a level's mass says little of the next one's)
 BASES = 3  # components of a level the next level extends
 KEEP = 64  # extensions of a level kept in the mixture
-SIZES = (0.5, 1.0, 2.0)  # a manoeuvre's velocity change: these times the prior's sd, alike
 REFINE = 2  # of which refined to their MAP trajectory
 LOG_STOP = math.log(1e-3)  # a level holding less of the mixture's mass ends the search
 LOG_SCREEN = math.log(1e-2)  # an extension screened below this share of the mass is left out
-REFINE_TOL_M = 0.1  # a refinement stops when no position moves more than this (m)
-WINDOW_MANOEUVRES = 3.0  # the answer rests on the span of this many manoeuvres (expected)...
-MIN_WINDOW_S = 1200.0  # ...or of this much time (s), whichever is longer
-
-
-@dataclass(frozen=True)
-class ManoeuvrePrior:
-    """What a target's manoeuvres are believed to be, before the bearings (module docstring).
-
-    ``rate_per_h``: manoeuvres per hour (Poisson); ``dv_m_s``: the velocity change's sd per
-    axis (m/s); ``durations_s``: the durations averaged over (equal prior weights);
-    ``step_s``: the grid of candidate start times (s)."""
-
-    rate_per_h: float
-    dv_m_s: float
-    durations_s: tuple[float, ...]
-    step_s: float = 60.0
-
-    @property
-    def rate_per_s(self) -> float:
-        return self.rate_per_h / 3600.0
-
-    def scaled(self, factor: float) -> "ManoeuvrePrior":
-        """The same prior with ``factor`` times the rate."""
-        return ManoeuvrePrior(self.rate_per_h * factor, self.dv_m_s, self.durations_s,
-                              self.step_s)
-
-
-RECORDED_MANOEUVRES = ManoeuvrePrior(RECORDED_RATE_PER_H, RECORDED_DV_M_S,
-                                     RECORDED_DURATIONS_S)
-
-
-def window_s(prior: ManoeuvrePrior) -> float:
-    """How far back (s) an answer under ``prior`` rests on: the span in which the target is
-    expected to make ``WINDOW_MANOEUVRES`` manoeuvres, at least ``MIN_WINDOW_S``. Earlier
-    bearings would say little more of the target now (its manoeuvres since cut the
-    trajectory into legs the bearings tie loosely) and would need more manoeuvres than the
-    search weighs; the answer says from when it holds (``leg_start_s``)."""
-    return max(MIN_WINDOW_S, WINDOW_MANOEUVRES / prior.rate_per_s if prior.rate_per_h > 0
-               else np.inf)
-
-
-def start_cells(t_first, t_last, step_s):
-    """Cells of ``step_s`` over each track's window: their bounds (n, J) each, clipped to the
-    window (J cells over the longest)."""
-    span = float(np.max(t_last - t_first)) if np.size(t_first) else 0.0
-    J = max(int(math.ceil(span / step_s - 1e-9)), 1)
-    lo = t_first[:, None] + step_s * np.arange(J)
-    hi = np.minimum(lo + step_s, t_last[:, None])
-    return lo, np.maximum(hi, lo)
-
-
-def manoeuvre_options(prior: ManoeuvrePrior):
-    """The manoeuvres a cell may hold, equally likely: every duration of ``prior`` with every
-    size, its velocity change's sd per axis ``prior.dv_m_s`` times ``SIZES`` (turns of 20
-    to 120 deg change the velocity by 0.35 to 1.7 times the speed: a velocity change is
-    heavier-tailed than one Gaussian); durations (s) and sds (m/s), (O,) each."""
-    D = np.asarray(prior.durations_s, dtype=float)
-    sizes = prior.dv_m_s * np.asarray(SIZES)
-    return np.repeat(D, sizes.size), np.tile(sizes, D.size)
-
-
-def cell_priors(prior: ManoeuvrePrior, t, first, last):
-    """Per track and cell (n, J): the manoeuvre's start (the cell's centre, s), the first epoch
-    after it (where a filter from the start takes it in) and the prior probability of no
-    manoeuvre in it, exp(-lambda cell) (1: a cell outside the window);
-    per track, cell and duration D (n, J, D): the epoch its shock is screened at (the first
-    at or after the burst's centre, at most the track's last; -1: a cell outside the window)
-    and that shock (n, J, D, 3: per axis, m^2, m^2/s and m^2/s^2): a burst of density
-    s^2 / D over D changes the velocity by N(0, s^2) and puts the position at its end
-    N(0, s^2 D^2 / 12) off that of a sudden change at its centre, uncorrelated (a burst
-    under way at the last bearing: as far as it went)."""
-    a, b = start_cells(t[first], t[last], prior.step_s)
-    tau = 0.5 * (a + b)
-    inside = (b > a) & (last > first)[:, None]
-    D, dv = manoeuvre_options(prior)
-    seen = np.clip((t[last][:, None, None] - tau[:, :, None]) / D, 0.0, 1.0)  # (n, J, D)
-    centre = tau[:, :, None] + 0.5 * seen * D
-    epoch = np.clip(np.searchsorted(t, centre), (first + 1)[:, None, None],
-                    last[:, None, None])
-    # the shock at the centre, carried to that epoch (x' = x + T' v: the same for any grid
-    # of epochs, bearings or none, between them)
-    lag = t[epoch] - centre
-    pp, vv = (dv**2 * seen) * (seen * D) ** 2 / 12.0, dv**2 * seen
-    shock = np.stack([pp + lag * lag * vv, lag * vv, vv], axis=-1)
-    after = np.clip(np.searchsorted(t, tau, side="right"), (first + 1)[:, None],
-                    last[:, None]).astype(np.int64)
-    end = np.clip(np.searchsorted(t, tau[:, :, None] + D, side="left"), after[:, :, None],
-                  last[:, None, None]).astype(np.int64)
-    return (tau, after, end, np.where(inside, np.exp(-prior.rate_per_s * (b - a)), 1.0),
-            np.where(inside[..., None], epoch, -1).astype(np.int64), shock)
-
-
-@njit(error_model="numpy")
-def _component_noise(t, lo, hi, q, taus, durations, burst, cells, count, Q):
-    """The process noise of a component: white acceleration ``q`` on every step plus, for
-    each of its ``count`` manoeuvres (``cells``: cell * D + duration), a burst of density
-    ``burst[d]`` over [taus[cell], taus[cell] + durations[d]], each step taking its share
-    (units of s^2)."""
-    D = durations.size
-    for j in range(3):
-        Q[lo, j] = 0.0
-    for k in range(lo + 1, hi + 1):
-        ta, tb = t[k - 1], t[k]
-        extra = 0.0
-        for m in range(count):
-            c, d = cells[m] // D, cells[m] % D
-            extra += burst[d] * max(min(tb, taus[c] + durations[d]) - max(ta, taus[c]), 0.0)
-        T = tb - ta
-        lam = q + extra / T
-        Q[k, 0] = lam * T * T * T / 3.0
-        Q[k, 1] = lam * T * T / 2.0
-        Q[k, 2] = lam * T
-
-
-@njit(error_model="numpy", depends=(_filter,))
-def _laplace(t, ox, oy, z, w, weighted, lo, hi, nom, Q, prior, p0, s2, mf, Pf, Pp, nu, S,
-             mean, cov):
-    """The Kalman filter linearised about ``nom``: writes the state at ``hi`` and its
-    covariance (units of s^2) and returns the log likelihood of the bearings,
-    -1/2 sum(nu^2 / (s^2 S) + log S), up to a constant common to every component."""
-    _filter(t, ox, oy, z, w, weighted, lo, hi, nom, Q, prior, p0, mf, Pf, Pp, nu, S)
-    loglik = 0.0
-    for k in range(lo, hi + 1):
-        if nu[k] == nu[k]:
-            loglik -= 0.5 * (nu[k] * nu[k] / (s2 * S[k]) + math.log(S[k]))
-    for a in range(4):
-        mean[a] = mf[hi, a]
-        for b in range(4):
-            cov[a, b] = Pf[hi, a, b]
-    return loglik
-
-
-@njit(error_model="numpy")
-def _logaddexp(a, b):
-    if a == -np.inf:
-        return b
-    if b == -np.inf:
-        return a
-    top = max(a, b)
-    return top + math.log(math.exp(a - top) + math.exp(b - top))
-
-
-@njit(error_model="numpy")
-def _same_set(cells, c1, n1, c2, n2):
-    """Whether components c1 and c2 hold the same manoeuvres (``cells`` kept sorted)."""
-    if n1 != n2:
-        return False
-    for m in range(n1):
-        if cells[c1, m] != cells[c2, m]:
-            return False
-    return True
-
-
-@njit(error_model="numpy", depends=(filter_on, _predict, shift_posterior))
-def _extension(t, ox, oy, z, w, weighted, k1, k2, hi, nom, Q, Q2, mf, Pf, Pp, g, G, W,
-               suffix, s2, mf2, Pf2, Pp2, nu, S, mean, cov):
-    """The log Bayes factor of a component extended by a burst over epochs k1..k2 (its
-    process noise ``Q2`` there; the base's ``Q`` elsewhere) against the base, exactly for the
-    bearings linearised about the base's trajectory ``nom``, and its state at ``hi`` (``mean``,
-    m and m/s; ``cov``, units of s^2): the base's filter (``mf``, ``Pf``, ``Pp``) is run again
-    over the burst alone, from its state at k1 - 1; the bearings after k2 come in through
-    the base's backward pass (``g``, ``G``, ``W``, ``shocks.backward_pass``) as a shift of
-    the predicted state at k2 + 1; ``suffix[k]``: the base's log likelihood of the bearings
-    k..hi. ``mf2``, ``Pf2``, ``Pp2``, ``nu``, ``S``: the filter's scratch."""
-    m, P = np.empty(4), np.empty((4, 4))
-    mp, Pn = np.empty(4), np.empty((4, 4))
-    for a in range(4):
-        m[a] = mf[k1 - 1, a]
-        for b in range(4):
-            P[a, b] = Pf[k1 - 1, a, b]
-    loglik = 0.0
-    filter_on(t, ox, oy, z, w, weighted, k1, k2, nom, Q2, m, P, mf2, Pf2, Pp2, nu, S)
-    for k in range(k1, k2 + 1):
-        if nu[k] == nu[k]:
-            loglik -= 0.5 * (nu[k] * nu[k] / (s2 * S[k]) + math.log(S[k]))
-    loglik -= suffix[k1] - suffix[k2 + 1]
-    if k2 == hi:
-        for a in range(4):
-            mean[a] = m[a]
-            for b in range(4):
-                cov[a, b] = P[a, b]
-        return loglik
-    # the predicted state at k2 + 1, the extension's against the base's
-    T = t[k2 + 1] - t[k2]
-    _predict(m, P, T, Q[k2 + 1], mp, Pn)
-    base_mean = np.empty(4)
-    base_mean[0] = mf[k2, 0] + T * mf[k2, 2]
-    base_mean[1] = mf[k2, 1] + T * mf[k2, 3]
-    base_mean[2], base_mean[3] = mf[k2, 2], mf[k2, 3]
-    inv_s = 1.0 / math.sqrt(s2)
-    d0, Delta = np.empty(4), np.empty((4, 4))
-    for a in range(4):
-        d0[a] = (mp[a] - base_mean[a]) * inv_s
-        for b in range(4):
-            Delta[a, b] = Pn[a, b] - Pp[k2 + 1, a, b]
-    A, rhs, dm, dc = np.empty((4, 4)), np.empty((4, 5)), np.empty(4), np.empty((4, 4))
-    loglik += shift_posterior(g[k2 + 1], G[k2 + 1], d0, Delta, A, rhs, dm, dc)
-    Wk = W[k2 + 1]
-    for a in range(4):
-        v = mf[hi, a]
-        for b in range(4):
-            v += Wk[a, b] * dm[b] / inv_s
-        mean[a] = v
-    for a in range(4):
-        for b in range(4):
-            v = Pf[hi, a, b]
-            for c in range(4):
-                for e in range(4):
-                    v += Wk[a, c] * dc[c, e] * Wk[b, e]
-            cov[a, b] = v
-    return loglik
-
-
-@njit(error_model="numpy")
-def _pool(mean, pcov, mass, lw, m, cov, count, mean_count):
-    """Add a component of log weight ``lw``, state ``m`` and covariance ``cov`` with
-    ``count`` manoeuvres to the pool of log mass ``mass``, mean ``mean`` and covariance
-    ``pcov`` (the moments of the two, merged; ``mean_count[0]``: its mean count); returns
-    the new log mass."""
-    if not mass > -np.inf:
-        for i in range(4):
-            mean[i] = m[i]
-            for j in range(4):
-                pcov[i, j] = cov[i, j]
-        mean_count[0] = count
-        return lw
-    new = _logaddexp(mass, lw)
-    a, b = math.exp(mass - new), math.exp(lw - new)
-    for i in range(4):
-        for j in range(4):
-            pcov[i, j] = (a * pcov[i, j] + b * cov[i, j]
-                          + a * b * (mean[i] - m[i]) * (mean[j] - m[j]))
-    for i in range(4):
-        mean[i] = a * mean[i] + b * m[i]
-    mean_count[0] = a * mean_count[0] + b * count
-    return new
-
-
-@njit(error_model="numpy")
-def _insert(cells, b, nb, code, row):
-    """Write into ``cells[row]`` the manoeuvres of component b (``nb``, sorted) with
-    ``code`` added in order."""
-    placed, mm = False, 0
-    for m in range(nb):
-        if not placed and code < cells[b, m]:
-            cells[row, mm] = code
-            mm += 1
-            placed = True
-        cells[row, mm] = cells[b, m]
-        mm += 1
-    if not placed:
-        cells[row, mm] = code
 
 
 @njit(error_model="numpy", depends=(_filter, _fit, finish_track, start_track, backward_pass,
@@ -665,41 +413,3 @@ def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_p
                    out["p_omitted"], out["n_manoeuvres"], *tail_points(), out["tail_scale"],
                    out["path_m"], out["log_evidence"])
     return in_units(out, sigma2, t[last], theta_cv)
-
-
-def component(t, own_x, own_y, measured_rad, theta_cv, levels, sigma_rad, start=None,
-              prior_state=None):
-    """One track's component under the process levels ``levels`` (K,: the density q_k of the
-    step into each epoch, m^2/s^3), refined to its MAP trajectory from the constant-velocity
-    ``theta_cv`` (4,) or the trajectory ``start`` (K, 4), with bearing noise ``sigma_rad``
-    and the weak prior about ``prior_state`` (4,; default: the start at the first epoch):
-    (log likelihood up to a constant that depends on sigma and the prior alone, state at the
-    last bearing (4,), its covariance (4, 4), the MAP trajectory (K, 4)). What
-    ``mixture_tracks`` computes for each component it refines, for tests and diagnosis."""
-    t = np.ascontiguousarray(t, dtype=float)
-    K = t.size
-    s2 = sigma_rad**2
-    nom = np.empty((K, 4))
-    nom[:, 0] = theta_cv[0] + theta_cv[2] * t
-    nom[:, 1] = theta_cv[1] + theta_cv[3] * t
-    nom[:, 2:] = theta_cv[2:]
-    if start is not None:
-        nom[:] = start
-    prior = np.array(nom[0] if prior_state is None else prior_state, dtype=float)
-    start_range = math.hypot(theta_cv[0] - own_x[0], theta_cv[1] - own_y[0])
-    p0 = np.array([max(PRIOR_RANGES * start_range, MIN_PRIOR_M) ** 2, PRIOR_SPEED_M_S**2]) / s2
-    T = np.diff(t, prepend=t[0])
-    lam = np.asarray(levels, dtype=float) / s2
-    Q = np.column_stack([lam * T**3 / 3.0, lam * T**2 / 2.0, lam * T])
-    Q[0] = 0.0
-    work = [np.empty((K, 4)), np.empty((K, 4, 4)), np.empty((K, 4, 4)), np.empty(K),
-            np.empty(K)]
-    mean, cov = np.empty(4), np.empty((4, 4))
-    ox, oy = np.ascontiguousarray(own_x, float), np.ascontiguousarray(own_y, float)
-    z = np.ascontiguousarray(measured_rad, float)
-    if _fit(t, ox, oy, z, np.empty(0), False, 0, K - 1, nom, Q, prior, p0, MAX_PASSES,
-            REFINE_TOL_M, *work, np.empty((K, 4)), np.empty((K, 4))) < 0:
-        return -np.inf, np.full(4, np.nan), np.full((4, 4), np.nan), nom
-    loglik = _laplace(t, ox, oy, z, np.empty(0), False, 0, K - 1, nom, Q, prior, p0, s2, *work,
-                      mean, cov)
-    return loglik, mean, cov * s2, nom

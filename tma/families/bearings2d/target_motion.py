@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.config import param, require
-from tma.families.bearings2d.manoeuvres import ManoeuvrePrior
+from tma.families.bearings2d.manoeuvre_prior import ManoeuvrePrior
 
 MANOEUVRE_STREAM, WANDER_STREAM = 2, 3  # spawn-key elements under the shard's (shard,)
 DURATIONS = 3  # a declared prior's durations: the means of the thirds of their distribution

@@ -18,7 +18,7 @@ from tma.estimator import Estimator, EstimatorConfig
 from tma.families.bearings2d import manoeuvres, ncv
 from tma.families.bearings2d.end_bearing import end_bearing
 from tma.families.bearings2d.log import BearingsLog
-from tma.families.bearings2d.manoeuvres import RECORDED_MANOEUVRES, ManoeuvrePrior
+from tma.families.bearings2d.manoeuvre_prior import RECORDED_MANOEUVRES, ManoeuvrePrior
 from tma.families.bearings2d.model import BearingTerms
 from tma.families.bearings2d.ncv import RECORDED_ACCEL_PSD
 from tma.families.bearings2d.status import (
