@@ -16,7 +16,9 @@ import numpy as np
 RECORDED_RATE_PER_H = 10.0
 RECORDED_DV_M_S = 4.6
 RECORDED_DURATIONS_S = (75.0, 120.0, 230.0)
-SIZES = (0.5, 1.0, 2.0)  # a manoeuvre's velocity change: these times the prior's sd, alike
+SIZES = (1.0,)  # a manoeuvre's velocity change: these times the prior's sd, alike (sizes of
+# 0.5, 1 and 2 times, for turns' heavier tails, were tried: they let a near target that turned
+# pass for a far one that runs, 140-190 km for 10 km, docs/manoeuvres.md)
 WINDOW_MANOEUVRES = 3.0  # the answer rests on the span of this many manoeuvres (expected)...
 MIN_WINDOW_S = 1200.0  # ...or of this much time (s), whichever is longer
 
@@ -70,9 +72,8 @@ def start_cells(t_first, t_last, step_s):
 
 def manoeuvre_options(prior: ManoeuvrePrior):
     """The manoeuvres a cell may hold, equally likely: every duration of ``prior`` with every
-    size, its velocity change's sd per axis ``prior.dv_m_s`` times ``SIZES`` (turns of 20
-    to 120 deg change the velocity by 0.35 to 1.7 times the speed: a velocity change is
-    heavier-tailed than one Gaussian); durations (s) and sds (m/s), (O,) each."""
+    size, its velocity change's sd per axis ``prior.dv_m_s`` times ``SIZES``; durations (s)
+    and sds (m/s), (O,) each."""
     D = np.asarray(prior.durations_s, dtype=float)
     sizes = prior.dv_m_s * np.asarray(SIZES)
     return np.repeat(D, sizes.size), np.tile(sizes, D.size)
