@@ -14,19 +14,23 @@ Inference: Bayesian model averaging over the manoeuvres the target made in the w
 is cut into cells of ``step_s`` seconds; a component is a set of manoeuvres, at most one per
 cell, each with one of the durations; its prior is the Poisson probability of exactly those.
 The components are found level by level (0, 1, 2, ... manoeuvres), each level extending the
-``BASES`` most probable components of the one below by one manoeuvre anywhere: every cell
-and duration at once, from one backward pass after the base's Kalman filter (``shocks.py``:
-the exact Bayes factor of the bearings linearised about the base's trajectory, and the
-state at the last bearing with it), so that a level costs a few filter passes whatever the
-number of cells. The ``KEEP`` most probable extensions of a level join the mixture, its
-``REFINE`` most probable are refined to their maximum a posteriori trajectory (``ncv._fit``:
-the iterated Kalman smoother) and linearised there (Laplace). The search goes deeper as long
-as a level holds more than ``STOP_MASS`` of the mixture's mass; what it leaves out is
-computed: the screened mass of the extensions not kept, and beyond the last level the tail
-of the levels' masses (geometric, at the ratio of the last two), as ``p_omitted``, the
-share of the posterior the answer does not hold (so an answer that leaves out much can be
-refused instead of stated). (Madigan and Raftery's Occam's window, JASA 89(428), 1994,
-with the window's omitted mass measured.)
+``BASES`` most probable components of the one below by one manoeuvre anywhere. Every cell and
+duration is screened at once, from one backward pass after the base's Kalman filter
+(``shocks.py``: the Bayes factor of the burst taken as a shock at its centre, and the state
+at the last bearing with it, for the bearings linearised about the base's trajectory), so
+that a level costs a few filter passes whatever the number of cells. The extensions that
+weigh (above ``LOG_SCREEN`` of the mixture's mass) are then evaluated exactly, the burst as
+it is (``manoeuvre_components._extension``: the base's filter run again over the burst
+alone, the bearings after it through the backward pass); the lighter ones are pooled into
+one Gaussian of their moments. The ``KEEP`` most probable extensions of a level join the
+mixture, its ``REFINE`` most probable are refined to their maximum a posteriori trajectory
+(``ncv._fit``: the iterated Kalman smoother) and linearised there (Laplace). The search goes
+at least ``MIN_LEVELS`` deep and on while a level holds more than ``LOG_STOP`` of the
+mixture's mass, up to ``MAX_LEVEL``; what it leaves out is computed: the extensions not
+kept, and beyond the last level the tail of the levels' masses (geometric, at the ratio of
+the last two), as ``p_omitted``, the share of the posterior the answer does not hold.
+(Madigan and Raftery's Occam's window, JASA 89(428), 1994, with the window's omitted mass
+measured.)
 
 The answer is the mixture's mean and covariance at the last bearing (within plus between
 components), widened by ``mixture_tails.tail_scale`` so that its 95 % ellipsoid holds 95 %
