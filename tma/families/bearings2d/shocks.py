@@ -99,94 +99,6 @@ def backward_pass(t, ox, oy, lo, hi, nom, Pp, nu, S, inv_s, g, G, W):
 
 
 @njit(error_model="numpy")
-def shock_posterior(g, G, d, A, rhs, mean, cov):
-    """The shock of covariance Delta (per axis ``d``) on a state of score ``g`` and
-    information ``G`` (``backward_pass``): returns the log Bayes factor (-inf where
-    I + G Delta is not positive, numerically) and writes the shock's posterior ``mean`` (4,;
-    in units of s: times s for metres) and ``cov`` (4, 4; units of s^2). ``A`` (4, 4),
-    ``rhs`` (4, 5): work arrays."""
-    for i in range(4):
-        for j in range(4):
-            # (G Delta)[i, j]; Delta = [[d_pp I, d_pv I], [d_pv I, d_vv I]]
-            if j < 2:
-                v = G[i, j] * d[0] + G[i, j + 2] * d[1]
-            else:
-                v = G[i, j - 2] * d[1] + G[i, j] * d[2]
-            A[i, j] = v + (1.0 if i == j else 0.0)
-            rhs[i, j] = 1.0 if i == j else 0.0
-        rhs[i, 4] = g[i]
-    logdet, sign = 0.0, 1.0  # LU with partial pivoting: A X = [I | g]
-    for c in range(4):
-        p, best = c, abs(A[c, c])
-        for r in range(c + 1, 4):
-            if abs(A[r, c]) > best:
-                p, best = r, abs(A[r, c])
-        if not best > 0.0:
-            return -np.inf
-        if p != c:
-            sign = -sign
-            for j in range(4):
-                A[c, j], A[p, j] = A[p, j], A[c, j]
-            for j in range(5):
-                rhs[c, j], rhs[p, j] = rhs[p, j], rhs[c, j]
-        if A[c, c] < 0.0:
-            sign = -sign
-        logdet += math.log(abs(A[c, c]))
-        for r in range(c + 1, 4):
-            f = A[r, c] / A[c, c]
-            for j in range(c, 4):
-                A[r, j] -= f * A[c, j]
-            for j in range(5):
-                rhs[r, j] -= f * rhs[c, j]
-    if sign < 0.0:
-        return -np.inf
-    for c in range(3, -1, -1):
-        for j in range(5):
-            v = rhs[c, j]
-            for m in range(c + 1, 4):
-                v -= A[c, m] * rhs[m, j]
-            rhs[c, j] = v / A[c, c]
-    # rhs = (I + G Delta)^-1 [I | g]; mean = Delta y, cov = Delta (I + G Delta)^-1
-    for j in range(5):
-        x0 = d[0] * rhs[0, j] + d[1] * rhs[2, j]
-        x1 = d[0] * rhs[1, j] + d[1] * rhs[3, j]
-        x2 = d[1] * rhs[0, j] + d[2] * rhs[2, j]
-        x3 = d[1] * rhs[1, j] + d[2] * rhs[3, j]
-        if j == 4:
-            mean[0], mean[1], mean[2], mean[3] = x0, x1, x2, x3
-        else:
-            cov[0, j], cov[1, j], cov[2, j], cov[3, j] = x0, x1, x2, x3
-    for i in range(4):
-        for j in range(i):
-            v = 0.5 * (cov[i, j] + cov[j, i])
-            cov[i, j] = v
-            cov[j, i] = v
-    quad = g[0] * mean[0] + g[1] * mean[1] + g[2] * mean[2] + g[3] * mean[3]
-    return -0.5 * logdet + 0.5 * quad
-
-
-@njit(error_model="numpy")
-def state_with_shock(m_hi, P_hi, Wk, mean, cov, s, out_mean, out_cov):
-    """The state at the last epoch given a shock at k: ``m_hi`` + ``Wk`` (s ``mean``) (m,
-    m/s) and ``P_hi`` + ``Wk`` ``cov`` ``Wk``^T (units of s^2)."""
-    for i in range(4):
-        v = m_hi[i]
-        for j in range(4):
-            v += Wk[i, j] * mean[j] * s
-        out_mean[i] = v
-    for i in range(4):
-        for j in range(4):
-            v = P_hi[i, j]
-            for a in range(4):
-                wa = Wk[i, a]
-                if wa == 0.0:
-                    continue
-                for b in range(4):
-                    v += wa * cov[a, b] * Wk[j, b]
-            out_cov[i, j] = v
-
-
-@njit(error_model="numpy")
 def shift_posterior(g, G, delta0, Delta, A, rhs, mean, cov):
     """A change of the predicted state's distribution from N(m, P) to N(m + ``delta0``,
     P + ``Delta``) (``Delta`` (4, 4) any symmetric matrix that keeps P + Delta positive,
@@ -259,3 +171,38 @@ def shift_posterior(g, G, delta0, Delta, A, rhs, mean, cov):
             cov[i, j] = v
             cov[j, i] = v
     return lin - 0.5 * logdet + 0.5 * quad
+
+
+@njit(error_model="numpy")
+def shock_posterior(g, G, d, A, rhs, mean, cov):
+    """The shock of covariance Delta (per axis ``d``) on a state of score ``g`` and
+    information ``G`` (``backward_pass``): returns the log Bayes factor (-inf where
+    I + G Delta is not positive, numerically) and writes the shock's posterior ``mean`` (4,;
+    in units of s: times s for metres) and ``cov`` (4, 4; units of s^2). ``A`` (4, 4),
+    ``rhs`` (4, 5): work arrays. (``shift_posterior`` with no mean shift.)"""
+    Delta = np.zeros((4, 4))
+    for a in range(2):  # Delta = [[d_pp I, d_pv I], [d_pv I, d_vv I]]
+        Delta[a, a], Delta[a, a + 2] = d[0], d[1]
+        Delta[a + 2, a], Delta[a + 2, a + 2] = d[1], d[2]
+    return shift_posterior(g, G, np.zeros(4), Delta, A, rhs, mean, cov)
+
+
+@njit(error_model="numpy")
+def state_with_shock(m_hi, P_hi, Wk, mean, cov, s, out_mean, out_cov):
+    """The state at the last epoch given a shock at k: ``m_hi`` + ``Wk`` (s ``mean``) (m,
+    m/s) and ``P_hi`` + ``Wk`` ``cov`` ``Wk``^T (units of s^2)."""
+    for i in range(4):
+        v = m_hi[i]
+        for j in range(4):
+            v += Wk[i, j] * mean[j] * s
+        out_mean[i] = v
+    for i in range(4):
+        for j in range(4):
+            v = P_hi[i, j]
+            for a in range(4):
+                wa = Wk[i, a]
+                if wa == 0.0:
+                    continue
+                for b in range(4):
+                    v += wa * cov[a, b] * Wk[j, b]
+            out_cov[i, j] = v
