@@ -82,7 +82,7 @@ MIN_LEVELS = 3  # levels searched whatever their mass (two manoeuvres may explai
 # cannot: a level's mass says little of the next one's)
 BASES = 3  # components of a level the next level extends
 KEEP = 64  # extensions of a level kept in the mixture
-REFINE = 2  # of which refined to their MAP trajectory
+REFINE = 3  # of which refined to their MAP trajectory (2: 90 % consistent where 3 gives 92 %)
 LOG_STOP = math.log(1e-3)  # a level holding less of the mixture's mass ends the search
 LOG_SCREEN = math.log(1e-2)  # an extension screened below this share of the mass is left out
 
