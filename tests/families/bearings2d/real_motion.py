@@ -274,7 +274,7 @@ def measured_prior(recordings) -> dict:
     ``manoeuvre_rate_per_h`` the sized manoeuvres (short trips at rest apart) per underway
     hour; ``manoeuvre_dv_m_s`` their velocity change's RMS per axis; ``manoeuvre_durations_s``
     the means of the thirds of their durations (as ``target_motion.declared_prior``
-    summarises a simulation's). ``manoeuvres.RECORDED_*`` and ``ncv.RECORDED_ACCEL_PSD`` are
+    summarises a simulation's). ``manoeuvre_prior.RECORDED_*`` and ``ncv.RECORDED_ACCEL_PSD`` are
     figures of this kind for both whole recordings pooled, rounded (``priors``' ``pooled``)."""
     ms = _stats_module()
     parts = []
@@ -314,7 +314,7 @@ def describe(f: dict) -> list[str]:
     which of ``TWO_SIDED``'s checks fail."""
     def pc(key):
         lo, hi = f[f"{key}_ci"]
-        return f"{f[key]:.0%} ({lo:.0%}-{hi:.0%})" if np.isfinite(f[key]) else "-"
+        return f"{f[key]:.1%} ({lo:.0%}-{hi:.0%})" if np.isfinite(f[key]) else "-"
 
     lo, hi = f["median_max_z_ci"]
     failed = [k for k, ok in two_sided(f).items() if not ok]
@@ -323,7 +323,7 @@ def describe(f: dict) -> list[str]:
         f"vessels): ok {pc('ok')}, ok or position_only {pc('ok_or_position_only')}",
         f"ok ({f['ok_rows']}): median largest |z| {f['median_max_z']:.2f} ({lo:.2f}-{hi:.2f});"
         f" beyond 5 sd {f['beyond_5_sd']}; all three within 3 sd {pc('within_3_sd')}",
-        *(f"  {q:6} within 1 sd {pc(f'{q}_within_1_sd'):17} within 2 sd "
+        *(f"  {q:6} within 1 sd {pc(f'{q}_within_1_sd'):19} within 2 sd "
           f"{pc(f'{q}_within_2_sd')}" for q in QUANTITIES),
         f"position_only: range within 2 sd {pc('position_only_range_within_2_sd')}, bearing "
         f"{pc('position_only_bearing_within_2_sd')}",
@@ -333,7 +333,7 @@ def describe(f: dict) -> list[str]:
 
 def prior_text(options: dict) -> str:
     """The prior an estimator ``options`` node sets (the recorded one where it sets none)."""
-    from tma.families.bearings2d.manoeuvres import RECORDED_MANOEUVRES as m
+    from tma.families.bearings2d.manoeuvre_prior import RECORDED_MANOEUVRES as m
     from tma.families.bearings2d.ncv import RECORDED_ACCEL_PSD
 
     scale = options.get("motion_prior_scale", 1.0)

@@ -188,7 +188,7 @@ def test_the_manoeuvre_prior_options():
     it on another): a recording's prior is real-ship motion, a simulation's its declared one,
     each part replaced where set; the rate and q, not the size or durations, are scaled by
     ``motion_prior_scale``; and the answer follows the prior it is given."""
-    from tma.families.bearings2d.manoeuvres import (
+    from tma.families.bearings2d.manoeuvre_prior import (
         RECORDED_DURATIONS_S,
         RECORDED_DV_M_S,
         RECORDED_RATE_PER_H,

@@ -76,12 +76,12 @@ class BearingsConfig(EstimatorConfig):
         "[0, 1000]")
     manoeuvre_dv_m_s: float | None = param(
         None, "a manoeuvre's velocity change, sd per axis (m/s), where the targets manoeuvre; "
-        "null: the log's declared one, else (a recording) manoeuvres.RECORDED_DV_M_S",
+        "null: the log's declared one, else (a recording) manoeuvre_prior.RECORDED_DV_M_S",
         "(0, 1000]")
     manoeuvre_durations_s: list[float] | None = param(
         None, "the durations a manoeuvre's velocity change is spread over (s, equal prior "
         "weights), where the targets manoeuvre; null: the log's declared ones, else (a "
-        "recording) manoeuvres.RECORDED_DURATIONS_S", each="(0, 86400]")
+        "recording) manoeuvre_prior.RECORDED_DURATIONS_S", each="(0, 86400]")
     motion_prior_scale: float = param(1.0, "the targets' assumed random acceleration and "
                                       "manoeuvre rate times this (1: as declared or assumed; "
                                       "to measure what a wrong prior does)", "(0, 1e6)")
