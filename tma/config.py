@@ -292,6 +292,13 @@ def _simple(tp) -> tuple[type, bool] | None:
     return (rest[0], len(rest) < len(args)) if len(rest) == 1 and rest[0] in SIMPLE else None
 
 
+def _listed(tp):
+    """The ``list[...]`` type of a field declared as one (or it or None); None otherwise."""
+    union = isinstance(tp, types.UnionType) or typing.get_origin(tp) is typing.Union
+    return next((a for a in (typing.get_args(tp) if union else (tp,))
+                 if typing.get_origin(a) is list), None)
+
+
 def _optional(f) -> bool:
     return f.type is typing.Any or "None" in str(f.type)
 
@@ -317,8 +324,8 @@ def allowed(f) -> str:
         text = SIMPLE[simple[0]]
         if "range" in meta and str(meta["range"]) != "any number":
             text += f" {_in(meta['range'])}"
-    elif typing.get_origin(f.type) is list:
-        text = "a list" + (" of numbers" if typing.get_args(f.type)[0] in (int, float) else "")
+    elif (listed := _listed(f.type)) is not None:
+        text = "a list" + (" of numbers" if typing.get_args(listed)[0] in (int, float) else "")
         text += f" each {_in(meta['each'])}" if "each" in meta else ""
     else:
         text = f"a {getattr(f.type, '__name__', f.type)}"

@@ -1,6 +1,8 @@
 """Manoeuvring targets (issue 20, items 2, 3 and 5): flagged by the trend test, re-solved
 on their last leg by ``last_leg``; estimators that cannot give honest errors say so."""
 
+import dataclasses
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -179,3 +181,49 @@ def test_motion_test_modes():
     log.accel_psd_m2_s3 = None
     assert np.isnan(_estimate(log, "lm", motion_test="off")["motion_p_value"]).all()
     assert np.isfinite(_estimate(log, "lm")["motion_p_value"]).all()
+
+
+def test_the_manoeuvre_prior_options():
+    """Every part of the manoeuvres' prior is an option (to fit it on one recording and test
+    it on another): a recording's prior is real-ship motion, a simulation's its declared one,
+    each part replaced where set; the rate and q, not the size or durations, are scaled by
+    ``motion_prior_scale``; and the answer follows the prior it is given."""
+    from tma.families.bearings2d.manoeuvre_prior import (
+        RECORDED_DURATIONS_S,
+        RECORDED_DV_M_S,
+        RECORDED_RATE_PER_H,
+        ManoeuvrePrior,
+    )
+    from tma.families.bearings2d.ncv import RECORDED_ACCEL_PSD
+    log, _ = _manoeuvring(n=20)
+    recording = dataclasses.replace(log, accel_psd_m2_s3=None, manoeuvres=None)
+    declared = dataclasses.replace(log, accel_psd_m2_s3=0.0,
+                                   manoeuvres=ManoeuvrePrior(3.0, 2.0, (60.0, 90.0)))
+    lm = build_estimator({"name": "lm"})
+    assert lm.motion(recording).accel_psd_m2_s3 == RECORDED_ACCEL_PSD
+    assert lm.motion(recording).manoeuvres == ManoeuvrePrior(
+        RECORDED_RATE_PER_H, RECORDED_DV_M_S, RECORDED_DURATIONS_S)
+    assert lm.motion(declared).manoeuvres == ManoeuvrePrior(3.0, 2.0, (60.0, 90.0))
+    set_ = build_estimator({"name": "lm", "accel_psd_m2_s3": 2e-4, "manoeuvre_rate_per_h": 7.0,
+                            "manoeuvre_dv_m_s": 3.5, "manoeuvre_durations_s": [50, 150],
+                            "motion_prior_scale": 0.5})
+    for which in (recording, declared):
+        motion = set_.motion(which)
+        assert motion.accel_psd_m2_s3 == pytest.approx(1e-4)
+        assert motion.manoeuvres == ManoeuvrePrior(3.5, 3.5, (50.0, 150.0))
+    # only the size set: the rest as the log declares; none declared: no manoeuvres
+    sized = build_estimator({"name": "lm", "manoeuvre_dv_m_s": 1.0})
+    assert sized.motion(declared).manoeuvres == ManoeuvrePrior(3.0, 1.0, (60.0, 90.0))
+    assert sized.motion(dataclasses.replace(declared, manoeuvres=None)).manoeuvres is None
+    # the answer follows the prior: the recorded one given as options is the default's
+    # answer, another size or other durations another answer
+    as_set = build_estimator({"name": "lm", "manoeuvre_dv_m_s": RECORDED_DV_M_S,
+                              "manoeuvre_durations_s": list(RECORDED_DURATIONS_S)})
+    a = lm.estimate(recording)
+    np.testing.assert_array_equal(a["range_sd_m"], as_set.estimate(recording)["range_sd_m"])
+    for other in ({"manoeuvre_dv_m_s": 2 * RECORDED_DV_M_S},
+                  {"manoeuvre_durations_s": [30.0, 600.0]}):
+        b = build_estimator({"name": "lm", **other}).estimate(recording)
+        both = np.isfinite(a["range_sd_m"]) & np.isfinite(b["range_sd_m"])
+        assert both.sum() >= 10, other
+        assert np.median(np.abs(b["range_sd_m"][both] / a["range_sd_m"][both] - 1)) > 0.01, other

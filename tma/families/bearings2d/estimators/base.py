@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tma.config import param
+from tma.config import param, require
 from tma.errors import InputError
 from tma.estimator import Estimator, EstimatorConfig
 from tma.families.bearings2d import manoeuvres, ncv
@@ -74,6 +74,14 @@ class BearingsConfig(EstimatorConfig):
         None, "the targets' manoeuvres per hour (Poisson; 0: none); null: the log's declared "
         "ones, else (a recording) real-ship manoeuvres, manoeuvres.RECORDED_MANOEUVRES",
         "[0, 1000]")
+    manoeuvre_dv_m_s: float | None = param(
+        None, "a manoeuvre's velocity change, sd per axis (m/s), where the targets manoeuvre; "
+        "null: the log's declared one, else (a recording) manoeuvre_prior.RECORDED_DV_M_S",
+        "(0, 1000]")
+    manoeuvre_durations_s: list[float] | None = param(
+        None, "the durations a manoeuvre's velocity change is spread over (s, equal prior "
+        "weights), where the targets manoeuvre; null: the log's declared ones, else (a "
+        "recording) manoeuvre_prior.RECORDED_DURATIONS_S", each="(0, 86400]")
     motion_prior_scale: float = param(1.0, "the targets' assumed random acceleration and "
                                       "manoeuvre rate times this (1: as declared or assumed; "
                                       "to measure what a wrong prior does)", "(0, 1e6)")
@@ -84,6 +92,12 @@ class BearingsConfig(EstimatorConfig):
                                 "(0, 1)")
     motion_terms: int = param(8, "cosines of the trend test's smooth bias (1: a constant bias)",
                               "[1, 64]")
+
+    def __post_init__(self):
+        super().__post_init__()
+        require(self.manoeuvre_durations_s is None or len(self.manoeuvre_durations_s) > 0,
+                self.where, "manoeuvre_durations_s must be null or a list of one duration "
+                "(s) or more, got []")
 
 
 @dataclass(frozen=True)
@@ -196,8 +210,9 @@ class BearingsEstimator(Estimator):
 
     def motion(self, log: BearingsLog) -> TargetMotion:
         """The targets' motion the outputs assume: the random acceleration q (m^2/s^3) and
-        the manoeuvres' prior, as set, else as the log declares, else (a recording, which
-        declares nothing) real-ship motion; both scaled by ``motion_prior_scale``."""
+        the manoeuvres' prior (rate, velocity change, durations), each as set, else as the
+        log declares, else (a recording, which declares nothing) real-ship motion; q and the
+        rate scaled by ``motion_prior_scale``."""
         cfg = self.config
         recorded = log.accel_psd_m2_s3 is None
         q = cfg.accel_psd_m2_s3
@@ -207,6 +222,11 @@ class BearingsEstimator(Estimator):
         if cfg.manoeuvre_rate_per_h is not None:
             prior = dataclasses.replace(prior or RECORDED_MANOEUVRES,
                                         rate_per_h=cfg.manoeuvre_rate_per_h)
+        if prior is not None and cfg.manoeuvre_dv_m_s is not None:
+            prior = dataclasses.replace(prior, dv_m_s=cfg.manoeuvre_dv_m_s)
+        if prior is not None and cfg.manoeuvre_durations_s is not None:
+            prior = dataclasses.replace(prior,
+                                        durations_s=tuple(cfg.manoeuvre_durations_s))
         if prior is not None:
             prior = prior.scaled(cfg.motion_prior_scale)
         return TargetMotion(q * cfg.motion_prior_scale,
