@@ -82,8 +82,22 @@ def _shown(f: dict) -> dict:
             if not k.endswith("_ci")}
 
 
-@pytest.mark.parametrize("prior", ["pooled", "left out"])
-@pytest.mark.parametrize("recording", RECORDINGS)
+# Issue 36's two-sided checks do not all hold yet (figures of 2026-11-28, docs/manoeuvres.md):
+# the ok answers are two to three times too wide on real ships (median largest |z| 0.38-0.64),
+# and two checks fail besides. Strict: the day they hold, these fail until the marks go.
+TOO_WIDE = "median largest |z| below 1.0: the ok answers' errors are wider than needed"
+KNOWN = {
+    ("solent", "pooled"): TOO_WIDE,
+    ("solent", "left out"): TOO_WIDE + "; one harbour vessel 2.2 km away beyond 5 sd",
+    ("nyharbor", "pooled"): TOO_WIDE + "; range within 2 sd on 89.9 % (two turning "
+                                       "targets answered 16-30 % too near)",
+    ("nyharbor", "left out"): TOO_WIDE,
+}
+
+
+@pytest.mark.parametrize("recording, prior", [
+    pytest.param(r, p, marks=pytest.mark.xfail(strict=True, reason=KNOWN[r, p]))
+    for r in RECORDINGS for p in ("pooled", "left out")])
 def test_lm_is_honest_both_ways_on_real_ship_motion(tmp_path_factory, recording, prior):
     """Issue 36, item 5: every check of ``TWO_SIDED`` (the message names those that fail)."""
     f = _figures(tmp_path_factory, recording, prior)
