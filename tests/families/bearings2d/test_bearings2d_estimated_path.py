@@ -21,6 +21,7 @@ from tma.families.bearings2d import ncv
 from tma.families.bearings2d.estimated_path import COLUMNS, decimate
 from tma.families.bearings2d.estimators.lm import Config, LevenbergMarquardt
 from tma.families.bearings2d.log import BearingsLog
+from tma.families.bearings2d.manoeuvre_components import component
 from tma.families.bearings2d.map_outputs import (
     CHI2_2_P95,
     position_covariance,
@@ -242,8 +243,6 @@ def test_smoothed_covariances_are_the_batch_posterior():
                      np.array([sigma]), path_cov=True)
     path = out["path_m"][0]
     # the MAP velocities: from the positions' fit again (the kernel keeps positions only)
-    from tma.families.bearings2d.manoeuvres import component
-
     _, _, _, nom = component(t, ox, oy, z, theta[0], np.full(K, q), sigma)
     np.testing.assert_allclose(nom[:, :2], path, rtol=0, atol=0.05)
     H = np.zeros((4 * K, 4 * K))
