@@ -183,10 +183,10 @@ def _turning_log(n, seed, dt=4.0, duration_s=1200.0):
 
 def test_the_path_errors_cover_the_truth_along_the_track():
     """On 120 targets that turned, the truth lies within the 95 % ellipse of the kept
-    trajectory of the ``ok`` answers at 93-99 % of their epochs, early in the track as late
-    (the smoothed errors of the most probable trajectory alone: 92.7 %, 91.5 % over the
+    trajectory of the ``ok`` answers at 95-99 % of their epochs, early in the track as late
+    (the smoothed errors of the most probable trajectory alone: 93.5 %, 91.2 % over the
     first third, too narrow where the mixture is unsure when the target turned; widened to
-    the answer's covariance now, as ``estimated_path`` does: 97.2 %, 95.8 %); the drawn
+    the answer's covariance now, as ``estimated_path`` does: 97.5 %, 95.8 %); the drawn
     track lies on the first bearings' lines of sight."""
     log, X, Y = _turning_log(120, seed=2)
     out = LevenbergMarquardt(Config(initial_bearing_deg=None, path_points=200)).estimate(log)
@@ -206,8 +206,8 @@ def test_the_path_errors_cover_the_truth_along_the_track():
         z_first.append(_line_of_sight_z(log, i, k[:FIRST],
                                         kept[["x_m", "y_m"]].to_numpy()[:FIRST]))
     inside, early = np.concatenate(inside), np.concatenate(early)
-    assert 0.93 <= inside.mean() <= 0.99, inside.mean()
-    assert 0.93 <= inside[early].mean() <= 0.995, inside[early].mean()
+    assert 0.95 <= inside.mean() <= 0.99, inside.mean()
+    assert 0.94 <= inside[early].mean() <= 0.995, inside[early].mean()
     z_first = np.concatenate(z_first)
     assert np.sqrt(np.mean(z_first**2)) < 1.5 and np.abs(z_first).max() < 5
     # at the last bearing the trajectory's errors hold the answer's: none narrower

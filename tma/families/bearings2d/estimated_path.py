@@ -10,12 +10,12 @@ the smoothed ones given every bearing under that trajectory's own manoeuvres
 covariance at the last bearing exceeds that trajectory's there (``widening``: the
 mixture's spread over when and how the target manoeuvred, and its tails; about 1 without
 manoeuvres). The smoothed errors alone are too narrow where the mixture is unsure of the
-manoeuvres: for the 49 ``ok`` answers on 120 targets that each turned once
+manoeuvres: for the 48 ``ok`` answers on 120 targets that each turned once
 (``tests/families/bearings2d/test_bearings2d_estimated_path.py``), the truth lay within the
-95 % ellipse at 93 % of the drawn epochs with them, at 97 % widened (92 and 96 % over the
-first third of each path); for the 62 ``ok`` answers on 100 targets of the default scenario
-made to turn once at 5-20 km, at 72 % and 85 %: as often as within the answer's own
-ellipse now (85 %; 84 % over the first third).
+95 % ellipse at 93.5 % of the drawn epochs with them, at 97.5 % widened (91 and 96 % over
+the first third of each path); for the 65 ``ok`` answers on 100 targets of the default
+scenario made to turn once at 5-20 km, at 74 % and 86 % (86 % over the first third), about
+as often as within the answer's own ellipse now (89 %).
 
 A track of thousands of epochs keeps at most ``points`` of them: half evenly spread in time,
 the rest where the drawn line would otherwise cut a corner the most (the top-down split of
