@@ -184,9 +184,9 @@ def _turning_log(n, seed, dt=4.0, duration_s=1200.0):
 def test_the_path_errors_cover_the_truth_along_the_track():
     """On 120 targets that turned, the truth lies within the 95 % ellipse of the kept
     trajectory of the ``ok`` answers at 95-99 % of their epochs, early in the track as late
-    (the smoothed errors of the most probable trajectory alone: 93.5 %, 91.2 % over the
+    (the smoothed errors of the most probable trajectory alone: 93.7 %, 91.3 % over the
     first third, too narrow where the mixture is unsure when the target turned; widened to
-    the answer's covariance now, as ``estimated_path`` does: 97.5 %, 95.8 %); the drawn
+    the answer's covariance now, as ``estimated_path`` does: 97.6 %, 95.8 %); the drawn
     track lies on the first bearings' lines of sight."""
     log, X, Y = _turning_log(120, seed=2)
     out = LevenbergMarquardt(Config(initial_bearing_deg=None, path_points=200)).estimate(log)

@@ -12,10 +12,10 @@ mixture's spread over when and how the target manoeuvred, and its tails; about 1
 manoeuvres). The smoothed errors alone are too narrow where the mixture is unsure of the
 manoeuvres: for the 48 ``ok`` answers on 120 targets that each turned once
 (``tests/families/bearings2d/test_bearings2d_estimated_path.py``), the truth lay within the
-95 % ellipse at 93.5 % of the drawn epochs with them, at 97.5 % widened (91 and 96 % over
-the first third of each path); for the 65 ``ok`` answers on 100 targets of the default
-scenario made to turn once at 5-20 km, at 74 % and 86 % (86 % over the first third), about
-as often as within the answer's own ellipse now (89 %).
+95 % ellipse at 94 % of the drawn epochs with them, at 98 % widened (91 and 96 % over the
+first third of each path); for the 63 ``ok`` answers on 100 targets of the default scenario
+made to turn once at 5-20 km, at 75 % and 86 % (86 % over the first third), about as often
+as within the answer's own ellipse now (90 %).
 
 A track of thousands of epochs keeps at most ``points`` of them: half evenly spread in time,
 the rest where the drawn line would otherwise cut a corner the most (the top-down split of
