@@ -227,8 +227,10 @@ def test_results_show_no_number_that_is_not_an_answer(tmp_path):
 def test_plot_contact_of_a_leg_that_starts_late(tmp_path):
     """Issue 28, item 5: the plot of a contact ``last_leg`` solved on a late leg shows
     own-ship's whole path and every bearing, and the estimated track from its leg's start
-    (before: ValueError, operands could not be broadcast together). Legs are sought as under
-    a prior without manoeuvres (with them, only where the mixture fails the trend test)."""
+    (before: ValueError, operands could not be broadcast together): the trajectory its answer
+    rests on where the estimator kept it (a recording's ``path``), else the straight line of
+    its answer. Legs are sought as under a prior without manoeuvres (with them, only where
+    the mixture fails the trend test)."""
     from tests.families.bearings2d.test_bearings2d_answers import late_leg_log, line_data
 
     rec = tma.read_log(late_leg_log(tmp_path / "turns.csv"))
@@ -237,6 +239,8 @@ def test_plot_contact_of_a_leg_that_starts_late(tmp_path):
     assert len(late) >= 3, found[["label", "leg_start_s", "status"]]
     (log,) = rec.logs
     theta = found.tma.estimates.set_index("track_id")
+    paths = found.tma.tables["path"]
+    drawn_paths = 0
     for r in late.itertuples(index=False):
         e = theta.loc[r.track_id]
         figure = tma.plot_contact(found, rec, r.label)
@@ -245,19 +249,26 @@ def test_plot_contact_of_a_leg_that_starts_late(tmp_path):
         first = np.flatnonzero(np.isfinite(log.bearing_deg[row]))[0]
         t = log.t_s[np.isfinite(log.bearing_deg[row])]
         held = t[t >= r.leg_start_s]
-        if r.status == "position_only":  # where it is heading is not determined: now alone
+        kept = paths[paths["track_id"] == r.track_id]
+        if len(kept):  # the trajectory the answer rests on, from the leg's start to now
+            drawn_paths += 1
+            assert kept["t_s"].min() >= r.leg_start_s and kept["t_s"].max() == t[-1]
+            x, y = line_data(figure, "estimated track")  # (to now, where position_only)
+            assert x.size == len(kept) and t[0] < kept["t_s"].min()
+            start = kept[["x_m", "y_m"]].to_numpy()[0]
+        elif r.status == "position_only":  # its heading not determined: now alone
             x, y = line_data(figure, "estimated position now")
             assert x.size == 1
-            held = held[-1:]
+            start = np.array([e.x0_m + e.vx_m_s * t[-1], e.y0_m + e.vy_m_s * t[-1]])
         else:
             x, y = line_data(figure, "estimated track")
             assert x.size == held.size < t.size
-        np.testing.assert_allclose([x[0], y[0]], np.array([e.x0_m + e.vx_m_s * held[0],
-                                                           e.y0_m + e.vy_m_s * held[0]]) / 1e3,
-                                   rtol=1e-12)
+            start = np.array([e.x0_m + e.vx_m_s * held[0], e.y0_m + e.vy_m_s * held[0]])
+        np.testing.assert_allclose([x[0], y[0]], start / 1e3, rtol=1e-12)
         lines = line_data(figure, "bearings")  # from the contact's first bearing on
         np.testing.assert_allclose([lines[0][0], lines[1][0]],
                                    [log.own_x_m[first] / 1e3, log.own_y_m[first] / 1e3])
+    assert drawn_paths == len(late)  # every one shown has a motion fit here
 
 
 def _relative_frame(n=2):

@@ -119,9 +119,10 @@ class ResultsAccessor:
 
 
 def _drawn(results, recording, what: str, hook: str):
-    """``(hook, report rows, estimate rows, logs, recording)`` of a plot or map of
-    ``results`` over ``recording``; ValueError where the family has no such hook or the
-    recording is of another family."""
+    """``(hook, report rows, estimate rows, logs, recording, side tables)`` of a plot or map
+    of ``results`` over ``recording`` (the side tables: the estimator's other tables, their
+    rows of those tracks, e.g. ``path``, the trajectory each answer rests on); ValueError
+    where the family has no such hook or the recording is of another family."""
     from tma.families import NAMES, family
 
     held = _held(results, what)
@@ -139,23 +140,27 @@ def _drawn(results, recording, what: str, hook: str):
                          f"{data.family} one: pass the recording given to tma.estimate")
     rows = held.rows(results, what)
     report = held.report.iloc[rows].reset_index(drop=True)
+    sides = {name: held.table(name, results, what) for name in held.tables
+             if name != "estimates"}
     return (getattr(report_module, hook), report, held.table("estimates", results, what),
-            list(data.logs), data)
+            list(data.logs), data, sides)
 
 
 def plot_contact(results: pd.DataFrame, recording, label):
     """The matplotlib Figure of one contact (own-ship's whole path, every bearing's line, the
-    estimated track from where its solution holds and its 95 % ellipse now; no track where
-    the results show no estimate), as aggregate draws ``<table>-<label>.png``: ``results``
-    from ``estimate`` (or rows of them), ``recording`` what it was estimated from, ``label``
-    the contact's (ValueError naming the contacts when there is no such one). For the
-    families whose report module draws contacts (``plot_contact``: ``bearings2d``)."""
-    hook, report, estimates, logs, _ = _drawn(results, recording, "plot_contact",
-                                              "plot_contact")
+    estimated track from where its solution holds, the trajectory its answer rests on where
+    the estimator kept it (``results.tma.tables["path"]``), and its 95 % ellipse now; no
+    track where the results show no estimate), as aggregate draws ``<table>-<label>.png``:
+    ``results`` from ``estimate`` (or rows of them), ``recording`` what it was estimated
+    from, ``label`` the contact's (ValueError naming the contacts when there is no such
+    one). For the families whose report module draws contacts (``plot_contact``:
+    ``bearings2d``)."""
+    hook, report, estimates, logs, _, sides = _drawn(results, recording, "plot_contact",
+                                                     "plot_contact")
     if isinstance(label, bool) or not isinstance(label, str | int | np.integer):
         raise TypeError(f"label must be a contact's label (str) or track id (int), got "
                         f"{type(label).__name__}")
-    return hook(report, estimates, logs, label)
+    return hook(report, estimates, logs, label, sides)
 
 
 def write_map(results: pd.DataFrame, recording, path) -> Path:
@@ -165,7 +170,8 @@ def write_map(results: pd.DataFrame, recording, path) -> Path:
     module writes a map, ``write_map``: ``bearings2d``). Contacts whose results show no
     estimate are left out (a warning names them). A path that cannot be written raises the
     OSError the system gave (PermissionError, FileNotFoundError...), naming ``path``."""
-    hook, report, estimates, logs, data = _drawn(results, recording, "write_map", "write_map")
+    hook, report, estimates, logs, data, sides = _drawn(results, recording, "write_map",
+                                                        "write_map")
     if not isinstance(path, str | os.PathLike):
         raise TypeError(f"path must be a file path (str or pathlib.Path), got "
                         f"{type(path).__name__}")
@@ -177,7 +183,7 @@ def write_map(results: pd.DataFrame, recording, path) -> Path:
         raise FileNotFoundError(errno.ENOENT, f"cannot write the map to {path}: there is no "
                                 f"directory {path.parent}; create it or choose another path")
     try:
-        return hook(path, report, estimates, logs, _sources(data)[1])
+        return hook(path, report, estimates, logs, _sources(data)[1], sides)
     except OSError as exc:  # named by the temporary file it was writing: name the user's
         message = (f"cannot write the map to {path}: {exc.strerror or exc}; choose a path "
                    "you can write to")

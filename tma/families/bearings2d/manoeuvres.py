@@ -69,9 +69,11 @@ from tma.families.bearings2d.ncv import (
     PRIOR_SPEED_M_S,
     _filter,
     _fit,
+    blank_path,
     finish_track,
     in_units,
     smooth,
+    smoothed_positions,
     start_track,
 )
 from tma.families.bearings2d.shocks import backward_pass, shock_posterior, state_with_shock
@@ -89,11 +91,11 @@ LOG_SCREEN = math.log(1e-2)  # an extension screened below this share of the mas
 
 @njit(error_model="numpy", depends=(_filter, _fit, finish_track, start_track, backward_pass,
                                          shock_posterior, state_with_shock, tail_scale,
-                                         _extension))
+                                         _extension, blank_path, smoothed_positions))
 def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q, taus, starts,
                    ends, durations, burst, p_none, epochs, shocks, scale2, p0_pos, max_iter, tol_m,
                    state, P_last, e, cost, passes, p_manoeuvre, p_omitted, n_manoeuvres, u,
-                   u_q95, widen, path, evidence):
+                   u_q95, widen, path, evidence, path_cov):
     """Per track i the mixture of the module docstring: wander ``q`` (n,, units of s^2),
     each cell's manoeuvre start ``taus`` (n, J) and the epoch after it ``starts`` (n, J),
     each burst's last epoch ``ends`` (n, J, D),
@@ -106,7 +108,9 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
     component; the Gauss-Newton passes of the no-manoeuvre fit, -1: failed), the posterior
     probability of a manoeuvre in the window, the share of the posterior left out, the
     posterior mean number of manoeuvres, the tail factor ``widen`` and the most probable
-    refined component's positions ``path`` (n, K, 2; NaN outside the track)."""
+    refined component's positions ``path`` (n, K, 2; NaN outside the track) with, where
+    ``path_cov`` has epochs (n, K, 3), their smoothed covariances under that component's
+    manoeuvres (``ncv.smoothed_positions``, units of s^2)."""
     n, K = measured.shape
     J, D = taus.shape[1], durations.size
     C = 2 + MAX_LEVEL * KEEP
@@ -141,8 +145,7 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
         start_track(i, t, lo, hi, theta, noms[0], state, P_last, e)
         cost[i], p_manoeuvre[i], p_omitted[i], n_manoeuvres[i] = np.nan, np.nan, np.nan, np.nan
         widen[i] = 1.0
-        for k in range(K):
-            path[i, k, 0] = path[i, k, 1] = np.nan
+        blank_path(i, path, path_cov)
         s2 = scale2[i]
         p0[0] = p0_pos[i] * p0_pos[i] / s2
         p0[1] = PRIOR_SPEED_M_S * PRIOR_SPEED_M_S / s2
@@ -351,12 +354,12 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
                         if omitted > -np.inf else 0.0)
         # the innovations (trend test) and residuals: the most probable refined component's
         nom = noms[slot[best]]
-        for k in range(lo, hi + 1):
-            path[i, k, 0], path[i, k, 1] = nom[k, 0], nom[k, 1]
         _component_noise(t, lo, hi, q[i], taus[i], durations, burst[i], cells[best],
                          count[best], Q)
         finish_track(i, t, ox, oy, z, w, weighted, lo, hi, nom, Q, True, state, P_last, e,
                      cost, nu, S, S0, R, r, Rinv, none)
+        smoothed_positions(i, t, ox, oy, z, w, weighted, lo, hi, nom, Q, prior, p0, mf, Pf,
+                           Pp, nu, S, path, path_cov)
         for a in range(4):  # (finish_track wrote that component's own state)
             state[i, a] = m0[a]
             for b in range(4):
@@ -364,7 +367,7 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
 
 
 def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_psd,
-            prior: ManoeuvrePrior, sigma_rad):
+            prior: ManoeuvrePrior, sigma_rad, path_cov=False):
     """The state at each track's last bearing under NCV wander ``accel_psd`` (m^2/s^3, (n,)
     or scalar) and the manoeuvres of ``prior``, from the constant-velocity start
     ``theta_cv`` (n, 4), as ``ncv.smooth`` returns it (``state``, ``cov``, ``theta``,
@@ -373,7 +376,8 @@ def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_p
     ``p_omitted`` (the share of the posterior the mixture leaves out), ``n_manoeuvres``
     (their posterior mean number), ``tail_scale`` (the factor its covariance was widened
     by, ``mixture_tails.tail_scale``) and ``path_m`` (n, K, 2: the most probable
-    trajectory's positions, NaN outside the track).
+    trajectory's positions, NaN outside the track); with ``path_cov``, ``path_cov_m2`` (n, K,
+    3: their smoothed covariances xx, xy, yy in m^2 under that trajectory's manoeuvres).
 
     ``sigma_rad`` (n,): the bearing noise, NaN where unknown: then estimated as
     ``ncv.smooth`` does without manoeuvres."""
@@ -381,7 +385,7 @@ def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_p
     sigma = np.asarray(sigma_rad, dtype=float)
     if prior.rate_per_h == 0:  # no manoeuvres: the nearly-constant-velocity answer itself
         out = smooth(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_psd,
-                     sigma)
+                     sigma, path_cov=path_cov)
         return {**out, "p_manoeuvre": np.zeros(n), "tail_scale": np.ones(n)}
     known = np.isfinite(sigma)
     weighted = valid is not None
@@ -408,6 +412,8 @@ def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_p
            "passes": np.zeros(n, dtype=np.int64), "p_manoeuvre": np.empty(n),
            "p_omitted": np.empty(n), "n_manoeuvres": np.empty(n), "tail_scale": np.ones(n),
            "path_m": np.empty((n, K, 2)), "log_evidence": np.full(n, np.nan)}
+    if path_cov:
+        out["path_cov_m2"] = np.empty((n, K, 3))
     mixture_tracks(t, np.ascontiguousarray(own_x, float), np.ascontiguousarray(own_y, float),
                    np.ascontiguousarray(measured_rad, float), weight, weighted, first, last,
                    theta0, q / sigma2, taus, starts, ends, durations, burst, p_none, epochs,
@@ -415,5 +421,6 @@ def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_p
                    REFINE_TOL_M, out["state"], out["cov"],
                    out["innovations"], out["cost_rad2"], out["passes"], out["p_manoeuvre"],
                    out["p_omitted"], out["n_manoeuvres"], *tail_points(), out["tail_scale"],
-                   out["path_m"], out["log_evidence"])
+                   out["path_m"], out["log_evidence"],
+                   out.get("path_cov_m2", np.empty((n, 0, 3))))
     return in_units(out, sigma2, t[last], theta_cv)

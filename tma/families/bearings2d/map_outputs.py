@@ -1,19 +1,27 @@
 """Map outputs of a dataset without truth (an ingested log): per contact a PNG, and the
 estimated target tracks as an MCAP that Foxglove's Map panel shows.
 
-Both come from each track's estimate theta = (x0, y0, vx, vy) (position at the dataset's
-t = 0 and velocity; x east, y north, m) and its covariance (J^T J)^-1 sigma^2, with J^T J and
-sigma as the estimator stored them (``jtj_ij``, ``sigma_used_deg``). The position at time t
-is p(t) = p0 + v t, its covariance A(t) Sigma A(t)^T with A(t) = [I, t I]; the 95 % ellipse
-is {p : (p - p(t))^T C^-1 (p - p(t)) <= chi-square(2) 95 % point}.
+Both draw each track's estimated track from when its answer holds (``leg_start_s``) to its
+last bearing: the trajectory the answer rests on where the estimator kept it (the side
+table ``path``, ``estimated_path``: the smoothed path with its manoeuvres and its one-sigma
+errors; ``lm`` and ``last_leg`` on a recording), its last point the answer now; else (an
+estimator that assumes constant velocity, a track without a motion fit, an older run) the
+straight line of the estimate theta = (x0, y0, vx, vy) (position at the dataset's t = 0 and
+velocity; x east, y north, m) with covariance (J^T J)^-1 sigma^2, J^T J and sigma as the
+estimator stored them (``jtj_ij``, ``sigma_used_deg``): the position at time t is
+p(t) = p0 + v t, its covariance A(t) Sigma A(t)^T with A(t) = [I, t I]. The answer now's
+covariance is always the latter (the report's). A 95 % ellipse is
+{p : (p - p(t))^T C^-1 (p - p(t)) <= chi-square(2) 95 % point}.
 
 - ``tables/<name>-<label>.png``: own-ship path, every k-th bearing line from own-ship, the
-  estimated track over the contact's bearings and the 95 % ellipse at its last bearing, in
-  km east/north, the status in the title;
+  estimated track (along a kept trajectory with the 95 % ellipses of a few of its
+  positions) and the 95 % ellipse at its last bearing, in km east/north, the status in the
+  title;
 - ``tables/<name>.mcap`` (only with a geographic origin and UTC times): per track
-  ``foxglove.LocationFix`` on ``/tma/estimate/<label>`` at each of its bearing epochs
-  (estimated position, position covariance in ENU m^2, type KNOWN), own-ship on
-  ``/ownship/location_fix``; log times UTC.
+  ``foxglove.LocationFix`` on ``/tma/estimate/<label>`` at each epoch of its estimated track
+  (a kept trajectory's points, else its bearing epochs; estimated position, position
+  covariance in ENU m^2, type KNOWN), own-ship on ``/ownship/location_fix``; log times
+  UTC.
 
 ``<label>`` is the contact's shown label (``tma.sources.labels``: safe for file names,
 Markdown and topics, long ones shortened with a hash); the table's CSV keeps the id as
@@ -112,6 +120,44 @@ def position_covariance(theta_cov: np.ndarray, t_s) -> np.ndarray:
     return pp + t * (pv + np.swapaxes(pv, -1, -2)) + t * t * vv
 
 
+def path_rows(paths: pd.DataFrame | None) -> dict:
+    """The side table ``path`` (``estimated_path``) by track id: ``{id: (t_s (k,), xy (k,
+    2), cov (k, 2, 2))}``; empty without one (an older run, an estimator that keeps
+    none)."""
+    if paths is None or paths.empty:
+        return {}
+    out = {}
+    for track_id, rows in paths.groupby("track_id", sort=False):
+        sx, sy = rows["x_sd_m"].to_numpy(float), rows["y_sd_m"].to_numpy(float)
+        xy = sx * sy * rows["xy_corr"].to_numpy(float)
+        cov = np.stack([np.stack([sx * sx, xy], -1), np.stack([xy, sy * sy], -1)], -2)
+        out[int(track_id)] = (rows["t_s"].to_numpy(float), rows[["x_m", "y_m"]].to_numpy(float),
+                              cov)
+    return out
+
+
+def drawn_path(kept, theta, cov_now, t_from, t_now):
+    """``(t_s, xy, cov)`` of a track's kept trajectory (a ``path_rows`` entry) from
+    ``t_from`` on, its point at the last bearing ``t_now`` the answer now: ``theta``'s
+    position then, with ``cov_now``, the report's (where the answer is a mixture over the
+    manoeuvres, its most probable trajectory ends within its errors); None without a kept
+    trajectory, or where ``theta`` is not finite (no estimate shown)."""
+    if kept is None or not np.isfinite(theta).all():
+        return None
+    t, xy, cov = kept
+    held = t >= t_from
+    t, xy, cov = t[held], xy[held].copy(), cov[held].copy()
+    if t.size == 0:
+        return None
+    if t[-1] == t_now:
+        xy[-1] = theta[:2] + theta[2:] * t_now
+        cov[-1] = cov_now
+    return t, xy, cov
+
+
+BAND_ELLIPSES = 6  # 95 % ellipses drawn along a kept trajectory (besides the one now)
+
+
 def ellipse_points(center, cov, n=90) -> np.ndarray:
     """(n, 2) points of the 95 % ellipse of a 2x2 covariance around ``center``."""
     w, V = np.linalg.eigh(cov)
@@ -161,6 +207,8 @@ class _TrackPlots:
         self.track_now, = ax.plot([], [], "o", color="tab:red", ms=4)
         self.ring, = ax.plot([], [], color="tab:red", lw=1, ls="--",
                              label="95 % position (last bearing)")
+        self.band, = ax.plot([], [], color="tab:red", lw=0.6, ls=":",
+                             label="along the track: 95 % positions")
         ax.set_aspect("equal", adjustable="box")
         ax.set_xlabel("east (km)")
         ax.set_ylabel("north (km)")
@@ -168,19 +216,34 @@ class _TrackPlots:
         self.fig.subplots_adjust(left=0.1, right=0.97, bottom=0.07, top=0.91)
 
     def draw(self, title: str, lg: BearingsLog, row: int, theta, cov_now, t_from=-np.inf,
-             position_only=False):
+             position_only=False, kept=None):
         """One contact: own-ship's whole path, every bearing's line, the estimated track
         from ``t_from`` (where its solution holds: ``leg_start_s``; ``last_leg`` solves a
         later leg) and its 95 % ellipse now (km); no track where ``theta`` is NaN (no
-        estimate shown), the position now alone where ``position_only`` (``now_only``)."""
+        estimate shown). The track is the trajectory the answer rests on where the estimator
+        kept it (``kept``: a ``path_rows`` entry), with the 95 % ellipses of a few of its
+        positions; else the straight line of ``theta``, of which a ``position_only`` track
+        (``now_only``: where it is heading is not determined) draws the position now alone."""
         valid = np.flatnonzero(np.isfinite(lg.bearing_deg[row]))
         held = valid[lg.t_s[valid] >= t_from]  # the bearings the solution rests on
         held = held if held.size else valid
-        held = held[-1:] if position_only else held
         own = np.column_stack([lg.own_x_m, lg.own_y_m])
-        track = theta[:2] + np.outer(lg.t_s[held], theta[2:])  # estimated positions then
+        path = drawn_path(kept, theta, cov_now, lg.t_s[held[0]], lg.t_s[valid[-1]])
+        band = np.empty((0, 2))
+        if path is not None:  # the trajectory the answer rests on, to now
+            t_path, track, covs = path
+            seen_from = own[np.clip(np.searchsorted(lg.t_s, t_path), 0, lg.t_s.size - 1)]
+            picks = np.unique(np.linspace(0, t_path.size - 1, BAND_ELLIPSES + 1).round()
+                              .astype(int)[:-1])
+            rings = [np.vstack([ellipse_points(track[k], covs[k]), [np.nan, np.nan]])
+                     for k in picks if np.isfinite(covs[k]).all()]
+            band = np.concatenate(rings) if rings else band
+        else:
+            held = held[-1:] if position_only else held
+            track = theta[:2] + np.outer(lg.t_s[held], theta[2:])  # estimated positions then
+            seen_from = own[held]
         finite = np.isfinite(track).all()
-        reach = (np.hypot(*(track - own[held]).T).max() * 1.3 if finite
+        reach = (np.hypot(*(track - seen_from).T).max() * 1.3 if finite
                  else NOMINAL_REACH_M)
         step = max(1, int(np.ceil(valid.size / BEARING_LINES)))
         b = np.deg2rad(lg.bearing_deg[row, valid[::step]])
@@ -199,21 +262,29 @@ class _TrackPlots:
             if np.isfinite(cov_now).all():
                 ring = ellipse_points(track[-1], cov_now)
                 shown.append(ring)
+            if band.size:
+                shown.append(band[np.isfinite(band).all(axis=1)])
         else:
             shown.append(end)
+            band = np.empty((0, 2))
         self.track.set_data(track.T / 1e3 if finite else ([], []))
-        self.track.set_label("estimated position now (heading not determined)"
-                             if position_only else "estimated track")
-        self.track.set_marker("o" if position_only else "None")
+        if not position_only:
+            self.track.set_label("estimated track")
+        else:  # its track to now where kept, else its position now alone
+            self.track.set_label("estimated track to now (heading not determined)"
+                                 if path is not None else
+                                 "estimated position now (heading not determined)")
+        self.track.set_marker("o" if position_only and path is None else "None")
         self.track_now.set_data(track[-1, :, None] / 1e3 if finite else ([], []))
         self.ring.set_data(ring.T / 1e3)
+        self.band.set_data(band.T / 1e3)
         box = np.concatenate(shown) / 1e3  # a square view of everything but the bearing lines
         lo, hi = box.min(axis=0), box.max(axis=0)
         mid, half = (lo + hi) / 2, 0.54 * (hi - lo).max() + 0.1
         self.ax.set_xlim(mid[0] - half, mid[0] + half)
         self.ax.set_ylim(mid[1] - half, mid[1] + half)
         drawn = [self.lines, self.own] + ([self.track] if finite else []) + (
-            [self.ring] if ring.size else [])
+            [self.ring] if ring.size else []) + ([self.band] if band.size else [])
         self.ax.legend(handles=drawn, loc="best", fontsize=8)
         self.ax.set_title(title, fontsize=10)
         return self.fig
@@ -223,12 +294,14 @@ class _TrackPlots:
 
 
 def write_track_plots(report: pd.DataFrame, estimates: pd.DataFrame, logs, tables_dir,
-                      name: str, progress=None) -> list[Path]:
+                      name: str, progress=None, paths: pd.DataFrame | None = None
+                      ) -> list[Path]:
     """``<name>-<label>.png`` per contact (the first ``MAX_PLOTS``), titled with the time of
     its last bearing in UTC (the report's), or in seconds from the log's start when it is
     not dated; returns their paths. ``progress``: a progress bar (None: on a terminal
-    only)."""
+    only); ``paths``: the run's side table ``path``, if any (``path_rows``)."""
     theta, theta_cov = shown_estimates(report, estimates)
+    kept = path_rows(paths)
     cov_now = position_covariance(theta_cov, estimates["t_last_s"].to_numpy(float))
     headless = now_only(report)
     where = {int(i): (lg, row) for lg in logs for row, i in enumerate(lg.track_id)}
@@ -252,7 +325,8 @@ def write_track_plots(report: pd.DataFrame, estimates: pd.DataFrame, logs, table
             used.add(part)
             path = Path(tables_dir) / fit_file_name(name, part, ".png")
             save_figure(plots.draw(plot_title(name, shown[n], r), lg, row, theta[n],
-                                   cov_now[n], r.leg_start_s, headless[n]), path)
+                                   cov_now[n], r.leg_start_s, headless[n],
+                                   kept.get(int(r.track_id))), path)
             paths.append(path)
     finally:
         plots.close()
@@ -278,10 +352,11 @@ def plot_title(name: str, shown: str, r) -> str:
 
 
 def contact_figure(report: pd.DataFrame, estimates: pd.DataFrame, logs, label,
-                   name: str = "tma"):
+                   name: str = "tma", paths: pd.DataFrame | None = None):
     """The matplotlib Figure of one contact's plot (as ``write_track_plots`` draws it),
-    ``label`` its report label (or track id); ValueError naming the contacts when there is no
-    such contact, or when ``logs`` do not hold its bearings."""
+    ``label`` its report label (or track id), ``paths`` the side table ``path`` if any;
+    ValueError naming the contacts when there is no such contact, or when ``logs`` do not
+    hold its bearings."""
     labels = report["label"].astype(str).to_numpy()
     match = np.flatnonzero(labels == str(label))
     if match.size == 0:
@@ -298,20 +373,24 @@ def contact_figure(report: pd.DataFrame, estimates: pd.DataFrame, logs, label,
     cov_now = position_covariance(theta_cov, estimates["t_last_s"].to_numpy(float)[[n]])[0]
     plots = _TrackPlots()
     return plots.draw(plot_title(name, shown_labels(report["label"])[n], r), *place,
-                      theta[0], cov_now, r.leg_start_s, now_only(report.iloc[[n]])[0])
+                      theta[0], cov_now, r.leg_start_s, now_only(report.iloc[[n]])[0],
+                      path_rows(paths).get(int(r.track_id)))
 
 
 # -- the estimated tracks as an MCAP ---------------------------------------------------------
 
 def write_map_mcap(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, epoch_utc_ns,
-                   origin_deg, run: dict, truth_track: pd.DataFrame | None = None) -> Path:
+                   origin_deg, run: dict, truth_track: pd.DataFrame | None = None,
+                   paths: pd.DataFrame | None = None) -> Path:
     """Write the estimated tracks and own-ship as ``foxglove.LocationFix`` (see the module
     docstring), in time order; returns ``path``. Tracks whose estimate the report does not
     show (blank: ``shown_estimates``) or that lie beyond ``MAX_MAPPED_M`` of the origin are
     left out (logged). ``truth_track``: the contacts' ships from their AIS
-    (``tma.ais.truth``), beside the estimates (``truth_parts``)."""
+    (``tma.ais.truth``), beside the estimates (``truth_parts``); ``paths``: the run's side
+    table ``path``, if any (``path_rows``)."""
     theta, theta_cov = shown_estimates(report, estimates)
     headless = now_only(report)
+    kept = path_rows(paths)
     where = {int(i): (k, row) for k, lg in enumerate(logs) for row, i in enumerate(lg.track_id)}
     own_topics = ([OWNSHIP_FIX_TOPIC] if len(logs) == 1
                   else [f"/ownship/{k}/location_fix" for k in range(len(logs))])
@@ -328,8 +407,15 @@ def write_map_mcap(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, ep
         t = logs[k].t_s[np.isfinite(logs[k].bearing_deg[row])]
         held = t >= r.leg_start_s
         t = t[held] if held.any() else t  # where the solution holds (its leg)
-        t = t[-1:] if headless[n] else t  # its position now alone (now_only)
-        x, y = (theta[n, :2, None] + theta[n, 2:, None] * t)
+        drawn = drawn_path(kept.get(int(r.track_id)), theta[n],
+                           position_covariance(theta_cov[n:n + 1], t[-1:])[0], t[0], t[-1])
+        if drawn is not None:  # the trajectory the answer rests on
+            t, xy, cov = drawn
+            x, y = xy.T
+        else:
+            t = t[-1:] if headless[n] else t  # its position now alone (now_only)
+            x, y = (theta[n, :2, None] + theta[n, 2:, None] * t)
+            cov = position_covariance(theta_cov[n:n + 1], t[None, :])[0]
         lat, lon = local_to_geodetic(x, y, origin_deg)
         if not np.isfinite(lat).all():  # no estimate shown, or one farther than a map
             skipped.append(shown[n])
@@ -338,14 +424,21 @@ def write_map_mcap(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, ep
         if topic in used:  # labels of different shards alike: the id tells them apart
             topic = f"{topic}-{r.track_id}"
         used.add(topic)
-        cov = position_covariance(theta_cov[n:n + 1], t[None, :])[0]
         cov = enu_covariance(cov) if np.isfinite(cov).all() else None
+        if drawn is not None:
+            what = ("the trajectory its answer rests on (smoothed, with its manoeuvres), from "
+                    "leg_start_s to its last bearing" + (" (where it is heading now is not "
+                                                         "determined)" if headless[n] else "")
+                    + ", there its answer now; covariance: the trajectory's, at the last "
+                    "bearing as in the report")
+        elif headless[n]:
+            what = ("its position at the last bearing alone (where it is heading is not "
+                    "determined); covariance as in the report")
+        else:
+            what = ("the estimator's track over the bearings its solution rests on (from "
+                    "leg_start_s); covariance as in the report")
         channels.append(Channel.protobuf(topic, LocationFix, {
-            "track_id": str(r.track_id), "status": r.status,
-            "estimate": "its position at the last bearing alone (where it is heading is not "
-                        "determined); covariance as in the report" if headless[n] else
-                        "the estimator's track over the bearings its solution rests on (from "
-                        "leg_start_s); covariance as in the report"}))
+            "track_id": str(r.track_id), "status": r.status, "estimate": what}))
         parts.append((t, lat.tolist(), lon.tolist(), cov, f"contact {shown[n]}"))
     if truth_track is not None:
         for channel, part in truth_parts(report, truth_track):

@@ -235,6 +235,63 @@ def _smooth(t, lo, hi, mf, Pf, Pp, ms):
     return True
 
 
+@njit(error_model="numpy", depends=(_filter, _chol_solve))
+def smoothed_positions(i, t, ox, oy, z, w, weighted, lo, hi, nom, Q, prior, p0, mf, Pf, Pp,
+                       nu, S, path, path_cov):
+    """Write the positions of the trajectory ``nom`` (its MAP, m) into ``path[i]`` (K, 2) and,
+    where ``path_cov`` has epochs (n, K, 3; none: only the positions), their smoothed
+    covariances about it (x x, x y, y y, units of s^2): the Kalman filter linearised about
+    ``nom`` under the same process noise ``Q`` and prior as the fit, then the
+    Rauch-Tung-Striebel recursion P_k = Pf_k + C_k (P_(k+1) - Pp_(k+1)) C_k^T,
+    C_k = Pf_k F^T Pp_(k+1)^-1 (Bar-Shalom, Li and Kirubarajan 2001, sec. 8.6): the
+    linearised posterior of each epoch's position given every bearing. NaN where a predicted
+    covariance is not positive definite. ``mf``..``S``: the filter's scratch."""
+    for k in range(lo, hi + 1):
+        path[i, k, 0], path[i, k, 1] = nom[k, 0], nom[k, 1]
+    if path_cov.shape[1] == 0:
+        return
+    _filter(t, ox, oy, z, w, weighted, lo, hi, nom, Q, prior, p0, mf, Pf, Pp, nu, S)
+    Ps, D, B, G, L, col, y = (np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 4)),
+                              np.empty((4, 4)), np.empty((4, 4)), np.empty(4), np.empty(4))
+    for a in range(4):
+        for b in range(4):
+            Ps[a, b] = Pf[hi, a, b]
+    path_cov[i, hi, 0], path_cov[i, hi, 1], path_cov[i, hi, 2] = Ps[0, 0], Ps[0, 1], Ps[1, 1]
+    for k in range(hi - 1, lo - 1, -1):
+        T = t[k + 1] - t[k]
+        for b in range(4):  # B = F Pf_k (F = [[I, T I], [0, I]])
+            B[0, b] = Pf[k, 0, b] + T * Pf[k, 2, b]
+            B[1, b] = Pf[k, 1, b] + T * Pf[k, 3, b]
+            B[2, b] = Pf[k, 2, b]
+            B[3, b] = Pf[k, 3, b]
+        for b in range(4):  # C_k^T = Pp_(k+1)^-1 F Pf_k, column by column
+            for a in range(4):
+                col[a] = B[a, b]
+            if not _chol_solve(Pp[k + 1], col, L, y):
+                for kk in range(lo, k + 1):
+                    for j in range(3):
+                        path_cov[i, kk, j] = np.nan
+                return
+            for a in range(4):
+                G[b, a] = y[a]  # G = C_k
+        for a in range(4):
+            for b in range(4):
+                D[a, b] = Ps[a, b] - Pp[k + 1, a, b]
+        for a in range(4):  # Ps = Pf_k + G D G^T
+            for b in range(4):
+                v = 0.0
+                for c in range(4):
+                    gd = 0.0
+                    for e in range(4):
+                        gd += G[a, e] * D[e, c]
+                    v += gd * G[b, c]
+                B[a, b] = Pf[k, a, b] + v
+        for a in range(4):
+            for b in range(4):
+                Ps[a, b] = 0.5 * (B[a, b] + B[b, a])
+        path_cov[i, k, 0], path_cov[i, k, 1], path_cov[i, k, 2] = Ps[0, 0], Ps[0, 1], Ps[1, 1]
+
+
 @njit(error_model="numpy", depends=(atan2, wrap_angle))
 def _bearing_cost(ox, oy, z, w, weighted, lo, hi, s):
     """Sum of squared wrapped bearing residuals (rad^2) of the trajectory ``s`` (K, 4)."""
@@ -485,9 +542,20 @@ def finish_track(i, t, ox, oy, z, w, weighted, lo, hi, nom, Q, noisy, state, P_l
     cost[i] = _bearing_cost(ox, oy, z, w, weighted, lo, hi, nom)
 
 
-@njit(error_model="numpy", depends=(atan2, wrap_angle, start_track, step_noise, finish_track))
+@njit(error_model="numpy")
+def blank_path(i, path, path_cov):
+    """Track i's trajectory and its covariances NaN until written."""
+    for k in range(path.shape[1]):
+        path[i, k, 0] = path[i, k, 1] = np.nan
+    for k in range(path_cov.shape[1]):
+        for j in range(3):
+            path_cov[i, k, j] = np.nan
+
+
+@njit(error_model="numpy", depends=(atan2, wrap_angle, start_track, step_noise, finish_track,
+                                     smoothed_positions))
 def smooth_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, lam, scale2,
-                  p0_pos, max_iter, tol_m, state, P_last, e, cost, passes):
+                  p0_pos, max_iter, tol_m, state, P_last, e, cost, passes, path, path_cov):
     """Per track i: the NCV MAP trajectory from the constant-velocity ``theta[i]`` with
     lam[i] = q / s^2 (``scale2[i]`` = s^2, rad^2: the noise variance the units refer to;
     ``max_iter`` 0: about the constant-velocity line itself, no iteration), then its
@@ -495,8 +563,10 @@ def smooth_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, lam
     the last bearing (4,) and its covariance in units of s^2 (NaN if singular), the
     innovations over the root of their variance in units of s^2 (``e``, rad: sd s under
     the model; NaN where no bearing and for the diffuse ones), the squared bearing residuals
-    of the trajectory (rad^2) and the Gauss-Newton passes (-1: a covariance was not positive
-    definite)."""
+    of the trajectory (rad^2), the Gauss-Newton passes (-1: a covariance was not positive
+    definite) and the trajectory's positions ``path`` (n, K, 2, m; NaN outside the track and
+    where the fit failed) with, where ``path_cov`` has epochs, their smoothed covariances
+    (``smoothed_positions``)."""
     n, K = measured.shape
     nom = np.empty((K, 4))
     mf, ms, trial = np.empty((K, 4)), np.empty((K, 4)), np.empty((K, 4))
@@ -510,6 +580,7 @@ def smooth_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, lam
         z, w = measured[i], (weight[i] if weighted else measured[i])
         start_track(i, t, lo, hi, theta, nom, state, P_last, e)
         cost[i] = np.nan
+        blank_path(i, path, path_cov)
         p0[0] = p0_pos[i] * p0_pos[i] / scale2[i]
         p0[1] = PRIOR_SPEED_M_S * PRIOR_SPEED_M_S / scale2[i]
         step_noise(t, lo, hi, lam[i], Q)
@@ -521,6 +592,8 @@ def smooth_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, lam
             continue
         finish_track(i, t, ox, oy, z, w, weighted, lo, hi, nom, Q, lam[i] > 0.0, state,
                      P_last, e, cost, nu, S, S0, R, r, Rinv, none)
+        smoothed_positions(i, t, ox, oy, z, w, weighted, lo, hi, nom, Q, prior, p0, mf, Pf,
+                           Pp, nu, S, path, path_cov)
 
 
 MAX_PASSES = 30  # Gauss-Newton passes
@@ -548,14 +621,17 @@ def in_units(out, sigma2, t_now, theta_cv):
     out["innovations"] = out["innovations"] / np.sqrt(sigma2)[:, None]
     out["theta"], out["cov_theta"] = theta_of_state(out["state"], out["cov"], t_now)
     out["sigma2"] = sigma2
+    if "path_cov_m2" in out:
+        out["path_cov_m2"] *= sigma2[:, None, None]
     fail = ~np.isfinite(theta_cv).all(axis=1)
-    for key in ("state", "cov", "innovations", "theta", "cov_theta"):
-        out[key][fail] = np.nan
+    for key in ("state", "cov", "innovations", "theta", "cov_theta", "path_m", "path_cov_m2"):
+        if key in out:
+            out[key][fail] = np.nan
     return out
 
 
 def smooth(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_psd, sigma_rad,
-           iterate=True):
+           iterate=True, path_cov=False):
     """The NCV MAP state at each track's last bearing from the constant-velocity start
     ``theta_cv`` (n, 4), with q = ``accel_psd`` (m^2/s^3, (n,)); ``iterate`` False keeps the
     constant-velocity line itself (only its innovations and covariance are computed).
@@ -566,7 +642,10 @@ def smooth(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_ps
     ``theta_cv``). Returns a dict: ``state`` (n, 4) and ``cov`` (n, 4, 4) at the last bearing
     (NaN where singular), ``innovations`` (n, K) normalised by sigma (NaN where none, and
     the diffuse ones), ``sigma2`` (rad^2) used, ``cost_rad2`` (squared bearing residuals of
-    the trajectory) and ``passes`` (Gauss-Newton passes; -1: failed)."""
+    the trajectory), ``passes`` (Gauss-Newton passes; -1: failed) and ``path_m`` (n, K, 2:
+    the MAP trajectory's positions, m; NaN outside the track); with ``path_cov``,
+    ``path_cov_m2`` (n, K, 3: their smoothed covariances xx, xy, yy in m^2,
+    ``smoothed_positions``)."""
     n, K = measured_rad.shape
     sigma = np.asarray(sigma_rad, dtype=float)
     known = np.isfinite(sigma)
@@ -590,10 +669,14 @@ def smooth(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_ps
         scale2 = np.maximum(sigma2, MIN_SIGMA_RAD**2)
         out = {"state": np.empty((n, 4)), "cov": np.empty((n, 4, 4)),
                "innovations": np.empty((n, K)), "cost_rad2": np.empty(n),
-               "passes": np.zeros(n, dtype=np.int64)}
+               "passes": np.zeros(n, dtype=np.int64), "path_m": np.empty((n, K, 2))}
+        # the covariances of the trajectory: in the last round only (the others' are not kept)
+        covs = np.empty((n, K if path_cov and round_ == rounds - 1 else 0, 3))
         smooth_tracks(*args, q / scale2, scale2, p0_pos, MAX_PASSES if iterate else 0, TOL_M,
                       out["state"], out["cov"], out["innovations"], out["cost_rad2"],
-                      out["passes"])
+                      out["passes"], out["path_m"], covs)
+        if covs.shape[1]:
+            out["path_cov_m2"] = covs
         e2 = out["innovations"] ** 2  # rad^2: mean s^2 under the model
         count = np.sum(np.isfinite(e2), axis=1)
         with np.errstate(invalid="ignore", divide="ignore"):

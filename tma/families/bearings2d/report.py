@@ -50,6 +50,7 @@ from tma.families.bearings2d.truth_report import (  # noqa: E402
     shown_columns,
     with_truth,
 )
+from tma.io import arrow  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
 from tma.maths.geo import local_to_geodetic  # noqa: E402
 from tma.report.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
@@ -443,7 +444,9 @@ def _report_without_truth(entry, tables_dir, name: str, progress=None) -> list[P
     written = write_track_report(report, tables_dir, name,
                                  m.get("input", {}).get("path", dataset.name),
                                  geographic=origin is not None)
-    written += write_track_plots(report, entry.estimates, logs, tables_dir, name, progress)
+    paths = run_path(entry.run_root)
+    written += write_track_plots(report, entry.estimates, logs, tables_dir, name, progress,
+                                 paths)
     if origin is None:
         log.info("%s: no map MCAP (%s.mcap): the dataset has no geographic origin (its "
                  "own-ship is in local metres; ingest latitude/longitude navigation or give "
@@ -456,8 +459,16 @@ def _report_without_truth(entry, tables_dir, name: str, progress=None) -> list[P
         written.append(write_map_mcap(Path(tables_dir) / f"{name}.mcap", report,
                                       entry.estimates, logs, epoch, origin,
                                       {"dataset": dataset.name, "estimator": entry.estimator},
-                                      truth_track=truth_track))
+                                      truth_track=truth_track, paths=paths))
     return written
+
+
+def run_path(run_root) -> pd.DataFrame | None:
+    """The run's side table ``path`` (``estimated_path``: the trajectory each answer rests
+    on, which the plots and the map draw), None where it kept none (an estimator that
+    assumes constant velocity, a simulation, a run from before it)."""
+    path = Path(run_root) / "path.parquet"
+    return arrow.read_table(path).to_pandas() if path.exists() else None
 
 
 # the other kinds of table of simulated runs an experiment may ask for (``report=``): each
@@ -513,7 +524,9 @@ def results(run) -> tuple[pd.DataFrame, dict]:
     (``metrics.track_metrics``, as ``tma.runs`` gives them; the errors and ``nees`` blank
     where the estimate is, the course and speed errors where its heading is). Tables:
     ``estimates``, the estimator's own columns (``x0_m``.., ``jtj_ij``, ``t_last_s``: what the
-    plot and the map draw from), ``x0_m``.. blank where the report's estimate is."""
+    plot and the map draw from), ``x0_m``.. blank where the report's estimate is, and the
+    side table ``path`` where the estimator kept one (``estimated_path``: the trajectory
+    each answer rests on, which the plot and the map draw)."""
     est = run.estimates
     report = contact_report(est, run.logs, "estimate",
                             getattr(run.estimator.config, "max_range_rel_sd", None),
@@ -530,7 +543,7 @@ def results(run) -> tuple[pd.DataFrame, dict]:
                                                           if c in report])], axis=1)
     estimates = est.copy()
     estimates.loc[blank, list(THETA)] = np.nan
-    return report, {"estimates": estimates}
+    return report, {"estimates": estimates, **run.side_tables}
 
 
 SAME_TIME_S = 1e-6  # a contact's last bearing time in the results and in its recording
@@ -565,17 +578,21 @@ def check_logs(report: pd.DataFrame, estimates: pd.DataFrame, logs):
                              f"{r.label!r}: {why}); pass the recording given to tma.estimate")
 
 
-def plot_contact(report: pd.DataFrame, estimates: pd.DataFrame, logs, label):
+def plot_contact(report: pd.DataFrame, estimates: pd.DataFrame, logs, label,
+                 side_tables=None):
     """``tma.plot_contact``: the Figure of contact ``label`` (``map_outputs.contact_figure``)
-    of the contacts of ``report`` and their ``estimates``, drawn over ``logs``."""
+    of the contacts of ``report`` and their ``estimates``, drawn over ``logs``, along the
+    trajectory its answer rests on where ``side_tables`` hold it (``path``)."""
     check_logs(report, estimates, logs)
-    return contact_figure(report, estimates, logs, label)
+    return contact_figure(report, estimates, logs, label,
+                          paths=(side_tables or {}).get("path"))
 
 
-def write_map(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, truth_track=None
-              ) -> Path:
+def write_map(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, truth_track=None,
+              side_tables=None) -> Path:
     """``tma.write_map``: the map MCAP of the contacts of ``report`` (``map_outputs.
-    write_map_mcap``), which needs own-ship in latitude/longitude and UTC times."""
+    write_map_mcap``; along the trajectory each answer rests on where ``side_tables`` hold
+    it, ``path``), which needs own-ship in latitude/longitude and UTC times."""
     check_logs(report, estimates, logs)
     epoch, origin = logs[0].epoch_utc_ns, logs[0].origin_deg
     if origin is None:
@@ -586,4 +603,5 @@ def write_map(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, truth_t
         raise ValueError("a map needs UTC times; this log's are relative: read it with "
                          "time={'start_utc': ...}")
     return write_map_mcap(path, report, estimates, logs, epoch, origin,
-                          {"estimator": "tma.estimate"}, truth_track=truth_track)
+                          {"estimator": "tma.estimate"}, truth_track=truth_track,
+                          paths=(side_tables or {}).get("path"))

@@ -15,7 +15,7 @@ import numpy as np
 from tma.config import param, require
 from tma.errors import InputError
 from tma.estimator import Estimator, EstimatorConfig
-from tma.families.bearings2d import manoeuvres, ncv
+from tma.families.bearings2d import estimated_path, manoeuvres, ncv
 from tma.families.bearings2d.end_bearing import end_bearing
 from tma.families.bearings2d.log import BearingsLog
 from tma.families.bearings2d.manoeuvre_prior import RECORDED_MANOEUVRES, ManoeuvrePrior
@@ -274,6 +274,10 @@ class BearingsEstimator(Estimator):
         motion_p, p_manoeuvre = np.full(n, np.nan), np.full(n, np.nan)
         tail_scale = np.ones(n)  # how much a mixture's errors were widened for its tails
         extra = {}
+        # the trajectory the answer rests on, for the plots and the map (a recording's
+        # default; lm's path_points): the side table path (estimated_path)
+        points = getattr(cfg, "path_points", 0) if self.models_motion else 0
+        paths = []
         undetermined = np.zeros(n, dtype=bool)
         start = first  # from when the answer holds
         if follows or test:
@@ -298,6 +302,7 @@ class BearingsEstimator(Estimator):
                 follow = range_rel_sd(theta, jtj, sigma2, t[last], ox[last], oy[last],
                                       cfg.singular_rcond) <= cfg.max_range_rel_sd
             innovations = np.full(b.measured.shape, np.nan)
+            leg_start = self._leg_start(t, start, solution)
             for rows, iterate in ((np.flatnonzero(follow), True),
                                   (np.flatnonzero(~follow), False)):
                 if rows.size == 0 or not (iterate or test):
@@ -305,8 +310,12 @@ class BearingsEstimator(Estimator):
                 fit = self._motion_fit(b, use, theta, rows, q if follows else 0.0,
                                        prior if follows else None, sigma2, iterate,
                                        b.sigma_deg is None and iterate, own_fit_test,
-                                       start[rows])
+                                       start[rows], path_cov=iterate and points > 0)
                 innovations[rows] = fit["innovations"]
+                if iterate and points > 0:
+                    paths.append(estimated_path.path_table(
+                        log.track_id[rows], t, fit["path_m"], fit["path_cov_m2"],
+                        fit["cov"][:, :2, :2], np.searchsorted(t, leg_start[rows]), points))
                 if "p_manoeuvre" in fit:
                     p_manoeuvre[rows] = fit["p_manoeuvre"]
                     tail_scale[rows] = fit["tail_scale"]
@@ -351,8 +360,7 @@ class BearingsEstimator(Estimator):
             "n_bearings": n_bearings.astype(np.int64),
             "t_last_s": t[last], "own_x_last_m": ox[last], "own_y_last_m": oy[last],
             **trust,
-            "leg_start_s": t[start] if solution.leg_start_s is None else np.maximum(
-                solution.leg_start_s, t[start]),
+            "leg_start_s": self._leg_start(t, start, solution),
             "accel_psd_m2_s3": np.full(n, float(q) if self.models_motion else 0.0),
             "motion_p_value": motion_p,
         }
@@ -364,15 +372,29 @@ class BearingsEstimator(Estimator):
         for i in range(4):
             for j in range(i, 4):
                 columns[f"jtj_{i}{j}"] = jtj[:, i, j]
+        if points > 0:
+            none = estimated_path.path_table(log.track_id[:0], t, np.empty((0, t.size, 2)),
+                                             np.empty((0, t.size, 3)), np.empty((0, 2, 2)),
+                                             first[:0], points)
+            columns["extras"] = {"path": {k: np.concatenate([p[k] for p in [none, *paths]])
+                                          for k in estimated_path.COLUMNS}}
         return columns
 
     @staticmethod
+    def _leg_start(t, start, solution: Solution):
+        """From when each track's answer holds (s): its first bearing ``start`` in the fit,
+        or later where the solution rests on a later leg (``Solution.leg_start_s``)."""
+        return t[start] if solution.leg_start_s is None else np.maximum(solution.leg_start_s,
+                                                                         t[start])
+
+    @staticmethod
     def _motion_fit(b: Bearings, use, theta, rows, q, prior, sigma2, iterate, sigma_unknown,
-                    robust, first):
+                    robust, first, path_cov=False):
         """The motion fit of tracks ``rows``: ``ncv.smooth`` (``iterate`` False: about their
         constant-velocity line), or with a manoeuvre ``prior`` ``manoeuvres.mixture``, from
         each track's bearing ``first``; a robust fit's (``robust``) bearings more than
-        ``GROSS_SIGMAS`` off the motion fit are outliers: dropped, and fitted again."""
+        ``GROSS_SIGMAS`` off the motion fit are outliers: dropped, and fitted again.
+        ``path_cov``: with the covariances of its trajectory's positions (``path_cov_m2``)."""
         part = None if use is None else use[rows]
         sigma_rad = np.full(rows.size, np.nan) if sigma_unknown else np.sqrt(sigma2[rows])
 
@@ -380,8 +402,8 @@ class BearingsEstimator(Estimator):
             args = (b.t, b.own_x, b.own_y, b.measured[rows], part, first, b.last[rows],
                     theta[rows], q)
             if prior is None or not iterate:
-                return ncv.smooth(*args, sigma_rad, iterate=iterate)
-            return manoeuvres.mixture(*args, prior, sigma_rad)
+                return ncv.smooth(*args, sigma_rad, iterate=iterate, path_cov=path_cov)
+            return manoeuvres.mixture(*args, prior, sigma_rad, path_cov=path_cov)
 
         fit = fit_of(part)
         wild = np.abs(np.nan_to_num(fit["innovations"])) > GROSS_SIGMAS

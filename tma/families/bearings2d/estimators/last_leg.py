@@ -62,7 +62,8 @@ class Config(LmConfig):
 class LastLeg(LevenbergMarquardt):
     Config = Config
     outputs = ("start_won", "n_rounds")
-    conformance_config = {"starts": 2}  # every output present (the loss is squared)
+    # every output present (the loss is squared; path: as lm's)
+    conformance_config = {"starts": 2, "path_points": 50}
     tests_motion = True  # its legs are tested whatever the log declares
 
     def solve(self, bearings: Bearings, motion: TargetMotion) -> Solution:

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.config import param, require
+from tma.families.bearings2d.estimated_path import RECORDED_POINTS
 from tma.families.bearings2d.estimators.base import (
     GROSS_SIGMAS,
     Bearings,
@@ -87,6 +88,9 @@ class Config(BearingsConfig):
     start_min_m: float = param(5000.0, "nearest extra start (m; geometric up to start_max_m)",
                                "(0, 1e9)")
     start_max_m: float = param(50000.0, "farthest extra start (m)", "(0, 1e9)")
+    path_points: int = param(0, "the trajectory each answer rests on, for the plots and the "
+                             "map: at most this many of its points per track in the side "
+                             "table path (0: none; a recording's default 200)", "[0, 100000]")
 
     def __post_init__(self):
         super().__post_init__()
@@ -173,10 +177,16 @@ class LevenbergMarquardt(BearingsEstimator):
     models_motion = True  # a target that is not at constant velocity: the NCV MAP state
     # present when starts > 1 / when the loss is robust (the default run adds none)
     outputs = ("start_won", "cost_robust_rad2", "n_downweighted")
-    conformance_config = {"starts": 2, "loss": "huber"}  # every output present
+    # every output present (the side table path: empty on the conformance log, whose
+    # targets hold course and speed as it declares)
+    conformance_config = {"starts": 2, "loss": "huber", "path_points": 50}
+    # the trajectory each answer rests on (path_points > 0, a recording's default), which
+    # the plots and the map draw (estimated_path)
+    side_tables = ("path",)
     # a recording has no prior on the bearing of its targets (the simulated one, north): start
-    # from each track's first bearing unless the command line says otherwise
-    recorded_defaults = {"initial_bearing_deg": None}
+    # from each track's first bearing unless the command line says otherwise; its contacts
+    # are drawn, along the trajectory each answer rests on
+    recorded_defaults = {"initial_bearing_deg": None, "path_points": RECORDED_POINTS}
 
     def solve(self, bearings: Bearings, motion: TargetMotion) -> Solution:
         t, own_x, own_y, measured_rad, valid, first = (
