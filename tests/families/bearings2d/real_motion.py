@@ -41,12 +41,17 @@ CRITERIA = {  # issue 28, item 3, on every recording
 }
 
 
-def _cases_module():
-    spec = importlib.util.spec_from_file_location("ais_build_cases", AIS / "build_cases.py")
+def _ais_module(name: str, file: str):
+    """The script ``tests/data/ais/<file>`` as a module (the test data's own builders)."""
+    spec = importlib.util.spec_from_file_location(name, AIS / file)
     module = importlib.util.module_from_spec(spec)
     sys.modules.setdefault(spec.name, module)
     spec.loader.exec_module(module)
     return module
+
+
+def _cases_module():
+    return _ais_module("ais_build_cases", "build_cases.py")
 
 
 def run_cases(workdir, estimator: dict, sigma_deg=None, recording: str = "solent",
@@ -259,11 +264,7 @@ def two_sided(f: dict) -> dict:
 
 
 def _stats_module():
-    spec = importlib.util.spec_from_file_location("ais_motion_stats", AIS / "motion_stats.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault(spec.name, module)
-    spec.loader.exec_module(module)
-    return module
+    return _ais_module("ais_motion_stats", "motion_stats.py")
 
 
 def measured_prior(recordings) -> dict:
