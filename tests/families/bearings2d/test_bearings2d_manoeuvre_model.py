@@ -133,7 +133,7 @@ def test_the_mixture_averages_its_components_by_prior_and_likelihood():
     """A turn the bearings show: the mixture's answer against Bayesian model averaging done
     by hand over every configuration of none or one manoeuvre (``component``, each refined,
     weighted by its Poisson prior: each 100-s cell holds no manoeuvre with probability
-    exp(-lambda cell), else one of the equally likely durations and sizes); at a low rate the
+    exp(-lambda cell), else one of the equally likely durations); at a low rate the
     configurations of two or more manoeuvres the mixture also weighs carry a few per cent,
     within the tolerance."""
     t, ox, oy, z, sigma, theta = _geometry(turn_at=270.0)
@@ -145,14 +145,14 @@ def test_the_mixture_averages_its_components_by_prior_and_likelihood():
     edges = np.append(np.arange(t[0], t[-1], prior.step_s), t[-1])
     cells = np.diff(edges)
     log_none = -prior.rate_per_s * cells.sum()
-    durations, sizes = manoeuvres.manoeuvre_options(prior)
     comps, logw = [none], [log_none + none[0]]
     for a, cell in zip(edges[:-1], cells, strict=True):
         tau = a + cell / 2
-        log_each = (math.log(-math.expm1(-prior.rate_per_s * cell) / durations.size)
-                    + prior.rate_per_s * cell)
-        for duration, size in zip(durations, sizes, strict=True):
-            levels = _levels(t, q, tau=tau, q_burst=size**2 / duration, duration=duration)
+        log_each = (math.log(-math.expm1(-prior.rate_per_s * cell)
+                             / len(prior.durations_s)) + prior.rate_per_s * cell)
+        for duration in prior.durations_s:
+            levels = _levels(t, q, tau=tau, q_burst=prior.dv_m_s**2 / duration,
+                             duration=duration)
             c = manoeuvres.component(t, ox, oy, z, theta, levels, sigma, start=none[3],
                                      prior_state=none[3][0])
             comps.append(c)
@@ -170,11 +170,10 @@ def test_the_mixture_averages_its_components_by_prior_and_likelihood():
     draws = _mixture_draws(w, means, [c[2] for c in comps], 200_000)
     scale = _quantile_95(draws - mean, cov) / chi2.ppf(0.95, 4)
     # (the mixture refines the most probable components of each level and takes the others
-    # linearised about the trajectory they extend, the lightest pooled: its errors follow
-    # the full average's, tails included, to within a fifth)
-    assert mixed["tail_scale"][0] >= 1.0
+    # linearised about the trajectory they extend, the lightest pooled)
+    assert mixed["tail_scale"][0] == pytest.approx(max(scale, 1.0), rel=0.05)
     np.testing.assert_allclose(np.sqrt(np.diag(mixed["cov"][0])),
-                               sd * math.sqrt(max(scale, 1.0)), rtol=0.2)
+                               sd * math.sqrt(mixed["tail_scale"][0]), rtol=0.1)
     assert mixed["p_manoeuvre"][0] == pytest.approx(1 - w[0], abs=0.01)
     assert mixed["p_manoeuvre"][0] > 0.99  # the turn is plain in the bearings
 

@@ -110,6 +110,15 @@ def path_table(track_id, t, path_m, path_cov_m2, cov_now, from_k, points: int) -
         for name, values in zip(COLUMNS, (np.full(ks.size, i), t[ks], path_m[r, ks, 0],
                                           path_m[r, ks, 1], sx, sy, corr), strict=True):
             parts[name].append(values)
-    dtypes = {"track_id": np.asarray(track_id).dtype}
-    return {name: (np.concatenate(v) if v else np.empty(0, dtypes.get(name, float)))
+    return _concatenated(parts, np.asarray(track_id).dtype)
+
+
+def joined(tables, track_id_dtype) -> dict:
+    """One ``path`` table of the tables of ``path_table`` (none: an empty one)."""
+    return _concatenated({name: [t[name] for t in tables] for name in COLUMNS}, track_id_dtype)
+
+
+def _concatenated(parts, track_id_dtype) -> dict:
+    return {name: (np.concatenate(v) if v else
+                   np.empty(0, track_id_dtype if name == "track_id" else float))
             for name, v in parts.items()}

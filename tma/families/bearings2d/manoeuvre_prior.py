@@ -1,6 +1,6 @@
 """What a target's manoeuvres are believed to be before the bearings (``ManoeuvrePrior``), the
 one measured on real ships for a recording (``RECORDED_MANOEUVRES``), and the cells of time
-and options (durations, sizes) a manoeuvre may take, with their priors: the model
+and durations a manoeuvre may take, with their priors: the model
 ``manoeuvres.py`` averages over (its docstring says how)."""
 
 import math
@@ -16,9 +16,6 @@ import numpy as np
 RECORDED_RATE_PER_H = 10.0
 RECORDED_DV_M_S = 4.6
 RECORDED_DURATIONS_S = (75.0, 120.0, 230.0)
-SIZES = (1.0,)  # a manoeuvre's velocity change: these times the prior's sd, alike (sizes of
-# 0.5, 1 and 2 times, for turns' heavier tails, were tried: they let a near target that turned
-# pass for a far one that runs, 140-190 km for 10 km, docs/manoeuvres.md)
 WINDOW_MANOEUVRES = 3.0  # the answer rests on the span of this many manoeuvres (expected)...
 MIN_WINDOW_S = 1200.0  # ...or of this much time (s), whichever is longer
 
@@ -70,15 +67,6 @@ def start_cells(t_first, t_last, step_s):
     return lo, np.maximum(hi, lo)
 
 
-def manoeuvre_options(prior: ManoeuvrePrior):
-    """The manoeuvres a cell may hold, equally likely: every duration of ``prior`` with every
-    size, its velocity change's sd per axis ``prior.dv_m_s`` times ``SIZES``; durations (s)
-    and sds (m/s), (O,) each."""
-    D = np.asarray(prior.durations_s, dtype=float)
-    sizes = prior.dv_m_s * np.asarray(SIZES)
-    return np.repeat(D, sizes.size), np.tile(sizes, D.size)
-
-
 def cell_priors(prior: ManoeuvrePrior, t, first, last):
     """Per track and cell (n, J): the manoeuvre's start (the cell's centre, s), the first epoch
     after it (where a filter from the start takes it in) and the prior probability of no
@@ -92,7 +80,7 @@ def cell_priors(prior: ManoeuvrePrior, t, first, last):
     a, b = start_cells(t[first], t[last], prior.step_s)
     tau = 0.5 * (a + b)
     inside = (b > a) & (last > first)[:, None]
-    D, dv = manoeuvre_options(prior)
+    D, dv = np.asarray(prior.durations_s, dtype=float), prior.dv_m_s
     seen = np.clip((t[last][:, None, None] - tau[:, :, None]) / D, 0.0, 1.0)  # (n, J, D)
     centre = tau[:, :, None] + 0.5 * seen * D
     epoch = np.clip(np.searchsorted(t, centre), (first + 1)[:, None, None],

@@ -57,7 +57,6 @@ from tma.families.bearings2d.manoeuvre_prior import (  # noqa: F401 (the prior's
     RECORDED_MANOEUVRES,
     ManoeuvrePrior,
     cell_priors,
-    manoeuvre_options,
     window_s,
 )
 from tma.families.bearings2d.mixture_tails import tail_points, tail_scale
@@ -95,7 +94,7 @@ LOG_SCREEN = math.log(1e-2)  # an extension screened below this share of the mas
 def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q, taus, starts,
                    ends, durations, burst, p_none, epochs, shocks, scale2, p0_pos, max_iter, tol_m,
                    state, P_last, e, cost, passes, p_manoeuvre, p_omitted, n_manoeuvres, u,
-                   u_q95, widen, path, evidence, path_cov):
+                   u_q95, widen, path, path_cov):
     """Per track i the mixture of the module docstring: wander ``q`` (n,, units of s^2),
     each cell's manoeuvre start ``taus`` (n, J) and the epoch after it ``starts`` (n, J),
     each burst's last epoch ``ends`` (n, J, D),
@@ -348,7 +347,6 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
                 P0[a, b] = v / mass
         widen[i] = tail_scale(weights, means, covs, used, m0, P0, s2, u, u_q95)
         p_manoeuvre[i] = 1.0 - weights[0] / mass
-        evidence[i] = math.log(mass) + top
         n_manoeuvres[i] = mean_count / mass
         p_omitted[i] = (1.0 / (1.0 + math.exp(math.log(mass) + top - omitted))
                         if omitted > -np.inf else 0.0)
@@ -405,13 +403,13 @@ def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_p
                                                   last, theta_cv, q, sigma)["sigma2"])
     sigma2 = np.maximum(sigma2, MIN_SIGMA_RAD**2)
     taus, starts, ends, p_none, epochs, shocks = cell_priors(prior, t, first, last)
-    durations, dv = manoeuvre_options(prior)
-    burst = dv**2 / durations[None, :] / sigma2[:, None]
+    durations = np.asarray(prior.durations_s, dtype=float)
+    burst = prior.dv_m_s**2 / durations[None, :] / sigma2[:, None]
     out = {"state": np.empty((n, 4)), "cov": np.empty((n, 4, 4)),
            "innovations": np.empty((n, K)), "cost_rad2": np.empty(n),
            "passes": np.zeros(n, dtype=np.int64), "p_manoeuvre": np.empty(n),
            "p_omitted": np.empty(n), "n_manoeuvres": np.empty(n), "tail_scale": np.ones(n),
-           "path_m": np.empty((n, K, 2)), "log_evidence": np.full(n, np.nan)}
+           "path_m": np.empty((n, K, 2))}
     if path_cov:
         out["path_cov_m2"] = np.empty((n, K, 3))
     mixture_tracks(t, np.ascontiguousarray(own_x, float), np.ascontiguousarray(own_y, float),
@@ -421,6 +419,6 @@ def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_p
                    REFINE_TOL_M, out["state"], out["cov"],
                    out["innovations"], out["cost_rad2"], out["passes"], out["p_manoeuvre"],
                    out["p_omitted"], out["n_manoeuvres"], *tail_points(), out["tail_scale"],
-                   out["path_m"], out["log_evidence"],
+                   out["path_m"],
                    out.get("path_cov_m2", np.empty((n, 0, 3))))
     return in_units(out, sigma2, t[last], theta_cv)

@@ -245,7 +245,9 @@ def smoothed_positions(i, t, ox, oy, z, w, weighted, lo, hi, nom, Q, prior, p0, 
     Rauch-Tung-Striebel recursion P_k = Pf_k + C_k (P_(k+1) - Pp_(k+1)) C_k^T,
     C_k = Pf_k F^T Pp_(k+1)^-1 (Bar-Shalom, Li and Kirubarajan 2001, sec. 8.6): the
     linearised posterior of each epoch's position given every bearing. NaN where a predicted
-    covariance is not positive definite. ``mf``..``S``: the filter's scratch."""
+    covariance is not positive definite. ``mf``..``S``: the filter's scratch. (Not P - P N P
+    from ``shocks.backward_pass``: under the diffuse prior the early predicted covariances
+    exceed the posterior's by ten orders, and the difference cancels to noise.)"""
     for k in range(lo, hi + 1):
         path[i, k, 0], path[i, k, 1] = nom[k, 0], nom[k, 1]
     if path_cov.shape[1] == 0:

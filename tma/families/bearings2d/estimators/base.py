@@ -167,7 +167,8 @@ class BearingsEstimator(Estimator):
     ``manoeuvre_rate_per_h`` and ``p_manoeuvre``) and the trend test's p-value
     (``motion_p_value``, NaN where not run).
 
-    ``models_motion``: the estimator can follow a target that is not at constant velocity:
+    ``models_motion``: the estimator can follow a target that is not at constant velocity
+    (its ``Config`` then declares ``path_points``, the side table ``path`` it keeps):
     its constant-velocity fit is refined to the maximum a posteriori state under the targets'
     motion (``ncv.smooth``; with manoeuvres, ``manoeuvres.mixture``), whose covariance
     includes that motion; for a robust fit (``loss`` huber|cauchy) on the bearings no more
@@ -276,7 +277,7 @@ class BearingsEstimator(Estimator):
         extra = {}
         # the trajectory the answer rests on, for the plots and the map (a recording's
         # default; lm's path_points): the side table path (estimated_path)
-        points = getattr(cfg, "path_points", 0) if self.models_motion else 0
+        points = cfg.path_points if self.models_motion else 0
         paths = []
         undetermined = np.zeros(n, dtype=bool)
         start = first  # from when the answer holds
@@ -373,11 +374,7 @@ class BearingsEstimator(Estimator):
             for j in range(i, 4):
                 columns[f"jtj_{i}{j}"] = jtj[:, i, j]
         if points > 0:
-            none = estimated_path.path_table(log.track_id[:0], t, np.empty((0, t.size, 2)),
-                                             np.empty((0, t.size, 3)), np.empty((0, 2, 2)),
-                                             first[:0], points)
-            columns["extras"] = {"path": {k: np.concatenate([p[k] for p in [none, *paths]])
-                                          for k in estimated_path.COLUMNS}}
+            columns["extras"] = {"path": estimated_path.joined(paths, log.track_id.dtype)}
         return columns
 
     @staticmethod
