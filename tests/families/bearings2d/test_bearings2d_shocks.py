@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tma.families.bearings2d import ncv, shocks
+from tma.families.bearings2d import kalman, shocks
 
 
 def _case(seed=1, K=150, dt=8.0):
@@ -32,7 +32,7 @@ def _filter(t, ox, oy, z, sigma, nom, Q):
     s2 = sigma**2
     out = [np.empty((K, 4)), np.empty((K, 4, 4)), np.empty((K, 4, 4)), np.empty(K),
            np.empty(K)]
-    ncv._filter(t, ox, oy, z, np.empty(0), False, 0, K - 1, nom, Q, nom[0].copy(),
+    kalman._filter(t, ox, oy, z, np.empty(0), False, 0, K - 1, nom, Q, nom[0].copy(),
                 np.array([1e8, 1e4]) / s2, *out)
     mf, Pf, Pp, nu, S = out
     return -0.5 * (nu**2 / (s2 * S) + np.log(S)), mf, Pf, Pp, nu, S
@@ -41,7 +41,7 @@ def _filter(t, ox, oy, z, sigma, nom, Q):
 def _base(seed=1):
     t, ox, oy, z, sigma, nom = _case(seed)
     Q = np.zeros((t.size, 3))
-    ncv.step_noise(t, 0, t.size - 1, 1e-4 / sigma**2, Q)
+    kalman.step_noise(t, 0, t.size - 1, 1e-4 / sigma**2, Q)
     ll, mf, Pf, Pp, nu, S = _filter(t, ox, oy, z, sigma, nom, Q)
     g, G, W = (np.empty((t.size, 4)), np.empty((t.size, 4, 4)), np.empty((t.size, 4, 4)))
     shocks.backward_pass(t, ox, oy, 0, t.size - 1, nom, Pp, nu, S, 1 / sigma, g, G, W)
@@ -85,7 +85,7 @@ def test_a_changed_predicted_state_is_the_filters_with_it(k1, k2, burst):
     part = [np.empty((K, 4)), np.empty((K, 4, 4)), np.empty((K, 4, 4)), np.empty(K),
             np.empty(K)]
     m, P = mf[k1 - 1].copy(), Pf[k1 - 1].copy()
-    ncv.filter_on(t, ox, oy, z, np.empty(0), False, k1, k2, nom, Q2, m, P, *part)
+    kalman.filter_on(t, ox, oy, z, np.empty(0), False, k1, k2, nom, Q2, m, P, *part)
     nu, S = part[3][k1:k2 + 1], part[4][k1:k2 + 1]
     lbf = -0.5 * np.sum(nu**2 / (s2 * S) + np.log(S)) - ll[k1:k2 + 1].sum()
     if k2 == K - 1:
@@ -93,8 +93,8 @@ def test_a_changed_predicted_state_is_the_filters_with_it(k1, k2, burst):
     else:
         mp, Pn, mb, Pb = np.empty(4), np.empty((4, 4)), np.empty(4), np.empty((4, 4))
         T = t[k2 + 1] - t[k2]
-        ncv._predict(m.copy(), P.copy(), T, Q[k2 + 1], mp, Pn)
-        ncv._predict(mf[k2].copy(), Pf[k2].copy(), T, Q[k2 + 1], mb, Pb)
+        kalman._predict(m.copy(), P.copy(), T, Q[k2 + 1], mp, Pn)
+        kalman._predict(mf[k2].copy(), Pf[k2].copy(), T, Q[k2 + 1], mb, Pb)
         np.testing.assert_allclose(Pb, Pp[k2 + 1])
         mean, cov = np.empty(4), np.empty((4, 4))
         lbf += shocks.shift_posterior(g[k2 + 1], G[k2 + 1], (mp - mb) / sigma, Pn - Pb,

@@ -6,7 +6,7 @@ Per track with a motion fit (``ncv.smooth``; with manoeuvres, the most probable 
 of ``manoeuvres.mixture``), its maximum a posteriori positions at the bearing epochs from
 when the answer holds (``leg_start_s``) to its last bearing, with their one-sigma errors:
 the smoothed ones given every bearing under that trajectory's own manoeuvres
-(``ncv.smoothed_positions``), widened by the factor by which the answer's own position
+(``kalman.smoothed_positions``), widened by the factor by which the answer's own position
 covariance at the last bearing exceeds that trajectory's there (``widening``: the
 mixture's spread over when and how the target manoeuvred, and its tails; about 1 without
 manoeuvres). The smoothed errors alone are too narrow where the mixture is unsure of the

@@ -6,15 +6,12 @@ import math
 
 import numpy as np
 
+from tma.families.bearings2d.kalman import _filter, _fit, _predict, filter_on
 from tma.families.bearings2d.ncv import (
     MAX_PASSES,
     MIN_PRIOR_M,
     PRIOR_RANGES,
     PRIOR_SPEED_M_S,
-    _filter,
-    _fit,
-    _predict,
-    filter_on,
 )
 from tma.families.bearings2d.shocks import shift_posterior
 from tma.runtime.jit import njit

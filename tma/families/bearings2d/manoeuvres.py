@@ -24,7 +24,7 @@ it is (``manoeuvre_components._extension``: the base's filter run again over the
 alone, the bearings after it through the backward pass); the lighter ones are pooled into
 one Gaussian of their moments. The ``KEEP`` most probable extensions of a level join the
 mixture, its ``REFINE`` most probable are refined to their maximum a posteriori trajectory
-(``ncv._fit``: the iterated Kalman smoother) and linearised there (Laplace). The search goes
+(``kalman._fit``: the iterated Kalman smoother) and linearised there (Laplace). The search goes
 at least ``MIN_LEVELS`` deep and on while a level holds more than ``LOG_STOP`` of the
 mixture's mass, up to ``MAX_LEVEL``; what it leaves out is computed: the extensions not
 kept, and beyond the last level the tail of the levels' masses (geometric, at the ratio of
@@ -42,6 +42,7 @@ import math
 
 import numpy as np
 
+from tma.families.bearings2d.kalman import _filter, _fit, smoothed_positions
 from tma.families.bearings2d.manoeuvre_components import (  # noqa: F401 (component: tests)
     REFINE_TOL_M,
     _component_noise,
@@ -66,13 +67,10 @@ from tma.families.bearings2d.ncv import (
     MIN_SIGMA_RAD,
     PRIOR_RANGES,
     PRIOR_SPEED_M_S,
-    _filter,
-    _fit,
     blank_path,
     finish_track,
     in_units,
     smooth,
-    smoothed_positions,
     start_track,
 )
 from tma.families.bearings2d.shocks import backward_pass, shock_posterior, state_with_shock
@@ -109,7 +107,7 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
     posterior mean number of manoeuvres, the tail factor ``widen`` and the most probable
     refined component's positions ``path`` (n, K, 2; NaN outside the track) with, where
     ``path_cov`` has epochs (n, K, 3), their smoothed covariances under that component's
-    manoeuvres (``ncv.smoothed_positions``, units of s^2)."""
+    manoeuvres (``kalman.smoothed_positions``, units of s^2)."""
     n, K = measured.shape
     J, D = taus.shape[1], durations.size
     C = 2 + MAX_LEVEL * KEEP

@@ -1,5 +1,5 @@
 """What the bearings say about a sudden change of the target's state at any epoch, for every
-epoch at once: one backward pass after a Kalman filter (``ncv._filter``).
+epoch at once: one backward pass after a Kalman filter (``kalman._filter``).
 
 A shock is an extra N(0, Delta) added to the predicted state at epoch k (per axis Delta =
 (d_pp, d_pv, d_vv): position, cross term, velocity; the order of the state is (x, y, vx,
@@ -30,7 +30,7 @@ from tma.runtime.jit import njit
 
 @njit(error_model="numpy")
 def backward_pass(t, ox, oy, lo, hi, nom, Pp, nu, S, inv_s, g, G, W):
-    """After ``ncv._filter`` over lo..hi about ``nom`` (predicted covariances ``Pp``,
+    """After ``kalman._filter`` over lo..hi about ``nom`` (predicted covariances ``Pp``,
     innovations ``nu`` in rad, NaN where no bearing, and their variances ``S``): for each
     epoch k the score ``g[k]`` (4,), information ``G[k]`` (4, 4) and sensitivity ``W[k]``
     (4, 4) of the module docstring (``inv_s``: 1 / s, rad^-1)."""
