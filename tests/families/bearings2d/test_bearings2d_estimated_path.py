@@ -241,7 +241,7 @@ def test_smoothed_covariances_are_the_batch_posterior():
     theta = x[:1].copy()
     out = ncv.smooth(t, ox, oy, z[None], None, np.array([0]), np.array([K - 1]), theta, q,
                      np.array([sigma]), path_cov=True)
-    path = out["path_m"][0]
+    path = out.path_m[0]
     # the MAP velocities: from the positions' fit again (the kernel keeps positions only)
     _, _, _, nom = component(t, ox, oy, z, theta[0], np.full(K, q), sigma)
     np.testing.assert_allclose(nom[:, :2], path, rtol=0, atol=0.05)
@@ -268,7 +268,7 @@ def test_smoothed_covariances_are_the_batch_posterior():
     C = np.linalg.inv(H)
     ref = np.array([[C[4 * k, 4 * k], C[4 * k, 4 * k + 1], C[4 * k + 1, 4 * k + 1]]
                     for k in range(K)])
-    got = out["path_cov_m2"][0]
+    got = out.path_cov_m2[0]
     scale = np.sqrt(ref[:, [0, 0, 2]] * ref[:, [0, 2, 2]])
     np.testing.assert_array_less(np.abs(got - ref) / scale, 1e-5)
     # their sd widens away from the well-observed middle, as the drawing shows

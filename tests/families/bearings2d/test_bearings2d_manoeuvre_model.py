@@ -124,9 +124,9 @@ def test_without_manoeuvres_the_mixture_is_the_ncv_answer():
     steady = ncv.smooth(*args, np.array([sigma]))
     prior = manoeuvres.ManoeuvrePrior(0.0, 2.0, (60.0, 240.0))
     mixed = manoeuvres.mixture(*args, prior, np.array([sigma]))
-    np.testing.assert_array_equal(mixed["theta"], steady["theta"])
-    np.testing.assert_array_equal(mixed["cov_theta"], steady["cov_theta"])
-    assert mixed["p_manoeuvre"][0] == 0.0
+    np.testing.assert_array_equal(mixed.theta, steady.theta)
+    np.testing.assert_array_equal(mixed.cov_theta, steady.cov_theta)
+    assert mixed.p_manoeuvre[0] == 0.0
 
 
 def test_the_mixture_averages_its_components_by_prior_and_likelihood():
@@ -164,18 +164,18 @@ def test_the_mixture_averages_its_components_by_prior_and_likelihood():
     cov = sum(wi * (c[2] + np.outer(m - mean, m - mean))
               for wi, c, m in zip(w, comps, means, strict=True))
     sd = np.sqrt(np.diag(cov))
-    assert np.all(np.abs(mixed["state"][0] - mean) <= 0.1 * sd), (mixed["state"][0], mean)
+    assert np.all(np.abs(mixed.state[0] - mean) <= 0.1 * sd), (mixed.state[0], mean)
     # the errors stated: the moments' covariance widened until its 95 % ellipsoid holds 95 %
     # of the mixture, by Monte Carlo over the mixture done by hand
     draws = _mixture_draws(w, means, [c[2] for c in comps], 200_000)
     scale = _quantile_95(draws - mean, cov) / chi2.ppf(0.95, 4)
     # (the mixture refines the most probable components of each level and takes the others
     # linearised about the trajectory they extend, the lightest pooled)
-    assert mixed["tail_scale"][0] == pytest.approx(max(scale, 1.0), rel=0.05)
-    np.testing.assert_allclose(np.sqrt(np.diag(mixed["cov"][0])),
-                               sd * math.sqrt(mixed["tail_scale"][0]), rtol=0.1)
-    assert mixed["p_manoeuvre"][0] == pytest.approx(1 - w[0], abs=0.01)
-    assert mixed["p_manoeuvre"][0] > 0.99  # the turn is plain in the bearings
+    assert mixed.tail_scale[0] == pytest.approx(max(scale, 1.0), rel=0.05)
+    np.testing.assert_allclose(np.sqrt(np.diag(mixed.cov[0])),
+                               sd * math.sqrt(mixed.tail_scale[0]), rtol=0.1)
+    assert mixed.p_manoeuvre[0] == pytest.approx(1 - w[0], abs=0.01)
+    assert mixed.p_manoeuvre[0] > 0.99  # the turn is plain in the bearings
 
 
 def _mixture_draws(weights, means, covs, n, seed=0):

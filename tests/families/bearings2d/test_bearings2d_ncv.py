@@ -79,9 +79,9 @@ def test_the_map_trajectory_is_the_least_squares_one():
                              np.full(K, theta[0, 2]), np.full(K, theta[0, 3])]).ravel()
     ref = least_squares(residuals, start, method="lm", xtol=1e-12, ftol=1e-12)
     last = ref.x.reshape(K, 4)[-1]
-    np.testing.assert_allclose(out["state"][0], last, rtol=1e-5, atol=1e-3)
+    np.testing.assert_allclose(out.state[0], last, rtol=1e-5, atol=1e-3)
     cov = np.linalg.inv(ref.jac.T @ ref.jac)[-4:, -4:]
-    np.testing.assert_allclose(out["cov"][0], cov, rtol=1e-3)
+    np.testing.assert_allclose(out.cov[0], cov, rtol=1e-3)
 
 
 def test_constant_velocity_innovations_are_the_recursive_residuals_of_least_squares():
@@ -106,13 +106,13 @@ def test_constant_velocity_innovations_are_the_recursive_residuals_of_least_squa
         b = np.linalg.lstsq(X[:k], y[:k], rcond=None)[0]
         expected[k] = (y[k] - X[k] @ b) / np.sqrt(1 + X[k] @ np.linalg.solve(X[:k].T @ X[:k],
                                                                               X[k]))
-    e = out["innovations"][0]
+    e = out.innovations[0]
     np.testing.assert_allclose(e[full:], expected[full:], rtol=1e-6, atol=1e-6)
     # the diffuse ones, about one per parameter, are left out: the first three, the turn's
     # (and the straight leg's round-off in range may leave one more)
     assert np.isnan(e[:3]).all() and 4 <= np.isnan(e).sum() <= 5
-    np.testing.assert_allclose(out["theta"][0], theta[0], rtol=1e-5)  # one step from LM
-    np.testing.assert_allclose(out["cov_theta"][0], np.linalg.inv(X.T @ X), rtol=1e-6)
+    np.testing.assert_allclose(out.theta[0], theta[0], rtol=1e-5)  # one step from LM
+    np.testing.assert_allclose(out.cov_theta[0], np.linalg.inv(X.T @ X), rtol=1e-6)
 
 
 def test_the_trend_test_is_the_f_test_of_a_cosine_bias():

@@ -38,6 +38,7 @@ of the mixture; with lambda = 0 the mixture is the no-manoeuvre component alone:
 ``ncv.smooth``'s answer.
 """
 
+import dataclasses
 import math
 
 import numpy as np
@@ -67,6 +68,7 @@ from tma.families.bearings2d.ncv import (
     MIN_SIGMA_RAD,
     PRIOR_RANGES,
     PRIOR_SPEED_M_S,
+    MotionFit,
     blank_path,
     finish_track,
     in_units,
@@ -363,11 +365,10 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
 
 
 def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_psd,
-            prior: ManoeuvrePrior, sigma_rad, path_cov=False):
+            prior: ManoeuvrePrior, sigma_rad, path_cov=False) -> MotionFit:
     """The state at each track's last bearing under NCV wander ``accel_psd`` (m^2/s^3, (n,)
     or scalar) and the manoeuvres of ``prior``, from the constant-velocity start
-    ``theta_cv`` (n, 4), as ``ncv.smooth`` returns it (``state``, ``cov``, ``theta``,
-    ``cov_theta``, ``innovations``, ``sigma2``, ``cost_rad2``, ``passes``) plus
+    ``theta_cv`` (n, 4): its ``ncv.MotionFit`` with the mixture's own
     ``p_manoeuvre`` (the posterior probability of a manoeuvre since the first bearing),
     ``p_omitted`` (the share of the posterior the mixture leaves out), ``n_manoeuvres``
     (their posterior mean number), ``tail_scale`` (the factor its covariance was widened
@@ -382,7 +383,7 @@ def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_p
     if prior.rate_per_h == 0:  # no manoeuvres: the nearly-constant-velocity answer itself
         out = smooth(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_psd,
                      sigma, path_cov=path_cov)
-        return {**out, "p_manoeuvre": np.zeros(n), "tail_scale": np.ones(n)}
+        return dataclasses.replace(out, p_manoeuvre=np.zeros(n), tail_scale=np.ones(n))
     known = np.isfinite(sigma)
     weighted = valid is not None
     weight = valid.astype(float) if weighted else np.empty((0, 0))
@@ -398,7 +399,7 @@ def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_p
     else:  # the no-manoeuvre fit's estimate: a manoeuvre can only inflate it (conservative);
         # the components' innovations would shrink it (they fit the noise with manoeuvres)
         sigma2 = np.where(known, sigma**2, smooth(t, own_x, own_y, measured_rad, valid, first,
-                                                  last, theta_cv, q, sigma)["sigma2"])
+                                                  last, theta_cv, q, sigma).sigma2)
     sigma2 = np.maximum(sigma2, MIN_SIGMA_RAD**2)
     taus, starts, ends, p_none, epochs, shocks = cell_priors(prior, t, first, last)
     durations = np.asarray(prior.durations_s, dtype=float)

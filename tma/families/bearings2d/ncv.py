@@ -46,6 +46,8 @@ declared (a simulation knows it), set (``estimator.accel_psd_m2_s3``) or, for a 
 log, a value measured on real ships (``RECORDED_ACCEL_PSD``).
 """
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from tma.families.bearings2d.kalman import (
@@ -179,6 +181,39 @@ MIN_SIGMA_RAD = float(np.deg2rad(1e-3))
 TOL_M = 1e-3  # a pass moving no position by more than this (m) ends the iteration
 
 
+@dataclass
+class MotionFit:
+    """What a motion fit returns per track (n,): ``ncv.smooth`` (the NCV MAP state) and
+    ``manoeuvres.mixture`` (averaged over the target's manoeuvres).
+
+    ``state`` (n, 4: x, y (m), vx, vy (m/s)) at the last bearing and its covariance ``cov``
+    (n, 4, 4); the same as ``theta`` (n, 4: the constant-velocity line through it, x0, y0 at
+    t = 0) with ``cov_theta``; ``innovations`` (n, K) normalised by sigma (NaN where none,
+    and the diffuse ones); ``sigma2`` (rad^2) used; ``cost_rad2`` (squared bearing residuals
+    of the trajectory); ``passes`` (Gauss-Newton passes of the no-manoeuvre fit; -1:
+    failed); ``path_m`` (n, K, 2: the most probable trajectory's positions, m; NaN outside the
+    track) and, where asked, ``path_cov_m2`` (n, K, 3: their smoothed covariances xx, xy, yy,
+    m^2). A mixture's own (None from ``ncv.smooth``): ``p_manoeuvre`` (posterior probability
+    of a manoeuvre in the window), ``p_omitted`` (the share of the posterior it leaves out),
+    ``n_manoeuvres`` (their posterior mean number) and ``tail_scale`` (the factor its
+    covariance was widened by)."""
+
+    state: np.ndarray
+    cov: np.ndarray
+    theta: np.ndarray
+    cov_theta: np.ndarray
+    innovations: np.ndarray
+    sigma2: np.ndarray
+    cost_rad2: np.ndarray
+    passes: np.ndarray
+    path_m: np.ndarray
+    path_cov_m2: np.ndarray | None = None
+    p_manoeuvre: np.ndarray | None = None
+    p_omitted: np.ndarray | None = None
+    n_manoeuvres: np.ndarray | None = None
+    tail_scale: np.ndarray | None = None
+
+
 def theta_of_state(state, P, t_now):
     """theta = (x0, y0, vx, vy) of the straight line through the state (x, y, vx, vy) at
     ``t_now`` (extrapolated back to t = 0: what every ``bearings2d`` output holds), and its
@@ -189,10 +224,11 @@ def theta_of_state(state, P, t_now):
     return theta, A @ P @ np.swapaxes(A, 1, 2)
 
 
-def in_units(out, sigma2, t_now, theta_cv):
-    """A kernel's ``out`` (covariance and innovations in units of the noise variance) in
-    physical units under ``sigma2`` (rad^2, (n,)), with ``theta``/``cov_theta`` of the state
-    at ``t_now`` (n,) and NaN for the tracks without a constant-velocity start."""
+def in_units(out, sigma2, t_now, theta_cv) -> MotionFit:
+    """A kernel's ``out`` (a dict; covariance and innovations in units of the noise variance)
+    as a ``MotionFit`` in physical units under ``sigma2`` (rad^2, (n,)), with
+    ``theta``/``cov_theta`` of the state at ``t_now`` (n,) and NaN for the tracks without a
+    constant-velocity start."""
     out["cov"] *= sigma2[:, None, None]
     out["innovations"] = out["innovations"] / np.sqrt(sigma2)[:, None]
     out["theta"], out["cov_theta"] = theta_of_state(out["state"], out["cov"], t_now)
@@ -203,11 +239,11 @@ def in_units(out, sigma2, t_now, theta_cv):
     for key in ("state", "cov", "innovations", "theta", "cov_theta", "path_m", "path_cov_m2"):
         if key in out:
             out[key][fail] = np.nan
-    return out
+    return MotionFit(**out)
 
 
 def smooth(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_psd, sigma_rad,
-           iterate=True, path_cov=False):
+           iterate=True, path_cov=False) -> MotionFit:
     """The NCV MAP state at each track's last bearing from the constant-velocity start
     ``theta_cv`` (n, 4), with q = ``accel_psd`` (m^2/s^3, (n,)); ``iterate`` False keeps the
     constant-velocity line itself (only its innovations and covariance are computed).
@@ -215,13 +251,8 @@ def smooth(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_ps
     ``sigma_rad``: the known bearing noise (n,); NaN where unknown: then sigma^2 is
     estimated from the innovations and the fit repeated with it (twice: q is absolute, so
     q / sigma^2 changes with the estimate; the first pass starts from the residual RMS of
-    ``theta_cv``). Returns a dict: ``state`` (n, 4) and ``cov`` (n, 4, 4) at the last bearing
-    (NaN where singular), ``innovations`` (n, K) normalised by sigma (NaN where none, and
-    the diffuse ones), ``sigma2`` (rad^2) used, ``cost_rad2`` (squared bearing residuals of
-    the trajectory), ``passes`` (Gauss-Newton passes; -1: failed) and ``path_m`` (n, K, 2:
-    the MAP trajectory's positions, m; NaN outside the track); with ``path_cov``,
-    ``path_cov_m2`` (n, K, 3: their smoothed covariances xx, xy, yy in m^2,
-    ``smoothed_positions``)."""
+    ``theta_cv``). Returns its ``MotionFit`` (the state and covariance NaN where singular;
+    with ``path_cov``, the trajectory's covariances, ``kalman.smoothed_positions``)."""
     n, K = measured_rad.shape
     sigma = np.asarray(sigma_rad, dtype=float)
     known = np.isfinite(sigma)

@@ -312,24 +312,24 @@ class BearingsEstimator(Estimator):
                                        prior if follows else None, sigma2, iterate,
                                        b.sigma_deg is None and iterate, own_fit_test,
                                        start[rows], path_cov=iterate and points > 0)
-                innovations[rows] = fit["innovations"]
+                innovations[rows] = fit.innovations
                 if iterate and points > 0:
                     paths.append(estimated_path.path_table(
-                        log.track_id[rows], t, fit["path_m"], fit["path_cov_m2"],
-                        fit["cov"][:, :2, :2], np.searchsorted(t, leg_start[rows]), points))
-                if "p_manoeuvre" in fit:
-                    p_manoeuvre[rows] = fit["p_manoeuvre"]
-                    tail_scale[rows] = fit["tail_scale"]
+                        log.track_id[rows], t, fit.path_m, fit.path_cov_m2,
+                        fit.cov[:, :2, :2], np.searchsorted(t, leg_start[rows]), points))
+                if fit.p_manoeuvre is not None:
+                    p_manoeuvre[rows] = fit.p_manoeuvre
+                    tail_scale[rows] = fit.tail_scale
                 for key in ("p_omitted", "n_manoeuvres"):
-                    if key in fit:
-                        extra.setdefault(key, np.full(n, np.nan))[rows] = fit[key]
+                    if getattr(fit, key) is not None:
+                        extra.setdefault(key, np.full(n, np.nan))[rows] = getattr(fit, key)
                 if iterate:
                     theta, cost, jtj, sigma2, fit_p = (
                         np.array(v, dtype=float) for v in (theta, cost, jtj, sigma2, fit_p))
                     (theta[rows], cost[rows], jtj[rows], sigma2[rows],
                      fit_p[rows]) = self._followed(fit, b.sigma_deg, fit_p[rows])
                     converged = converged.copy()
-                    converged[rows] &= fit["passes"] >= 0
+                    converged[rows] &= fit.passes >= 0
             if test:
                 motion_p = np.where(tested, trend_test_p(innovations, t, cfg.motion_terms),
                                     np.nan)
@@ -403,7 +403,7 @@ class BearingsEstimator(Estimator):
             return manoeuvres.mixture(*args, prior, sigma_rad, path_cov=path_cov)
 
         fit = fit_of(part)
-        wild = np.abs(np.nan_to_num(fit["innovations"])) > GROSS_SIGMAS
+        wild = np.abs(np.nan_to_num(fit.innovations)) > GROSS_SIGMAS
         if iterate and robust and wild.any():
             fit = fit_of((np.ones(wild.shape, dtype=bool) if part is None else part) & ~wild)
         return fit
@@ -416,15 +416,15 @@ class BearingsEstimator(Estimator):
         two-sided chi-square of its normalised innovations when sigma is known (none when
         unknown: a robust fit's own test judged the constant-velocity fit, which a wandering
         target fails; below ``ncv.MIN_SIGMA_RAD``, the constant-velocity fit's)."""
-        sigma2 = fit["sigma2"]
-        info, _ = scaled_inverse(fit["cov_theta"], 1e-14)
+        sigma2 = fit.sigma2
+        info, _ = scaled_inverse(fit.cov_theta, 1e-14)
         info *= sigma2[:, None, None]
         if sigma_deg is not None and np.deg2rad(sigma_deg) >= ncv.MIN_SIGMA_RAD:
-            e2 = fit["innovations"] ** 2
+            e2 = fit.innovations ** 2
             count = np.sum(np.isfinite(e2), axis=1)
             fit_p = np.where(count > 0,
                              two_sided_chi2_p(np.maximum(count, 1), np.nansum(e2, axis=1)),
                              np.nan)
         elif sigma_deg is None:
             fit_p = np.full(sigma2.size, np.nan)
-        return fit["theta"], fit["cost_rad2"], info, sigma2, fit_p
+        return fit.theta, fit.cost_rad2, info, sigma2, fit_p

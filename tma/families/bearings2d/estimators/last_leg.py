@@ -120,11 +120,11 @@ class LastLeg(LevenbergMarquardt):
             fit = manoeuvres.mixture(t, own_x, own_y, measured, used, first, last, theta, q,
                                      prior, sigma_rad)
         with np.errstate(invalid="ignore"):
-            drifting = trend_test_p(fit["innovations"], t, self.config.motion_terms) \
+            drifting = trend_test_p(fit.innovations, t, self.config.motion_terms) \
                 < self.config.motion_alpha
         # below any sensor's noise (a noiseless log) the residuals are round-off: no pattern
         noisy = (sigma is None or np.deg2rad(sigma) >= ncv.MIN_SIGMA_RAD) & (
-            np.sqrt(fit["sigma2"]) >= ncv.MIN_SIGMA_RAD)
+            np.sqrt(fit.sigma2) >= ncv.MIN_SIGMA_RAD)
         return drifting & noisy
 
     def _settle(self, t, own_x, own_y, measured, used, theta, sigma):
@@ -145,7 +145,7 @@ class LastLeg(LevenbergMarquardt):
                             np.full(todo.size, np.nan if sigma is None else np.deg2rad(sigma)),
                             iterate=False)
             with np.errstate(invalid="ignore"):
-                unsettled = trend_test_p(cv["innovations"], t, cfg.motion_terms) \
+                unsettled = trend_test_p(cv.innovations, t, cfg.motion_terms) \
                     < cfg.settle_alpha
             start = t[first] + cfg.step_s
             room = (last_t[todo] - start >= cfg.min_leg_s) & (
