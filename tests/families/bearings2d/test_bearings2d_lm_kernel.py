@@ -10,7 +10,7 @@ import pytest
 
 from tma.families import build_estimator
 from tma.families.bearings2d.estimators.lm import initial_theta
-from tma.families.bearings2d.estimators.lm_kernel import (
+from tma.families.bearings2d.marquardt import (
     STOP_F_TOL,
     STOP_LAMBDA_MAX,
     STOP_MAX_ITER,

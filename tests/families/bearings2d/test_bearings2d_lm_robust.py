@@ -12,7 +12,7 @@ from scipy.special import chdtri
 
 from tma.families import build_estimator
 from tma.families.bearings2d.estimators.lm import initial_theta
-from tma.families.bearings2d.estimators.lm_kernel import (
+from tma.families.bearings2d.marquardt import (
     LOSS_HUBER,
     TUNING,
     marquardt,

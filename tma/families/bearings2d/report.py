@@ -167,7 +167,7 @@ def _poor_fit_note(row) -> str:
             f"(chi-square p = {row.fit_p_value:.1e}): {why}")
 
 
-NOT_CONVERGED = {  # by stop_reason (estimates.parquet; lm_kernel's STOP_MAX_ITER and
+NOT_CONVERGED = {  # by stop_reason (estimates.parquet; marquardt.py's STOP_MAX_ITER and
     # STOP_LAMBDA_MAX, not imported: it loads the compiler, which aggregate never needs)
     1: "the estimator stopped at max_iter before converging",
     2: "the estimator stopped at lambda_max (its damping) before converging",

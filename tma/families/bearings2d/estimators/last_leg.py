@@ -36,9 +36,9 @@ import numpy as np
 from tma.config import param, require
 from tma.families.bearings2d import manoeuvres, ncv
 from tma.families.bearings2d.estimators.base import Bearings, Solution, TargetMotion
-from tma.families.bearings2d.estimators.lm import MAX_INT, LevenbergMarquardt
 from tma.families.bearings2d.estimators.lm import Config as LmConfig
-from tma.families.bearings2d.estimators.lm_kernel import STOP_F_TOL, marquardt
+from tma.families.bearings2d.estimators.lm import LevenbergMarquardt
+from tma.families.bearings2d.marquardt import STOP_F_TOL, MarquardtSettings, fit_starts
 from tma.families.bearings2d.status import trend_test_p
 
 
@@ -70,7 +70,7 @@ class LastLeg(LevenbergMarquardt):
         t, own_x, own_y, measured_rad, valid = (bearings.t, bearings.own_x, bearings.own_y,
                                                 bearings.measured, bearings.valid)
         q, sigma, prior = motion.accel_psd_m2_s3, bearings.sigma_deg, motion.manoeuvres
-        out = self.fit(t, own_x, own_y, measured_rad, valid, bearings.first, sigma)
+        out = self.fit(bearings)
         n, K = measured_rad.shape
         present = np.ones((n, K), dtype=bool) if valid is None else valid
         used = present.copy()
@@ -97,10 +97,8 @@ class LastLeg(LevenbergMarquardt):
                                       out["theta"][todo], q, sigma, prior)
             todo = todo[drifting]
         out["converged"] = out["stop_reason"] == STOP_F_TOL
-        columns = {k: out.pop(k) for k in self.outputs if k in out}
-        columns["n_rounds"] = rounds
-        return Solution(**out, bearings_used=used, leg_start_s=t[np.argmax(used, axis=1)],
-                        columns=columns)
+        out.update(n_rounds=rounds, bearings_used=used, leg_start_s=t[np.argmax(used, axis=1)])
+        return self.solution(out)
 
     def _drifting(self, t, own_x, own_y, measured, used, theta, q, sigma, prior=None):
         """Tracks whose residual sequence fails the trend test, under the wander ``q`` and
@@ -201,27 +199,7 @@ class LastLeg(LevenbergMarquardt):
             # a target at rest at distance d along the leg's first bearing
             starts.append(np.column_stack([ox0 + d * np.sin(bearing), oy0 + d * np.cos(bearing),
                                            np.zeros(n), np.zeros(n)]))
-        best = None
-        weight = np.ascontiguousarray(used, dtype=float)
-        for start in starts:
-            fit = {"theta": np.array(np.nan_to_num(start), dtype=float),
-                   "n_f_evals": np.zeros(n, dtype=np.int64),
-                   "n_iter": np.zeros(n, dtype=np.int64),
-                   "stop_reason": np.full(n, -1, dtype=np.int64),
-                   "cost_rad2": np.zeros(n), "jtj": np.zeros((n, 4, 4))}
-            marquardt(fit["theta"], np.ascontiguousarray(t, float),
-                      np.ascontiguousarray(own_x, float), np.ascontiguousarray(own_y, float),
-                      np.ascontiguousarray(measured, float), weight, True, float(cfg.lambda0),
-                      float(cfg.lambda_up), float(cfg.lambda_down), float(cfg.f_tol_rad2),
-                      min(int(cfg.max_iter), MAX_INT), float(cfg.lambda_max),
-                      float(cfg.pd_rtol), fit["n_f_evals"], fit["n_iter"], fit["stop_reason"],
-                      fit["cost_rad2"], fit["jtj"])
-            if best is None:
-                best = fit
-                continue
-            better = np.nan_to_num(fit["cost_rad2"], nan=np.inf) < \
-                np.nan_to_num(best["cost_rad2"], nan=np.inf) - cfg.f_tol_rad2
-            best["n_f_evals"] += fit["n_f_evals"]
-            for key in ("theta", "n_iter", "stop_reason", "cost_rad2", "jtj"):
-                best[key][better] = fit[key][better]
+        best = fit_starts(MarquardtSettings.of(cfg), np.nan_to_num(np.concatenate(starts)), t,
+                          own_x, own_y, measured, np.ascontiguousarray(used, dtype=float), True)
+        best.pop("start_won", None)
         return best["cost_rad2"] if cost_only else best

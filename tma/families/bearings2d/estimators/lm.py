@@ -1,5 +1,5 @@
 """``lm``: maximum-likelihood TMA by Marquardt's Levenberg-Marquardt, one track at a time in
-compiled code (``lm_kernel.marquardt``) over the tracks of a shard.
+compiled code (``marquardt.py``) over the tracks of a shard.
 
 Minimises F(theta) = sum_k wrap(X_k - f_k(theta))^2 (rad^2) per track with its own lambda:
 A = H + lambda diag(H), H = J^T J; a trial step whose F rises, or whose A is not positive
@@ -8,7 +8,7 @@ definite, multiplies lambda by ``lambda_up``; an accepted step multiplies it by
 Every pass makes one fused evaluation of F, J^T J and J^T r at the trial point (accepted and
 rejected alike; n_f_evals counts it once).
 
-``loss=huber|cauchy`` fits robustly (the same ``lm_kernel.marquardt``, its loss a parameter):
+``loss=huber|cauchy`` fits robustly (the same ``marquardt.marquardt``, its loss a parameter):
 F_rho = sum s^2 rho(r/s), iteratively reweighted inside the Marquardt loop (H = J^T Omega J,
 g = J^T Omega r, omega = rho'(u) / (2u), a step accepted when F_rho falls; c = 1.345 s for Huber,
 2.385 s for Cauchy). The scale s is the log's nominal sigma (``scale=sigma``), or with
@@ -42,17 +42,17 @@ from tma.families.bearings2d.estimators.base import (
     Solution,
     TargetMotion,
 )
-from tma.families.bearings2d.estimators.lm_kernel import (
+from tma.families.bearings2d.marquardt import (
     LOSSES,
     STOP_F_TOL,
     TUNING,
-    marquardt,
+    MarquardtSettings,
+    fit_starts,
 )
 from tma.families.bearings2d.model import BearingTerms, bearing_jacobian, bearing_residuals
 from tma.families.bearings2d.status import noiseless_fit_p, robust_fit_p, runs_test_p
 from tma.maths.linalg import scaled_inverse
 
-MAX_INT = np.iinfo(np.int64).max
 SCALES = ("sigma", "mad")
 MAD_TO_SD = 1.4826  # sd of a normal over its median absolute deviation
 MIN_SCALE_RAD = 1e-10  # floor of a MAD scale (a noiseless fit has residuals ~ round-off)
@@ -126,25 +126,6 @@ def initial_theta(cfg: Config, t, own_x, own_y, measured_rad, first, distance_m=
     ])
 
 
-def _tiled(array, k):
-    """``array`` repeated ``k`` times along its first axis (a 0-row placeholder as it is)."""
-    return array if k == 1 or array.shape[0] == 0 else np.tile(array, (k, 1))
-
-
-def _best_start(cost, k, tol):
-    """Index (n,) of the start of lowest cost per track (NaN counts as +inf), from ``cost``
-    of the ``k`` starts stacked start-major (k * n,): the earliest start within ``tol`` of
-    the lowest (starts reaching one minimum differ by about the F tolerance)."""
-    cost = np.where(np.isnan(cost), np.inf, cost).reshape(k, -1)
-    return np.argmax(cost <= cost.min(axis=0) + tol, axis=0)
-
-
-def _pick(values, won, k):
-    """Rows of ``values`` (k * n, ...) stacked start-major: the winning start's per track."""
-    n = won.size
-    return values.reshape(k, n, *values.shape[1:])[won, np.arange(n)]
-
-
 def mad_scale(residuals, valid):
     """1.4826 median |r| over each track's bearings (rad), floored at ``MIN_SCALE_RAD``."""
     a = np.abs(residuals) if valid is None else np.where(valid, np.abs(residuals), np.nan)
@@ -189,18 +170,20 @@ class LevenbergMarquardt(BearingsEstimator):
     recorded_defaults = {"initial_bearing_deg": None, "path_points": RECORDED_POINTS}
 
     def solve(self, bearings: Bearings, motion: TargetMotion) -> Solution:
-        t, own_x, own_y, measured_rad, valid, first = (
-            bearings.t, bearings.own_x, bearings.own_y, bearings.measured, bearings.valid,
-            bearings.first)
-        out = self.fit(t, own_x, own_y, measured_rad, valid, first, bearings.sigma_deg)
+        return self.solution(self.fit(bearings))
+
+    def solution(self, out: dict) -> Solution:
+        """The ``Solution`` of a fit's fields by name (``fit``), its outputs as columns."""
         columns = {k: out.pop(k) for k in self.outputs if k in out}
         return Solution(**out, columns=columns)
 
-    def fit(self, t, own_x, own_y, measured_rad, valid, first, sigma) -> dict:
-        """The Marquardt fit of every track from its starts (``valid``: mask or None;
-        ``first``: each track's first bearing; ``sigma``: the nominal noise, deg, None where
-        unknown): the ``Solution``'s fields and the outputs, by name."""
+    def fit(self, bearings: Bearings) -> dict:
+        """The Marquardt fit of every track from its starts: the ``Solution``'s fields and
+        the outputs, by name."""
         cfg = self.config
+        t, own_x, own_y, measured_rad, valid, first, sigma = (
+            bearings.t, bearings.own_x, bearings.own_y, bearings.measured, bearings.valid,
+            bearings.first, bearings.sigma_deg)
         terms = BearingTerms(t, own_x, own_y, measured_rad, valid)
         starts = np.concatenate([initial_theta(cfg, t, own_x, own_y, measured_rad, first, d)
                                  for d in start_distances(cfg)])
@@ -227,54 +210,15 @@ class LevenbergMarquardt(BearingsEstimator):
         return out
 
     def _squared(self, terms, theta):
-        """Today's Marquardt kernel on every start (theta stacked start-major)."""
-        cfg = self.config
-        k, m = cfg.starts, theta.shape[0]
-        out = {
-            "theta": theta,
-            "n_f_evals": np.zeros(m, dtype=np.int64),
-            "n_iter": np.zeros(m, dtype=np.int64),
-            "stop_reason": np.full(m, -1, dtype=np.int64),
-            "cost_rad2": np.zeros(m),
-            "jtj": np.zeros((m, 4, 4)),
-        }
-        marquardt(out["theta"], terms.t, terms.ox, terms.oy, _tiled(terms.measured, k),
-                  _tiled(terms.weight, k), terms.weighted, float(cfg.lambda0),
-                  float(cfg.lambda_up), float(cfg.lambda_down), float(cfg.f_tol_rad2),
-                  min(int(cfg.max_iter), MAX_INT), float(cfg.lambda_max), float(cfg.pd_rtol),
-                  out["n_f_evals"], out["n_iter"], out["stop_reason"], out["cost_rad2"],
-                  out["jtj"])
-        return self._winners(out, k, "cost_rad2")
+        """The squared-loss Marquardt fit from every start (stacked start-major)."""
+        return fit_starts(MarquardtSettings.of(self.config), theta, terms.t, terms.ox,
+                          terms.oy, terms.measured, terms.weight, terms.weighted)
 
     def _robust(self, terms, theta, scale):
-        """The robust kernel on every start (stacked start-major; ``scale`` per track)."""
-        cfg = self.config
-        k, m = theta.shape[0] // scale.size, theta.shape[0]
-        out = {
-            "theta": np.array(theta),
-            "n_f_evals": np.zeros(m, dtype=np.int64),
-            "n_iter": np.zeros(m, dtype=np.int64),
-            "stop_reason": np.full(m, -1, dtype=np.int64),
-            "cost_robust_rad2": np.zeros(m),
-        }
-        marquardt(out["theta"], terms.t, terms.ox, terms.oy, _tiled(terms.measured, k),
-                  _tiled(terms.weight, k), terms.weighted, float(cfg.lambda0),
-                  float(cfg.lambda_up), float(cfg.lambda_down), float(cfg.f_tol_rad2),
-                  min(int(cfg.max_iter), MAX_INT), float(cfg.lambda_max), float(cfg.pd_rtol),
-                  out["n_f_evals"], out["n_iter"], out["stop_reason"], out["cost_robust_rad2"],
-                  None, LOSSES[cfg.loss], TUNING[cfg.loss], np.tile(scale, k))
-        return self._winners(out, k, "cost_robust_rad2")
-
-    def _winners(self, out, k, cost):
-        """Each track's start of lowest ``cost``; ``start_won`` when there are several."""
-        if k == 1:
-            return out
-        won = _best_start(out[cost], k, self.config.f_tol_rad2)
-        total = out["n_f_evals"].reshape(k, -1).sum(axis=0)
-        out = {key: _pick(value, won, k) for key, value in out.items()}
-        out["n_f_evals"] = total
-        out["start_won"] = won.astype(np.int64)
-        return out
+        """The robust fit from every start (stacked start-major; ``scale`` per track)."""
+        return fit_starts(MarquardtSettings.of(self.config), theta, terms.t, terms.ox,
+                          terms.oy, terms.measured, terms.weight, terms.weighted,
+                          self.config.loss, scale)
 
     def _robust_columns(self, out, t, own_x, own_y, measured_rad, valid, scale, sigma):
         """At the robust solution: the plain F, the sandwich information as ``jtj``, the

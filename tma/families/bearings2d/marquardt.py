@@ -1,4 +1,6 @@
-"""The compiled Marquardt loop of ``lm``, one track at a time over the tracks of a shard.
+"""The compiled Marquardt loop of ``lm`` and ``last_leg``, one track at a time over the tracks
+of a shard, and the one way they call it (``fit_starts``: every track from several starts,
+each keeping its best, ``best_start``).
 
 Per track: A = H + lambda diag(H) with H = J^T J (J^T Omega J for a robust loss), scaled to
 unit diagonal (D = sqrt(diag H),
@@ -9,6 +11,7 @@ evaluation of F, H and g at the trial point (``model.track_terms``), accepted or
 """
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -22,6 +25,7 @@ from tma.families.bearings2d.model import (  # noqa: F401 (the losses, imported 
 )
 from tma.runtime.jit import njit
 
+MAX_INT = np.iinfo(np.int64).max
 # Stop reasons recorded per track.
 STOP_F_TOL, STOP_MAX_ITER, STOP_LAMBDA_MAX = 0, 1, 2
 MAX_SWEEPS = 50  # Jacobi sweeps (4x4: converged after 4-6; the cap only stops a NaN input)
@@ -177,3 +181,82 @@ def marquardt(theta, t, ox, oy, measured, weight, weighted, lambda0, lambda_up, 
         n_f_evals[i], n_iter[i], stop[i], cost[i] = n_f, n_acc, reason, F
         if jtj is not None:
             jtj[i] = H
+
+
+@dataclass(frozen=True)
+class MarquardtSettings:
+    """The loop's settings (``lm.Config`` states each): the first lambda, its factors after
+    a rejected and an accepted step, the F tolerance (rad^2), the accepted steps at most,
+    the largest lambda and the definiteness threshold."""
+
+    lambda0: float
+    lambda_up: float
+    lambda_down: float
+    f_tol_rad2: float
+    max_iter: int
+    lambda_max: float
+    pd_rtol: float
+
+    @classmethod
+    def of(cls, cfg) -> "MarquardtSettings":
+        """The settings an estimator's config holds (``lm.Config`` and its subclasses)."""
+        return cls(float(cfg.lambda0), float(cfg.lambda_up), float(cfg.lambda_down),
+                   float(cfg.f_tol_rad2), min(int(cfg.max_iter), MAX_INT),
+                   float(cfg.lambda_max), float(cfg.pd_rtol))
+
+
+def _tiled(array, k):
+    """``array`` repeated ``k`` times along its first axis (a 0-row placeholder as it is)."""
+    return array if k == 1 or array.shape[0] == 0 else np.tile(array, (k, 1))
+
+
+def best_start(cost, k, tol):
+    """Index (n,) of the start of lowest cost per track (NaN counts as +inf), from ``cost``
+    of the ``k`` starts stacked start-major (k * n,): the earliest start within ``tol`` of
+    the lowest (starts reaching one minimum differ by about the F tolerance)."""
+    cost = np.where(np.isnan(cost), np.inf, cost).reshape(k, -1)
+    return np.argmax(cost <= cost.min(axis=0) + tol, axis=0)
+
+
+def _pick(values, won, k):
+    """Rows of ``values`` (k * n, ...) stacked start-major: the winning start's per track."""
+    n = won.size
+    return values.reshape(k, n, *values.shape[1:])[won, np.arange(n)]
+
+
+def fit_starts(settings: MarquardtSettings, starts, t, ox, oy, measured, weight, weighted,
+               loss="squared", scale=None) -> dict:
+    """Marquardt from ``starts`` (k * n, 4: k starts of the n tracks of ``measured``, stacked
+    start-major; ``weight``: each bearing's weight, n x K, read when ``weighted``), on the
+    squared cost or on a robust ``loss`` with the bearing ``scale`` per track (n,, rad), each
+    track keeping its best start (``best_start``). Returns by name ``theta`` (n, 4),
+    ``n_f_evals`` (summed over the starts), ``n_iter``, ``stop_reason`` and the cost at the
+    result: ``cost_rad2`` with ``jtj`` (the normal matrix) for the squared loss,
+    ``cost_robust_rad2`` for a robust one; with several starts, ``start_won``."""
+    n = measured.shape[0]
+    k, m = starts.shape[0] // n, starts.shape[0]
+    robust = loss != "squared"
+    cost_key = "cost_robust_rad2" if robust else "cost_rad2"
+    out = {"theta": np.array(starts, dtype=float), "n_f_evals": np.zeros(m, dtype=np.int64),
+           "n_iter": np.zeros(m, dtype=np.int64),
+           "stop_reason": np.full(m, -1, dtype=np.int64), cost_key: np.zeros(m)}
+    if not robust:
+        out["jtj"] = np.zeros((m, 4, 4))
+    s = settings
+    common = (out["theta"], np.ascontiguousarray(t, float), np.ascontiguousarray(ox, float),
+              np.ascontiguousarray(oy, float), _tiled(np.ascontiguousarray(measured, float), k),
+              _tiled(weight, k), weighted, s.lambda0, s.lambda_up, s.lambda_down, s.f_tol_rad2,
+              s.max_iter, s.lambda_max, s.pd_rtol, out["n_f_evals"], out["n_iter"],
+              out["stop_reason"], out[cost_key])
+    if robust:
+        marquardt(*common, None, LOSSES[loss], TUNING[loss], np.tile(scale, k))
+    else:
+        marquardt(*common, out["jtj"])
+    if k == 1:
+        return out
+    won = best_start(out[cost_key], k, s.f_tol_rad2)
+    total = out["n_f_evals"].reshape(k, -1).sum(axis=0)
+    out = {key: _pick(value, won, k) for key, value in out.items()}
+    out["n_f_evals"] = total
+    out["start_won"] = won.astype(np.int64)
+    return out
