@@ -8,7 +8,7 @@ targets' motion fitted about the solution, the noise and trend tests, the status
 columns)."""
 
 import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -16,9 +16,10 @@ from tma.config import param, require
 from tma.errors import InputError
 from tma.estimator import Estimator, EstimatorConfig
 from tma.families.bearings2d import estimated_path, manoeuvres, ncv
+from tma.families.bearings2d.contract import Bearings, JudgedFit, Solution, TargetMotion
 from tma.families.bearings2d.end_bearing import end_bearing
 from tma.families.bearings2d.log import BearingsLog
-from tma.families.bearings2d.manoeuvre_prior import RECORDED_MANOEUVRES, ManoeuvrePrior
+from tma.families.bearings2d.manoeuvre_prior import RECORDED_MANOEUVRES
 from tma.families.bearings2d.model import BearingTerms
 from tma.families.bearings2d.ncv import RECORDED_ACCEL_PSD
 from tma.families.bearings2d.status import (
@@ -98,65 +99,6 @@ class BearingsConfig(EstimatorConfig):
         require(self.manoeuvre_durations_s is None or len(self.manoeuvre_durations_s) > 0,
                 self.where, "manoeuvre_durations_s must be null or a list of one duration "
                 "(s) or more, got []")
-
-
-@dataclass(frozen=True)
-class Bearings:
-    """One shard's bearings as every estimator takes them: times ``t`` (K,, s), own-ship
-    ``own_x``, ``own_y`` (K,, m), the bearings ``measured`` (n, K, rad; 0 where missing),
-    ``valid`` (n, K; None: every bearing present, which spares the masks in the hot loops),
-    each track's ``first`` and ``last`` bearing (n,), ``n_bearings`` (n,) and the log's
-    nominal noise ``sigma_deg`` (None: unknown)."""
-
-    t: np.ndarray
-    own_x: np.ndarray
-    own_y: np.ndarray
-    measured: np.ndarray
-    valid: np.ndarray | None
-    first: np.ndarray
-    last: np.ndarray
-    n_bearings: np.ndarray
-    sigma_deg: float | None
-
-
-@dataclass(frozen=True)
-class TargetMotion:
-    """The targets' motion an estimate assumes: random acceleration ``accel_psd_m2_s3`` per
-    axis (m^2/s^3; 0: none) and the manoeuvres' prior (None: none)."""
-
-    accel_psd_m2_s3: float
-    manoeuvres: ManoeuvrePrior | None = None
-
-    @property
-    def moving(self) -> bool:
-        return self.accel_psd_m2_s3 > 0 or self.manoeuvres is not None
-
-
-@dataclass
-class Solution:
-    """What ``solve`` returns, per track (n,): the estimate ``theta`` (n, 4: x0, y0 (m), vx,
-    vy (m/s)), whether it ``converged``, its ``stop_reason`` (0: the F tolerance; what else
-    means the estimator's own, named by the report), the cost evaluations ``n_f_evals`` and
-    iterations ``n_iter`` (NaN where the estimator has none: a direct solve);
-    optional: the fit at theta (``cost_rad2``, F in rad^2, and ``jtj``, the normal matrix
-    (n, 4, 4); computed when absent), a noise scale and fit test of the estimator's own
-    (``sigma2_rad2``, ``fit_p``: a robust fit's, which replace the nominal ones), the bearings
-    it kept (``inliers``, n x K) or fitted (``bearings_used``: part of each track), from when
-    the solution holds (``leg_start_s``), and its own output ``columns`` (its ``outputs``)."""
-
-    theta: np.ndarray
-    converged: np.ndarray
-    stop_reason: np.ndarray
-    n_f_evals: np.ndarray
-    n_iter: np.ndarray
-    cost_rad2: np.ndarray | None = None
-    jtj: np.ndarray | None = None
-    sigma2_rad2: np.ndarray | None = None
-    fit_p: np.ndarray | None = None
-    inliers: np.ndarray | None = None
-    bearings_used: np.ndarray | None = None
-    leg_start_s: np.ndarray | None = None
-    columns: dict = field(default_factory=dict)
 
 
 class BearingsEstimator(Estimator):
@@ -240,17 +182,34 @@ class BearingsEstimator(Estimator):
 
     def judge(self, bearings: Bearings, motion: TargetMotion, solution: Solution,
               log: BearingsLog) -> dict:
-        """The output columns of ``solution``: the noise fit, the targets' motion fitted about
-        it (``models_motion``), the trend test, the status and one-sigma errors
-        (``status.assess``)."""
-        cfg, b = self.config, bearings
-        t, ox, oy, first, last = b.t, b.own_x, b.own_y, b.first, b.last
-        theta, converged = solution.theta, solution.converged
+        """The output columns of ``solution``, in four steps: ``_noise_fit`` (the fit at the
+        solution and the noise test), ``_follow`` (the targets' motion fitted about it,
+        ``models_motion``, and the trend test), ``status.assess`` (the status and one-sigma
+        errors, with ``end_bearing``'s guard) and ``_columns``."""
+        b = bearings
+        fit = self._noise_fit(b, solution)
+        self._follow(b, motion, solution, log, fit)
+        approximate = np.full(fit.theta.shape[0], not self.honest_errors)
+        approximate |= motion.moving and not self.models_motion
+        t, ox, oy, last = b.t, b.own_x, b.own_y, b.last
+        trust = assess(fit.theta, fit.jtj, fit.sigma2, fit.fit_p, fit.motion_p, fit.converged,
+                       approximate, t[last], ox[last], oy[last], self.config,
+                       motion_tested=fit.tested, undetermined=fit.undetermined,
+                       moving=motion.moving, tail_scale=fit.tail_scale)
+        # where the log's own last bearings point now, for status.not_an_answer's rule
+        trust.update(end_bearing(t, b.measured, b.valid, last, np.sqrt(fit.sigma2)))
+        return self._columns(b, motion, solution, log, fit, trust)
+
+    def _noise_fit(self, b: Bearings, solution: Solution) -> JudgedFit:
+        """The fit at the solution (F and J^T J, computed where the solver has none), the
+        bearings it rests on, and the noise scale and fit test (the solver's own for a robust
+        fit)."""
+        theta = solution.theta
         if solution.cost_rad2 is not None:  # iterative estimators know F and J^T J there
             cost, jtj = solution.cost_rad2, solution.jtj
         else:
             cost, jtj, _ = evaluate_in_blocks(
-                BearingTerms(t, ox, oy, b.measured, b.valid), theta)
+                BearingTerms(b.t, b.own_x, b.own_y, b.measured, b.valid), theta)
         n_bearings, valid = b.n_bearings, b.valid
         if solution.bearings_used is not None:  # a fit of part of each track (last_leg)
             n_bearings, valid = solution.bearings_used.sum(axis=1), solution.bearings_used
@@ -258,123 +217,134 @@ class BearingsEstimator(Estimator):
         # of the bearings the ones it kept
         sigma2, fit_p = solution.sigma2_rad2, solution.fit_p
         own_fit_test = fit_p is not None
-        use = valid if solution.inliers is None else solution.inliers
         if fit_p is None:
             sigma2, fit_p = noise_fit(cost, n_bearings - 4, b.sigma_deg)
-        sigma2 = np.broadcast_to(np.asarray(sigma2, dtype=float), theta.shape[:1])
         n = theta.shape[0]
+        sigma2 = np.broadcast_to(np.asarray(sigma2, dtype=float), (n,))
+        return JudgedFit(theta=theta, converged=solution.converged, cost=cost, jtj=jtj,
+                         sigma2=sigma2, fit_p=fit_p, own_fit_test=own_fit_test,
+                         n_bearings=n_bearings,
+                         use=valid if solution.inliers is None else solution.inliers,
+                         start=b.first, tested=np.zeros(n, dtype=bool),
+                         motion_p=np.full(n, np.nan), p_manoeuvre=np.full(n, np.nan),
+                         tail_scale=np.ones(n), undetermined=np.zeros(n, dtype=bool))
+
+    def _follow(self, b: Bearings, motion: TargetMotion, solution: Solution,
+                log: BearingsLog, fit: JudgedFit):
+        """The targets' motion fitted about the solution (``models_motion``: ``ncv.smooth``,
+        with manoeuvres ``manoeuvres.mixture`` over the recent window the answer rests on),
+        its trajectory kept for the plots (``path_points``), and the trend test of the
+        innovations; updates ``fit``."""
+        cfg = self.config
+        t, ox, oy, first, last = b.t, b.own_x, b.own_y, b.first, b.last
+        n = fit.theta.shape[0]
         undeclared = log.accel_psd_m2_s3 is None or b.sigma_deg is None
         test = cfg.motion_test == "on" or (cfg.motion_test == "auto"
                                            and (undeclared or self.tests_motion))
         test &= b.sigma_deg != 0  # a noiseless sensor: any misfit fails its own test
         # residuals below any sensor's noise (a noiseless log, declared or not) have no
         # pattern to test: round-off has one
-        tested = np.full(n, test) & (np.sqrt(sigma2) >= ncv.MIN_SIGMA_RAD)
+        fit.tested = np.full(n, test) & (np.sqrt(fit.sigma2) >= ncv.MIN_SIGMA_RAD)
         follows = motion.moving and self.models_motion
         q, prior = motion.accel_psd_m2_s3, motion.manoeuvres
-        motion_p, p_manoeuvre = np.full(n, np.nan), np.full(n, np.nan)
-        tail_scale = np.ones(n)  # how much a mixture's errors were widened for its tails
-        extra = {}
         # the trajectory the answer rests on, for the plots and the map (a recording's
         # default; lm's path_points): the side table path (estimated_path)
         points = cfg.path_points if self.models_motion else 0
-        paths = []
-        undetermined = np.zeros(n, dtype=bool)
-        start = first  # from when the answer holds
-        if follows or test:
-            # without manoeuvres, a track whose range the constant-velocity fit leaves
-            # undetermined stays so: wander could only widen it (and its MAP would shrink
-            # range to fit noise); its innovations for the trend test are those about the
-            # fit's line. A manoeuvre can explain what a constant-velocity fit leaves
-            # undetermined: with them, every track with an estimate (and then whether
-            # own-ship's motion determines the range of the answer, below)
-            follow = np.zeros(n, dtype=bool)
-            if follows and prior is not None:
-                follow = np.isfinite(theta).all(axis=1)
-                # the answer rests on the recent past, where the manoeuvres it weighs are few
-                # enough to be weighed (manoeuvres.window_s): from when it holds
-                start = np.maximum(first, np.searchsorted(
-                    t, t[last] - manoeuvres.window_s(prior), side="left"))
-                if np.any(start > first):
-                    inside = np.arange(t.size)[None, :] >= start[:, None]
-                    use = inside if use is None else use & inside
-                    n_bearings = use.sum(axis=1)
-            elif follows:
-                follow = range_rel_sd(theta, jtj, sigma2, t[last], ox[last], oy[last],
-                                      cfg.singular_rcond) <= cfg.max_range_rel_sd
-            innovations = np.full(b.measured.shape, np.nan)
-            leg_start = self._leg_start(t, start, solution)
-            for rows, iterate in ((np.flatnonzero(follow), True),
-                                  (np.flatnonzero(~follow), False)):
-                if rows.size == 0 or not (iterate or test):
-                    continue
-                fit = self._motion_fit(b, use, theta, rows, q if follows else 0.0,
-                                       prior if follows else None, sigma2, iterate,
-                                       b.sigma_deg is None and iterate, own_fit_test,
-                                       start[rows], path_cov=iterate and points > 0)
-                innovations[rows] = fit.innovations
-                if iterate and points > 0:
-                    paths.append(estimated_path.path_table(
-                        log.track_id[rows], t, fit.path_m, fit.path_cov_m2,
-                        fit.cov[:, :2, :2], np.searchsorted(t, leg_start[rows]), points))
-                if fit.p_manoeuvre is not None:
-                    p_manoeuvre[rows] = fit.p_manoeuvre
-                    tail_scale[rows] = fit.tail_scale
-                for key in ("p_omitted", "n_manoeuvres"):
-                    if getattr(fit, key) is not None:
-                        extra.setdefault(key, np.full(n, np.nan))[rows] = getattr(fit, key)
-                if iterate:
-                    theta, cost, jtj, sigma2, fit_p = (
-                        np.array(v, dtype=float) for v in (theta, cost, jtj, sigma2, fit_p))
-                    (theta[rows], cost[rows], jtj[rows], sigma2[rows],
-                     fit_p[rows]) = self._followed(fit, b.sigma_deg, fit_p[rows])
-                    converged = converged.copy()
-                    converged[rows] &= fit.passes >= 0
-            if test:
-                motion_p = np.where(tested, trend_test_p(innovations, t, cfg.motion_terms),
-                                    np.nan)
-            if follows and prior is not None:
-                # no target manoeuvre makes range observable, only own-ship's: the bearings'
-                # information on a constant-velocity target at the answer must determine it
-                _, jtj_cv, _ = evaluate_in_blocks(
-                    BearingTerms(t, ox, oy, b.measured, use), theta)
-                undetermined = ~(range_rel_sd(theta, jtj_cv, sigma2, t[last], ox[last],
-                                              oy[last], cfg.singular_rcond)
+        if not (follows or test):
+            return
+        # without manoeuvres, a track whose range the constant-velocity fit leaves
+        # undetermined stays so: wander could only widen it (and its MAP would shrink range
+        # to fit noise); its innovations for the trend test are those about the fit's line.
+        # A manoeuvre can explain what a constant-velocity fit leaves undetermined: with
+        # them, every track with an estimate (and then whether own-ship's motion determines
+        # the range of the answer, below)
+        follow = np.zeros(n, dtype=bool)
+        if follows and prior is not None:
+            follow = np.isfinite(fit.theta).all(axis=1)
+            # the answer rests on the recent past, where the manoeuvres it weighs are few
+            # enough to be weighed (manoeuvres.window_s): from when it holds
+            fit.start = np.maximum(first, np.searchsorted(
+                t, t[last] - manoeuvres.window_s(prior), side="left"))
+            if np.any(fit.start > first):
+                inside = np.arange(t.size)[None, :] >= fit.start[:, None]
+                fit.use = inside if fit.use is None else fit.use & inside
+                fit.n_bearings = fit.use.sum(axis=1)
+        elif follows:
+            follow = range_rel_sd(fit.theta, fit.jtj, fit.sigma2, t[last], ox[last], oy[last],
+                                  cfg.singular_rcond) <= cfg.max_range_rel_sd
+        innovations = np.full(b.measured.shape, np.nan)
+        leg_start = self._leg_start(t, fit.start, solution)
+        for rows, iterate in ((np.flatnonzero(follow), True), (np.flatnonzero(~follow), False)):
+            if rows.size == 0 or not (iterate or test):
+                continue
+            motion_fit = self._motion_fit(b, fit.use, fit.theta, rows, q if follows else 0.0,
+                                          prior if follows else None, fit.sigma2, iterate,
+                                          b.sigma_deg is None and iterate, fit.own_fit_test,
+                                          fit.start[rows], path_cov=iterate and points > 0)
+            innovations[rows] = motion_fit.innovations
+            if iterate and points > 0:
+                fit.paths.append(estimated_path.path_table(
+                    log.track_id[rows], t, motion_fit.path_m, motion_fit.path_cov_m2,
+                    motion_fit.cov[:, :2, :2], np.searchsorted(t, leg_start[rows]), points))
+            if motion_fit.p_manoeuvre is not None:
+                fit.p_manoeuvre[rows] = motion_fit.p_manoeuvre
+                fit.tail_scale[rows] = motion_fit.tail_scale
+            for key in ("p_omitted", "n_manoeuvres"):
+                if getattr(motion_fit, key) is not None:
+                    fit.extra.setdefault(key, np.full(n, np.nan))[rows] = getattr(motion_fit,
+                                                                                   key)
+            if iterate:
+                fit.theta, fit.cost, fit.jtj, fit.sigma2, fit.fit_p = (
+                    np.array(v, dtype=float)
+                    for v in (fit.theta, fit.cost, fit.jtj, fit.sigma2, fit.fit_p))
+                (fit.theta[rows], fit.cost[rows], fit.jtj[rows], fit.sigma2[rows],
+                 fit.fit_p[rows]) = self._followed(motion_fit, b.sigma_deg, fit.fit_p[rows])
+                fit.converged = fit.converged.copy()
+                fit.converged[rows] &= motion_fit.passes >= 0
+        if test:
+            fit.motion_p = np.where(fit.tested,
+                                    trend_test_p(innovations, t, cfg.motion_terms), np.nan)
+        if follows and prior is not None:
+            # no target manoeuvre makes range observable, only own-ship's: the bearings'
+            # information on a constant-velocity target at the answer must determine it
+            _, jtj_cv, _ = evaluate_in_blocks(
+                BearingTerms(t, ox, oy, b.measured, fit.use), fit.theta)
+            fit.undetermined = ~(range_rel_sd(fit.theta, jtj_cv, fit.sigma2, t[last],
+                                              ox[last], oy[last], cfg.singular_rcond)
                                  <= cfg.max_range_rel_sd)
-                # there no one-sigma error can be given (the prior's would pretend one): the
-                # estimate is no answer (status.not_an_answer)
-                jtj = np.where(undetermined[:, None, None], np.nan, jtj)
-        approximate = np.full(n, not self.honest_errors)
-        approximate |= motion.moving and not self.models_motion
-        trust = assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t[last],
-                       ox[last], oy[last], cfg, motion_tested=tested,
-                       undetermined=undetermined, moving=motion.moving,
-                       tail_scale=tail_scale)
-        # where the log's own last bearings point now, for status.not_an_answer's rule
-        trust.update(end_bearing(t, b.measured, b.valid, last, np.sqrt(sigma2)))
+            # there no one-sigma error can be given (the prior's would pretend one): the
+            # estimate is no answer (status.not_an_answer)
+            fit.jtj = np.where(fit.undetermined[:, None, None], np.nan, fit.jtj)
+
+    def _columns(self, b: Bearings, motion: TargetMotion, solution: Solution,
+                 log: BearingsLog, fit: JudgedFit, trust: dict) -> dict:
+        """The output columns by name (and the side table ``path`` under ``extras``)."""
+        t, ox, oy, last = b.t, b.own_x, b.own_y, b.last
+        theta, n = fit.theta, fit.theta.shape[0]
+        q, prior = motion.accel_psd_m2_s3, motion.manoeuvres
         columns = {
             "x0_m": theta[:, 0], "y0_m": theta[:, 1], "vx_m_s": theta[:, 2], "vy_m_s": theta[:, 3],
             "n_f_evals": solution.n_f_evals, "n_iter": solution.n_iter,
-            "stop_reason": solution.stop_reason, "converged": converged,
+            "stop_reason": solution.stop_reason, "converged": fit.converged,
             **solution.columns,
-            "cost_rad2": cost,
-            "n_bearings": n_bearings.astype(np.int64),
+            "cost_rad2": fit.cost,
+            "n_bearings": fit.n_bearings.astype(np.int64),
             "t_last_s": t[last], "own_x_last_m": ox[last], "own_y_last_m": oy[last],
             **trust,
-            "leg_start_s": self._leg_start(t, start, solution),
+            "leg_start_s": self._leg_start(t, fit.start, solution),
             "accel_psd_m2_s3": np.full(n, float(q) if self.models_motion else 0.0),
-            "motion_p_value": motion_p,
+            "motion_p_value": fit.motion_p,
         }
         if prior is not None and self.models_motion:  # (not in the constant-velocity runs)
             columns["manoeuvre_rate_per_h"] = np.full(n, prior.rate_per_h)
-            columns["p_manoeuvre"] = p_manoeuvre
-            columns["tail_scale"] = tail_scale
-            columns.update(extra)
+            columns["p_manoeuvre"] = fit.p_manoeuvre
+            columns["tail_scale"] = fit.tail_scale
+            columns.update(fit.extra)
         for i in range(4):
             for j in range(i, 4):
-                columns[f"jtj_{i}{j}"] = jtj[:, i, j]
-        if points > 0:
-            columns["extras"] = {"path": estimated_path.joined(paths, log.track_id.dtype)}
+                columns[f"jtj_{i}{j}"] = fit.jtj[:, i, j]
+        if self.models_motion and self.config.path_points > 0:
+            columns["extras"] = {"path": estimated_path.joined(fit.paths, log.track_id.dtype)}
         return columns
 
     @staticmethod

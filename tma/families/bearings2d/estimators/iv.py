@@ -32,13 +32,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.config import param
-from tma.families.bearings2d.estimators.base import (
-    Bearings,
-    BearingsConfig,
-    BearingsEstimator,
-    Solution,
-    TargetMotion,
-)
+from tma.families.bearings2d.contract import Bearings, Solution, TargetMotion
+from tma.families.bearings2d.estimators.base import BearingsConfig, BearingsEstimator
 from tma.families.bearings2d.estimators.nbearings import NBearings
 from tma.families.bearings2d.model import relative_position
 

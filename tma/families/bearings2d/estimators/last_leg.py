@@ -35,7 +35,7 @@ import numpy as np
 
 from tma.config import param, require
 from tma.families.bearings2d import manoeuvres, ncv
-from tma.families.bearings2d.estimators.base import Bearings, Solution, TargetMotion
+from tma.families.bearings2d.contract import Bearings, Solution, TargetMotion
 from tma.families.bearings2d.estimators.lm import Config as LmConfig
 from tma.families.bearings2d.estimators.lm import LevenbergMarquardt
 from tma.families.bearings2d.marquardt import STOP_F_TOL, MarquardtSettings, fit_starts

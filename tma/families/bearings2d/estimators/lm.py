@@ -33,15 +33,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.config import param, require
+from tma.families.bearings2d.contract import Bearings, Solution, TargetMotion
 from tma.families.bearings2d.estimated_path import RECORDED_POINTS
-from tma.families.bearings2d.estimators.base import (
-    GROSS_SIGMAS,
-    Bearings,
-    BearingsConfig,
-    BearingsEstimator,
-    Solution,
-    TargetMotion,
-)
+from tma.families.bearings2d.estimators.base import GROSS_SIGMAS, BearingsConfig, BearingsEstimator
 from tma.families.bearings2d.marquardt import (
     LOSSES,
     STOP_F_TOL,

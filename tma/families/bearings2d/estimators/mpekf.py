@@ -54,12 +54,10 @@ import numpy as np
 
 from tma.config import param
 from tma.errors import InputError
+from tma.families.bearings2d.contract import Bearings, Solution, TargetMotion
 from tma.families.bearings2d.estimators.base import (
-    Bearings,
     BearingsConfig,
     BearingsEstimator,
-    Solution,
-    TargetMotion,
     evaluate_in_blocks,
 )
 from tma.families.bearings2d.model import BearingTerms, wrap_residual
