@@ -42,6 +42,7 @@ LAT = ("latitude_deg", "latitude_degrees", "latitude", "lat_deg", "lat")
 LON = ("longitude_deg", "longitude_degrees", "longitude", "lon_deg", "lon", "long", "lng")
 SENTENCE = re.compile(rb"(?:\\[^\\]*\\)?![A-Z]{2}VD[MO],[^*\s]*\*[0-9A-Fa-f]{2}")
 AIS_IN = re.compile(rb"![A-Z]{2}VD[MO],")
+OTHER_NMEA = re.compile(rb"[$!]([A-Z][A-Z0-9]{1,5}),")  # a receiver's $PGHP, own-ship's $GPRMC
 TAG_TIME = re.compile(rb"^\\[^\\]*\bc:(\d+(?:\.\d+)?)")
 DMA_TIME = re.compile(r"^\d{2}/\d{2}/\d{4}")
 MCAP_MAGIC = b"\x89MCAP"
@@ -120,7 +121,7 @@ def _read_nmea(path: Path, data: bytes) -> Reports:
     from pyais.exceptions import AISBaseException
     from pyais.messages import AISSentence, NMEASentenceFactory
 
-    dropped, rows, others, pending = Dropped("drop"), [], {}, {}
+    dropped, rows, others, pending, not_ais = Dropped("drop"), [], {}, {}, {}
     bad = {"bad checksum": [], "not a readable AIS sentence": [], "no time stamp": [],
            "undecodable AIS message": [], "position not available (lat 91, lon 181)": [],
            "multi-part message missing a part": []}
@@ -128,7 +129,11 @@ def _read_nmea(path: Path, data: bytes) -> Reports:
     for number, line in enumerate(data.splitlines(), start=1):
         found = SENTENCE.search(line)
         if found is None:
-            if line.strip():
+            other = None if AIS_IN.search(line) else OTHER_NMEA.search(line)
+            if other is not None:  # NMEA of another kind (a receiver's $PGHP, own GPS)
+                name = other.group(0)[:1].decode() + other.group(1).decode()
+                not_ais[name] = not_ais.get(name, 0) + 1
+            elif line.strip():
                 bad["not a readable AIS sentence"].append(number)
             continue
         raw = found.group(0)
@@ -185,6 +190,10 @@ def _read_nmea(path: Path, data: bytes) -> Reports:
                      "reports, not used (" + ", ".join(
                          f"{n} of type {k}" + (f" {TYPE_NAMES[k]}" if k in TYPE_NAMES else "")
                          for k, n in sorted(others.items())) + ")")
+    if not_ais:
+        notes.append(f"{path.name}: {sum(not_ais.values())} NMEA sentence(s) that are not AIS, "
+                     "not used (" + ", ".join(f"{n} {name}" for name, n in sorted(
+                         not_ais.items(), key=lambda item: -item[1])) + ")")
     if zoneless:
         notes.append(f"{path.name}: time stamps without a zone taken as UTC (AIS time is UTC)")
     table = np.array(rows, dtype=float).reshape(-1, 4)

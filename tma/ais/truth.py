@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from tma.ais.match import Contact, Match, bearings_from, match_contacts
+from tma.ais.match import Contact, Match, bearings_from, gap_bound, match_contacts
 from tma.ais.options import TruthError, TruthOptions
 from tma.ais.reports import read_reports
 from tma.ais.tracks import vessel_tracks
@@ -38,6 +38,7 @@ from tma.utc import format_utc
 
 log = logging.getLogger(__name__)
 TRUTH, TRUTH_TRACK = "truth.parquet", "truth_track.parquet"
+BRACKET_S = 6 * 3600.0  # a ship's reports this far around the log bracket it (sparse AIS)
 
 
 @dataclass
@@ -72,7 +73,7 @@ def log_truth(contacts: list[Contact], origin_deg, epoch_ns, options: TruthOptio
     if not near.any():
         raise TruthError(f"truth={path}: its AIS covers {reports.span_text()} and {where} "
                          f"{log_span}: AIS of another time, not this log's trial")
-    kept = _subset(reports, near)
+    kept = _subset(reports, near | _bracketing(reports, lo, hi))
     ships = {m: t.on_plane(origin_deg, epoch_ns) for m, t in vessel_tracks(kept).items()}
     ships = {m: s for m, s in ships.items() if s.t_s.size >= 2}
     _check_place(ships, contacts, options, path, where)
@@ -88,6 +89,13 @@ def log_truth(contacts: list[Contact], origin_deg, epoch_ns, options: TruthOptio
                                            "x_m": x, "y_m": y}))
         (log.info if m.has_truth else log.warning)("%s contact %s: %s", where, m.label, m.note)
     if not rows:
+        gaps = [m.max_gap_s for m in matches if m.verdict == "gap"]
+        if gaps:  # the one way out, first: the contacts were matched, their AIS is sparse
+            raise TruthError(
+                f"truth={path}: no contact of {where} has a truth: {len(gaps)} of "
+                f"{len(matches)} matched to their ship, whose AIS has gaps up to "
+                f"{max(gaps):.0f} s, longer than truth.max_gap_s = {options.max_gap_s:g} s; "
+                f"set truth.max_gap_s={gap_bound(max(gaps))} to take the truth across them")
         shown = "; ".join(f"{m.label}: {m.note}" for m in matches[:3])
         raise TruthError(f"truth={path}: no contact of {where} has a truth ({shown}"
                          f"{'; ...' if len(matches) > 3 else ''})")
@@ -108,6 +116,18 @@ def log_truth(contacts: list[Contact], origin_deg, epoch_ns, options: TruthOptio
         log.warning("truth=%s: left out %d report(s): %s", path, reports.dropped.count,
                     reports.dropped.text())
     return LogTruth(truth, track, matches, record)
+
+
+def _bracketing(reports, lo: int, hi: int) -> np.ndarray:
+    """Per ship its last report before ``lo`` and its first after ``hi`` (UTC ns), within
+    ``BRACKET_S``: sparse AIS (a satellite's, every few minutes) still covers the log, and the
+    gap it bridges is said (``truth.max_gap_s``) rather than the ship lost."""
+    t, same = reports.t_ns, reports.mmsi[1:] == reports.mmsi[:-1]  # sorted by MMSI, time
+    before = (t < lo) & (t >= lo - BRACKET_S * 10**9)
+    after = (t > hi) & (t <= hi + BRACKET_S * 10**9)
+    last_before = before & ~np.r_[same & before[1:], False]
+    first_after = after & ~np.r_[False, same & after[:-1]]
+    return last_before | first_after
 
 
 def _subset(reports, mask):
@@ -142,10 +162,12 @@ def _truth_row(contact: Contact, ship, m: Match, options: TruthOptions, epoch_ns
     ta = t - options.velocity_span_s
     gap = ship.max_gap(ta, t)
     if gap > options.max_gap_s:
-        m.verdict = "gap"
+        m.verdict, m.max_gap_s = "gap", gap
         m.note += (f"; but its AIS does not cover the {options.velocity_span_s:g} s before the "
                    f"last bearing ({format_utc(epoch_ns + int(round(t * 1e9)))}) without a gap "
-                   f"over truth.max_gap_s = {options.max_gap_s:g} s: no truth")
+                   f"over truth.max_gap_s = {options.max_gap_s:g} s"
+                   + (f" (truth.max_gap_s={gap_bound(gap)} accepts it)" if np.isfinite(gap)
+                      else "") + ": no truth")
         return None
     x, y = ship.at(t)
     vx, vy = ship.mean_velocity(ta, t)

@@ -132,6 +132,8 @@ class CsvFile:
     mark, header, units row), and which column holds what (``columns``); ``read`` reads the
     chosen columns with pandas. ``tma.sources.table.Frame`` is a DataFrame's."""
 
+    id_hint = ""  # what a refusal of duplicate times per contact adds (a frame's float ids)
+
     def __init__(self, path: Path, options):
         self.path, self.options, self.notes = path, options, []
         raw = file_head(path, SAMPLE_BYTES, "a CSV file")
@@ -374,6 +376,12 @@ class Frame(CsvFile):
                     series = series.dt.tz_localize("UTC")
                 series = series.dt.tz_convert("UTC")
             elif role == "track":
+                if pd.api.types.is_float_dtype(series):  # 7 and 7.0 are one float there
+                    self.id_hint = (f"; the frame's column {name} holds floats ({series.dtype}), "
+                                    "in which ids such as 7 and 7.0 are one number: two "
+                                    "contacts may have been read as one; give the ids as text "
+                                    f"(frame[{name!r}].astype(str) before they are mixed) to "
+                                    "keep them apart")
                 series = series.astype(str).where(series.notna(), "").astype(object)
             out[name] = series
         return pd.DataFrame(out)

@@ -87,7 +87,7 @@ def read_table(table, options, *, navigation: bool, contacts: bool) -> list[Reco
         b, stated = _values(b_raw[keep], cols[role], options, table, path, line, notes)
         track = _tracks(None if track_raw is None else track_raw[keep], len(t), notes,
                         f"{path}: {cols.get('track')}")
-        _check_increasing(t, track, tcol, path, line)
+        _check_increasing(t, track, tcol, path, line, table.id_hint)
     if not navigation:
         return [Recording(None, Contacts(t, epoch, track, b, str(path), stated), notes=notes,
                           dropped=rows)]
@@ -230,7 +230,7 @@ def _codes(track: np.ndarray) -> np.ndarray:
     return pd.factorize(track)[0] if track.dtype == object else track
 
 
-def _check_increasing(t, track, col, path, line):
+def _check_increasing(t, track, col, path, line, hint=""):
     """Times must increase strictly within each track, in file order."""
     code = _codes(track)
     order = np.argsort(code, kind="stable")
@@ -240,7 +240,7 @@ def _check_increasing(t, track, col, path, line):
         k = int(np.argmax(bad))
         kind = "duplicate" if ts[k + 1] == ts[k] else "non-increasing"
         raise InputError(f"{path}: {kind} {col} for track {track[order[k + 1]]} on line "
-                         f"{line[order[k + 1]]} ({col} must increase within a track)")
+                         f"{line[order[k + 1]]} ({col} must increase within a track){hint}")
 
 
 def _check_lat_lon(lat, lon, cols, path, line):
