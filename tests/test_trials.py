@@ -99,3 +99,68 @@ def test_truth_options_dotted_in_python_are_those_of_the_command_line(trial):
     rec = tma.read_log(trial / "trial.csv", truth=trial / "trial_ais.csv",
                        options={"truth.match": {"T1": 235031618}})
     assert list(rec.matches["how"]) == ["given", "bearings"]
+
+
+# -- item 2: times as written ------------------------------------------------------------------
+
+def _local_log(trial, d, zone="Europe/Madrid", pattern="%d-%m-%y %H:%M:%S"):
+    """The trial's log with its times as a local clock writes them: day first, two-digit
+    year, no zone, a column named in Spanish."""
+    log = pd.read_csv(trial / "trial.csv")
+    utc = pd.to_datetime(log.pop("timestamp_utc"), utc=True)
+    log.insert(0, "Fecha", utc.dt.tz_convert(zone).dt.strftime(pattern))
+    log.to_csv(d / "local.csv", index=False)
+    return d / "local.csv", utc
+
+
+def test_a_local_time_log_is_read_by_its_pattern_and_zone(trial, tmp_path):
+    """14:33 in Madrid (CET, +01:00, in January) is 13:33 UTC: the bearings' UTC times are
+    those written, from the command's options and the API's."""
+    import tma
+
+    path, utc = _local_log(trial, tmp_path)
+    with pytest.raises(ValueError, match=r"'12-01-16 14:33:00' on line 2 has no time zone.*"
+                                         r"time\.zone="):
+        tma.read_log(path, columns={"time": "Fecha"}, time={"format": "%d-%m-%y %H:%M:%S"})
+    with pytest.raises(ValueError, match=r"time\.format='%Y/%m/%d %H:%M' matches no time of "
+                                         r"column Fecha \(line 2: '12-01-16 14:33:00'\)"):
+        tma.read_log(path, columns={"time": "Fecha"},
+                     time={"format": "%Y/%m/%d %H:%M", "zone": "Europe/Madrid"})
+    with pytest.raises(ValueError, match="time.zone=Mars/Olympus: no such IANA time zone"):
+        tma.read_log(path, options={"time.zone": "Mars/Olympus"})
+    rec = tma.read_log(path, options={"columns.time": "Fecha", "time.format": "%d-%m-%y %H:%M:%S",
+                                      "time.zone": "Europe/Madrid"})
+    got = rec.bearings.sort_values(["t_s", "label"])["time_utc"].reset_index(drop=True)
+    want = utc.sort_values().reset_index(drop=True)
+    assert (got == want).all()
+    assert rec.start_utc == "2016-01-12T13:33:00Z"
+
+
+def test_daylight_saving_repeats_and_gaps_are_refused_or_resolved_as_said():
+    """Madrid's clocks went back at 03:00 CEST on 27 October 2019 (02:30 happened twice: at
+    00:30 and 01:30 UTC) and forward at 02:00 CET on 31 March 2019 (02:30 never happened:
+    00:30 UTC by the summer offset, 01:30 UTC by the winter one)."""
+    import tma
+
+    def frame(day, times):
+        return pd.DataFrame({"time": [f"{day} {t}" for t in times],
+                             "bearing_deg": np.arange(len(times), dtype=float),
+                             "x": np.arange(len(times)) * 10.0, "y": 0.0})
+
+    times = ["01:50", "02:30", "03:10", "03:30", "03:50"]
+    both = {"earliest": "00:30", "latest": "01:30"}
+    cases = {"27/10/2019": (times, "repeated when the clocks went back", both),
+             "31/03/2019": (times, "skipped when the clocks went forward", both)}
+    for day, (times, refusal, resolved) in cases.items():
+        options = {"time.format": "%d/%m/%Y %H:%M", "time.zone": "Europe/Madrid",
+                   "nav.max_gap_s": 1e5}
+        with pytest.raises(ValueError, match=f"'{day} 02:30' on line 1 is a time of day in "
+                                             f"Europe/Madrid {refusal}.*time.ambiguous="):
+            tma.Recording.from_frames(frame(day, times), options=options)
+        for how, hhmm in resolved.items():
+            later = ["04:10", "04:30", "04:50", "05:10"]  # after the change: one instant each
+            rec = tma.Recording.from_frames(frame(day, ["02:30", *later]),
+                                            options={**options, "time.ambiguous": how})
+            first = rec.bearings["time_utc"].iloc[0]
+            iso = f"{day[6:]}-{day[3:5]}-{day[:2]}T{hhmm}:00Z"
+            assert first == pd.Timestamp(iso), (day, how, first)

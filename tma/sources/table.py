@@ -27,7 +27,7 @@ import pandas as pd
 
 from tma.errors import InputError
 from tma.sources.base import Caution, Contacts, Navigation, Recording, line_places
-from tma.utc import table_seconds, time_column
+from tma.utc import is_pattern, table_seconds, time_column
 
 MAX_TRACK_ID = 2**53  # an id written as a larger integer is kept as text
 NAMED_ALIKE = 3  # groups of alike ids named in the warning
@@ -50,13 +50,14 @@ def read_table(table, options, *, navigation: bool, contacts: bool) -> list[Reco
         keep[:] &= rows.drop(bad & keep, reason, line_places(line), f"{path}: {refusal}")
 
     tcol = cols["time"]
-    t_raw, fmt, t_ok, not_absolute = time_column(df[tcol], tcol, options.time.format, path,
-                                                 line, notes,
-                                                 lambda: _number_column(df, tcol, path))
+    t_raw, fmt, t_ok, not_absolute = time_column(
+        df[tcol], tcol, options.time.format, path, line, notes,
+        lambda: _number_column(df, tcol, path), options.time.zone, options.time.ambiguous)
     drop(~t_ok, "time missing or unreadable",
          f"column {tcol} has missing times or values that are not "
          + ("ISO-8601 times such as 2024-05-01T10:00:00Z; set columns.time or time.format"
-            if fmt in ("iso", "iso_utc") else "numbers"))
+            if fmt in ("iso", "iso_utc") else f"times written as time.format='{fmt}'"
+            if is_pattern(fmt) else "numbers"))
     unit = fmt.replace("unix_", "")
     drop(not_absolute, "time not absolute among absolute times",
          f"column {tcol} has times that are not Unix times ({unit}) like the others: times "
