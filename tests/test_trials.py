@@ -164,3 +164,83 @@ def test_daylight_saving_repeats_and_gaps_are_refused_or_resolved_as_said():
             first = rec.bearings["time_utc"].iloc[0]
             iso = f"{day[6:]}-{day[3:5]}-{day[:2]}T{hhmm}:00Z"
             assert first == pd.Timestamp(iso), (day, how, first)
+
+
+# -- item 1: AIS through the logs' table reader -------------------------------------------------
+
+OTHER_NAMES = {"time": "Zeit", "mmsi": "Schiff", "lat": "Breite", "lon": "Laenge",
+               "sog": "Fahrt"}
+LOCAL = "%d-%m-%y %H:%M:%S"
+
+
+def _other_export(reports: pd.DataFrame, path):
+    """The reports as an export of another country writes them: its own column names, ';'
+    between fields, a decimal comma, local (Madrid) times day first with a two-digit year,
+    speed in knots."""
+    utc = pd.to_datetime(np.round(reports.t_s) * 1e9, utc=True)
+    pd.DataFrame({"Zeit": utc.dt.tz_convert("Europe/Madrid").dt.strftime(LOCAL),
+                  "Schiff": reports.mmsi, "Breite": reports.lat_deg,
+                  "Laenge": reports.lon_deg, "Fahrt": reports.sog_kn,
+                  "Name": "X"}).to_csv(path, sep=";", decimal=",", index=False)
+    return path
+
+
+def _table_options(prefix="truth."):
+    return {**{f"{prefix}columns.{r}": c for r, c in OTHER_NAMES.items()},
+            f"{prefix}time.format": LOCAL, f"{prefix}time.zone": "Europe/Madrid"}
+
+
+def test_an_ais_export_with_other_names_times_and_layout_is_read_by_its_options(trial,
+                                                                             tmp_path):
+    """Refused naming the options that fix it; read with them, the reports are those written
+    (times to the second, positions exactly, SOG from knots to m/s), and the trial's contacts
+    are matched to their ships as from the Stone Soup file."""
+    import tma
+    from tma.ais.options import truth_options
+
+    reports = ais_trial.ais_reports()
+    path = _other_export(reports, tmp_path / "export.csv")
+    with pytest.raises(ValueError, match=r"no time or mmsi or lat or lon column among Zeit, "
+                                         r"Schiff.*truth\.columns\.time=<name>"):
+        read_reports(path)
+    with pytest.raises(ValueError, match=r"Zeit '12-01-16 14:28:00' on line 2 is not a time "
+                                         r"tma reads by itself.*truth\.time\.format="):
+        read_reports(path, truth_options({k: v for k, v in _table_options("").items()
+                                          if "time." not in k} | {"file": str(path)}))
+    got = read_reports(path, truth_options({"file": str(path), **_table_options("")}))
+    want = reports.sort_values(["mmsi", "t_s"], kind="stable")
+    assert got.kind == "csv" and len(got) == len(want) and got.dropped.count == 0
+    assert (got.mmsi == want.mmsi.to_numpy()).all()
+    assert np.abs(got.t_ns / 1e9 - np.round(want.t_s.to_numpy())).max() < 1e-6
+    assert np.abs(got.lat_deg - want.lat_deg.to_numpy()).max() < 1e-12
+    assert np.allclose(got.sog_m_s, want.sog_kn.to_numpy() * 1852 / 3600, equal_nan=True)
+    rec = tma.read_log(trial / "trial.csv", truth=path, options=_table_options())
+    assert dict(zip(rec.truth["label"], rec.truth["mmsi"], strict=True)) == ais_trial.TRUTH
+
+
+def test_an_ais_parquet_is_read_as_its_csv(trial, tmp_path):
+    reports = ais_trial.ais_reports()
+    frame = pd.DataFrame({"BaseDateTime": pd.to_datetime(reports.t_s * 1e9, utc=True),
+                          "MMSI": reports.mmsi, "LAT": reports.lat_deg,
+                          "LON": reports.lon_deg, "SOG": reports.sog_kn})
+    frame.to_parquet(tmp_path / "ais.parquet")
+    got = read_reports(tmp_path / "ais.parquet")
+    csv = read_reports(trial / "trial_ais.csv")
+    assert got.kind == "parquet" and len(got) == len(csv)
+    assert (got.mmsi == csv.mmsi).all() and np.abs(got.t_ns - csv.t_ns).max() <= 10**6
+    assert np.allclose(got.lat_deg, csv.lat_deg, rtol=0, atol=1e-9)
+
+
+def test_the_command_reads_an_ais_export_by_its_options(trial, tmp_path, monkeypatch):
+    monkeypatch.chdir(trial)
+    path = _other_export(ais_trial.ais_reports(), tmp_path / "export.csv")
+    options = [f"{k}={v}" if " " not in v else f"{k}='{v}'" for k, v in _table_options().items()]
+    proc = run_stage_here("ingest", "input=trial.csv", f"truth={path}", "name=export", *options,
+                          *data_paths(tmp_path), *QUIET, check=False)
+    assert proc.returncode == 0, proc.stderr
+    truth = pd.read_parquet(tmp_path / "data" / "datasets" / "export" / "truth.parquet")
+    assert dict(zip(truth["label"], truth["mmsi"], strict=True)) == ais_trial.TRUTH
+    proc = run_stage_here("ingest", "input=trial.csv", f"truth={path}", "name=export2",
+                          *options[:4], *data_paths(tmp_path), *QUIET, check=False)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1 and "truth.time.zone=" in lines[0], lines

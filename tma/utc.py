@@ -212,6 +212,14 @@ def _mostly_text(series) -> bool:
     return numeric < 0.5
 
 
+def _no_pattern(text, line, col, path, prefix) -> InputError:
+    """The refusal of a column of times none of which tma reads by itself."""
+    return InputError(f"{path}: {col} '{text}' on line {line} is not a time tma reads by "
+                      "itself (ISO-8601, Unix time): give the pattern it is written in, "
+                      f"{prefix}time.format='%d-%m-%y %H:%M' say (strptime), and "
+                      f"{prefix}time.zone=<IANA zone> for local times")
+
+
 def _iso_times(series, col, fmt, path, line, notes, local) -> tuple[np.ndarray, np.ndarray]:
     """ISO-8601 texts as UTC ns (int64) and which rows hold one. A column whose times mostly
     have no zone is refused (unless ``iso_utc``, or ``time.zone`` names theirs): the times
@@ -238,9 +246,14 @@ def _iso_times(series, col, fmt, path, line, notes, local) -> tuple[np.ndarray, 
         except (ValueError, OverflowError) as exc:
             raise InputError(f"{path}: column {col}: not ISO-8601 times ({exc})") from None
         ok = parsed.notna().to_numpy()
+        if not ok.any() and (~missing).any():
+            k = int(np.argmax(~missing))
+            raise _no_pattern(text.iloc[k], line[k], col, path, local.prefix)
         return local.utc_ns(parsed.dt.as_unit("ns").array.asi8, ok, text.to_numpy()), ok
     if fmt != "iso_utc" and unzoned.sum() * 2 >= (~missing).sum() and unzoned.any():
         k = int(np.argmax(unzoned))
+        if pd.isna(pd.to_datetime(text.iloc[k], format="ISO8601", errors="coerce")):
+            raise _no_pattern(text.iloc[k], line[k], col, path, local.prefix)
         named = re.search(rf"{ZONE_NAME.pattern}$", text.iloc[k])
         if named:  # "CET", "EST": no offset (summer time?): the offset is the user's to say
             raise InputError(f"{path}: {col} '{text.iloc[k]}' on line {line[k]} names its zone "
@@ -250,8 +263,8 @@ def _iso_times(series, col, fmt, path, line, notes, local) -> tuple[np.ndarray, 
         raise InputError(f"{path}: {col} '{text.iloc[k]}' on line {line[k]} has no time zone: "
                          f"write times with one ({text.iloc[k]}Z for UTC), set "
                          f"{local.prefix}time.zone=<IANA zone> (Europe/Madrid) for local "
-                         f"times or {local.prefix}time.format=iso_utc to read zone-less times "
-                         "as UTC")
+                         f"times, or set {local.prefix}time.format=iso_utc to read zone-less "
+                         "times as UTC")
     if fmt == "iso_utc" and unzoned.any():
         notes.append(f"{path.name}: {col} without time zone read as UTC (time.format=iso_utc)")
     try:
@@ -260,6 +273,9 @@ def _iso_times(series, col, fmt, path, line, notes, local) -> tuple[np.ndarray, 
     except (ValueError, OverflowError) as exc:
         raise InputError(f"{path}: column {col}: not ISO-8601 times ({exc})") from None
     ok = parsed.notna().to_numpy()
+    if not ok.any() and (~missing).any():
+        k = int(np.argmax(~missing))
+        raise _no_pattern(text.iloc[k], line[k], col, path, local.prefix)
     if fmt == "auto" and ok.any():
         notes.append(f"{path.name}: {col} read as ISO-8601 times (time.format=iso)")
     return np.where(ok, parsed.dt.as_unit("ns").array.asi8, 0), ok

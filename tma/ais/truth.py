@@ -63,7 +63,7 @@ def log_truth(contacts: list[Contact], origin_deg, epoch_ns, options: TruthOptio
             else "", "own-ship latitude/longitude (a plane with a geographic origin: give "
                      "origin.lat/origin.lon for x/y navigation)" if origin_deg is None else ""]))
         raise TruthError(f"truth={path}: scoring {where} against AIS needs {missing}")
-    reports = read_reports(path)
+    reports = read_reports(path, options)
     t0 = min(float(c.t_s[0]) for c in contacts)
     t1 = max(float(c.t_s[-1]) for c in contacts)
     log_span = f"{format_utc(epoch_ns + int(t0 * 1e9))} to {format_utc(epoch_ns + int(t1 * 1e9))}"
@@ -107,7 +107,7 @@ def log_truth(contacts: list[Contact], origin_deg, epoch_ns, options: TruthOptio
         track["x_m"].to_numpy(), track["y_m"].to_numpy(), origin_deg)
     record = {"path": str(path), "sha256": sha256_file(path), **reports.record(),
               "ships_in_log_times": len(ships),
-              "options": {k: v for k, v in vars(options).items() if k != "file"},
+              "options": options.record(),
               "contacts": [m.record() for m in matches],
               "with_truth": int(len(truth))}
     log.info("%s: truth for %d of %d contact(s) from %s (%d reports of %d ships in the log's "
@@ -134,7 +134,9 @@ def _subset(reports, mask):
     from dataclasses import replace
 
     return replace(reports, mmsi=reports.mmsi[mask], t_ns=reports.t_ns[mask],
-                   lat_deg=reports.lat_deg[mask], lon_deg=reports.lon_deg[mask])
+                   lat_deg=reports.lat_deg[mask], lon_deg=reports.lon_deg[mask],
+                   sog_m_s=None if reports.sog_m_s is None else reports.sog_m_s[mask],
+                   cog_deg=None if reports.cog_deg is None else reports.cog_deg[mask])
 
 
 def _check_place(ships, contacts, options, path, where):

@@ -154,9 +154,10 @@ class CsvFile:
 
     id_hint = ""  # what a refusal of duplicate times per contact adds (a frame's float ids)
 
-    def __init__(self, path: Path, options):
+    def __init__(self, path: Path, options, head: bytes | None = None):
         self.path, self.options, self.notes = path, options, []
-        raw = file_head(path, SAMPLE_BYTES, "a CSV file")
+        raw = file_head(path, SAMPLE_BYTES, "a CSV file") if head is None else \
+            head[:SAMPLE_BYTES]  # a file read already (decompressed: an AIS export)
         try:
             text = raw.decode("utf-8-sig")
         except UnicodeDecodeError as exc:

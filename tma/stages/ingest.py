@@ -194,7 +194,7 @@ def with_truth(read: Read, truth, where: str) -> Read:
     lg = read.logs[0]
     read.truth = log_truth(family_named(read.family).ingest.contacts(read.logs), lg.origin_deg,
                            lg.epoch_utc_ns, options, where)
-    read.config["truth"] = {k: v for k, v in vars(options).items() if k != "file"}
+    read.config["truth"] = options.record()
     read.sources["truth"] = read.truth.record
     return read
 
