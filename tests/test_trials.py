@@ -244,3 +244,67 @@ def test_the_command_reads_an_ais_export_by_its_options(trial, tmp_path, monkeyp
                           *options[:4], *data_paths(tmp_path), *QUIET, check=False)
     lines = proc.stderr.strip().splitlines()
     assert proc.returncode == 2 and len(lines) == 1 and "truth.time.zone=" in lines[0], lines
+
+
+# -- item 3: own-ship from its AIS -------------------------------------------------------------
+
+def _bare_log(trial, d):
+    """The trial's log as a sonar alone writes it: time, contact, bearing."""
+    pd.read_csv(trial / "trial.csv")[["timestamp_utc", "contact", "bearing_deg"]].to_csv(
+        d / "bare.csv", index=False)
+    return d / "bare.csv"
+
+
+def test_own_ship_from_its_ais_scores_a_log_of_bearings_alone(trial, tmp_path, monkeypatch):
+    """``truth.own_mmsi``: own-ship is its AIS track (the trial's own-ship positions were
+    built from it: they agree to centimetres), the contacts are scored as with the full log,
+    and the table, the map and the manifest say where own-ship came from."""
+    import json
+
+    import tma
+
+    bare = _bare_log(trial, tmp_path)
+    ais = trial / "trial_ais.csv"
+    with pytest.raises(ValueError, match=r"no own-ship position.*truth\.own_mmsi=<MMSI>"):
+        tma.read_log(bare, truth=ais)
+    with pytest.raises(ValueError, match=r"truth.own_mmsi=211000003: no position report of "
+                                         r"MMSI 211000003 in truth="):
+        tma.read_log(bare, truth={"file": ais, "own_mmsi": 211000003})
+    own = {"truth.own_mmsi": ais_trial.OWN, "nav.max_gap_s": 30}
+    rec = tma.read_log(bare, truth=ais, options=own)
+    full = tma.read_log(trial / "trial.csv", truth=ais)
+    assert np.abs(rec.ownship.lat_deg - full.ownship.lat_deg).max() * 111e3 < 0.05
+    assert np.allclose(rec.truth.range_now_m, full.truth.range_now_m, rtol=0, atol=0.05)
+    assert ais_trial.OWN not in set(rec.matches["mmsi"])
+    # own-ship reports every ~10 s: under nav.max_gap_s = 10 s the bearings in its longer
+    # gaps are left out and counted, never interpolated across
+    strict = tma.read_log(bare, truth=ais, options={"truth.own_mmsi": ais_trial.OWN})
+    assert len(strict.bearings) < len(rec.bearings) == len(full.bearings)
+    assert "own-ship's AIS longer than nav.max_gap_s" in json.dumps(strict.dropped)
+    monkeypatch.chdir(tmp_path)
+    run_stage_here("table", "input=bare.csv", f"truth={ais}",
+                   f"truth.own_mmsi={ais_trial.OWN}", "nav.max_gap_s=30", "name=bare",
+                   *data_paths(tmp_path), *QUIET)
+    table = pd.read_csv(tmp_path / "tables" / "bare-lm.csv")
+    assert list(table["truth_mmsi"]) == list(ais_trial.TRUTH.values()) and table.covered.all()
+    md = (tmp_path / "tables" / "bare-lm.md").read_text()
+    assert f"own-ship: AIS of MMSI {ais_trial.OWN} in {ais}" in md
+    manifest = json.loads((tmp_path / "data" / "datasets" / "bare" / "manifest.json")
+                          .read_text())
+    assert manifest["navigation"]["kind"] == "ais"
+    assert manifest["navigation"]["mmsi"] == ais_trial.OWN
+    from mcap.reader import make_reader
+
+    with open(tmp_path / "tables" / "bare-lm.mcap", "rb") as f:
+        meta = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
+    assert f"MMSI {ais_trial.OWN}" in json.dumps(meta)
+
+
+def test_own_ship_ais_too_sparse_for_nav_max_gap_s_is_one_line(trial, tmp_path):
+    import tma
+
+    ais_trial.write_ais_csv(tmp_path / "sparse.csv", _sparse(ais_trial.ais_reports(), 60.0))
+    with pytest.raises(ValueError, match=r"every bearing lies in a gap of own-ship's AIS.*set "
+                                         r"nav\.max_gap_s=(\d+) to interpolate"):
+        tma.read_log(_bare_log(trial, tmp_path), truth=tmp_path / "sparse.csv",
+                     options={"truth.own_mmsi": ais_trial.OWN})

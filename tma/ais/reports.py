@@ -23,15 +23,17 @@ MCAP log, own-ship NMEA, a bearing log) or with no usable report left is refused
 Times are the receiver's stamps (the reports' own UTC second is not used).
 """
 
+import functools
 import gzip
+import json
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
-from tma.ais.options import TruthError, TruthFileNotFound, TruthOptions
+from tma.ais.options import TruthError, TruthFileNotFound, TruthOptions, truth_options
 from tma.sources.base import Dropped
 from tma.utc import UNIX_MAGNITUDE, UNIX_SCALE_NS, UTC_FROM_NS
 
@@ -120,6 +122,26 @@ def read_reports(path, options: TruthOptions | None = None) -> Reports:
         if getattr(reports, name) is not None:
             setattr(reports, name, getattr(reports, name)[order])
     return reports
+
+
+@functools.lru_cache(maxsize=2)
+def _cached(path: str, stamp: tuple, options_json: str) -> Reports:
+    return read_reports(path, truth_options(json.loads(options_json)))
+
+
+def cached_reports(options: TruthOptions) -> Reports:
+    """``read_reports`` of ``options.file``, read once while the file and the table options
+    stay the same (own-ship and the truth read the same AIS)."""
+    path = Path(options.file)
+    try:
+        stat = path.stat()
+    except FileNotFoundError:
+        raise TruthFileNotFound(f"truth={path}: no such file") from None
+    table = {"file": str(path), "sog_units": options.sog_units,
+             **{k.removeprefix("truth."): v for k, v in options.table_options().items()}}
+    reports = _cached(str(path), (stat.st_mtime_ns, stat.st_size),
+                      json.dumps(table, sort_keys=True))
+    return replace(reports, dropped=reports.dropped, notes=list(reports.notes))
 
 
 # -- raw NMEA ----------------------------------------------------------------------------------

@@ -30,7 +30,7 @@ import pandas as pd
 
 from tma.ais.match import Contact, Match, bearings_from, gap_bound, match_contacts
 from tma.ais.options import TruthError, TruthOptions
-from tma.ais.reports import read_reports
+from tma.ais.reports import cached_reports
 from tma.ais.tracks import vessel_tracks
 from tma.io.atomic import sha256_file
 from tma.maths.geo import local_to_geodetic
@@ -63,7 +63,7 @@ def log_truth(contacts: list[Contact], origin_deg, epoch_ns, options: TruthOptio
             else "", "own-ship latitude/longitude (a plane with a geographic origin: give "
                      "origin.lat/origin.lon for x/y navigation)" if origin_deg is None else ""]))
         raise TruthError(f"truth={path}: scoring {where} against AIS needs {missing}")
-    reports = read_reports(path, options)
+    reports = cached_reports(options)
     t0 = min(float(c.t_s[0]) for c in contacts)
     t1 = max(float(c.t_s[-1]) for c in contacts)
     log_span = f"{format_utc(epoch_ns + int(t0 * 1e9))} to {format_utc(epoch_ns + int(t1 * 1e9))}"
@@ -75,7 +75,7 @@ def log_truth(contacts: list[Contact], origin_deg, epoch_ns, options: TruthOptio
                          f"{log_span}: AIS of another time, not this log's trial")
     kept = _subset(reports, near | _bracketing(reports, lo, hi))
     ships = {m: t.on_plane(origin_deg, epoch_ns) for m, t in vessel_tracks(kept).items()}
-    ships = {m: s for m, s in ships.items() if s.t_s.size >= 2}
+    ships = {m: s for m, s in ships.items() if s.t_s.size >= 2 and m != options.own_mmsi}
     _check_place(ships, contacts, options, path, where)
     matches = match_contacts(contacts, ships, options, epoch_ns, where)
     rows, track = [], []

@@ -297,7 +297,8 @@ class CsvFile:
         raise InputError(f"{self.path}: no own-ship position: columns found: "
                          f"{', '.join(self.header)}; set columns.lat=<name> columns.lon=<name> "
                          "(degrees) or columns.x=<name> columns.y=<name> (metres east, north), "
-                         "or give the own-ship in a separate file with navigation=FILE")
+                         "give the own-ship in a separate file with navigation=FILE, or take it "
+                         "from the AIS with truth.own_mmsi=<MMSI>")
 
     def read(self, cols: dict[str, str]):
         """The chosen columns (by position, so odd header spellings cannot get in the way).
