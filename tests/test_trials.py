@@ -308,3 +308,67 @@ def test_own_ship_ais_too_sparse_for_nav_max_gap_s_is_one_line(trial, tmp_path):
                                          r"nav\.max_gap_s=(\d+) to interpolate"):
         tma.read_log(_bare_log(trial, tmp_path), truth=tmp_path / "sparse.csv",
                      options={"truth.own_mmsi": ais_trial.OWN})
+
+
+# -- item 4: a campaign in one command -----------------------------------------------------------
+
+def _campaign(trial, d):
+    """Three logs in a folder, each with its AIS beside it: the trial (CSV AIS), the trial
+    again with the NMEA AIS, and a log whose bearings are 20 deg off (no ship fits: not
+    scored, said)."""
+    logs = d / "logs"
+    logs.mkdir()
+    log = pd.read_csv(trial / "trial.csv")
+    log.to_csv(logs / "t1.csv", index=False)
+    (logs / "t1_ais.csv").write_bytes((trial / "trial_ais.csv").read_bytes())
+    log.to_csv(logs / "t2.csv", index=False)
+    (logs / "t2_ais.nmea").write_bytes((trial / "trial_ais.nmea").read_bytes())
+    log.assign(bearing_deg=(log.bearing_deg + 20) % 360).to_csv(logs / "off.csv", index=False)
+    (logs / "off_ais.csv").write_bytes((trial / "trial_ais.csv").read_bytes())
+    return logs
+
+
+def _wilson(k, n, z=1.959963984540054):
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return centre - half, centre + half
+
+
+def test_a_campaign_pools_each_logs_verdicts_in_one_table(trial, tmp_path, monkeypatch):
+    """Each log's own table as ``input=LOG`` writes it, and the campaign's: per log and
+    pooled, the counts and z-scores of each log's own scores, the covered share with its
+    Wilson interval; the log no ship fits is not scored and says why. The API returns the
+    same table."""
+    import tma
+
+    logs = _campaign(trial, tmp_path)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(FileNotFoundError, match=r"log t3\.csv has no AIS: name it t3_ais\.csv"):
+        (logs / "t3.csv").write_bytes((logs / "t1.csv").read_bytes())
+        tma.campaign(logs)
+    (logs / "t3.csv").unlink()
+    table = tma.campaign(logs)
+    assert list(table["log"]) == ["off.csv", "t1.csv", "t2.csv", "pooled"]
+    off = table.set_index("log").loc["off.csv"]
+    assert "no contact" in off.note and pd.isna(off.contacts)
+    own = {name: tma.estimate(tma.read_log(logs / name, truth=logs / ais))
+           for name, ais in (("t1.csv", "t1_ais.csv"), ("t2.csv", "t2_ais.nmea"))}
+    pooled = pd.concat(own.values())
+    for name, report in [*own.items(), ("pooled", pooled)]:
+        row = table.set_index("log").loc[name]
+        ok = report[(report.status == "ok") & report.covered.notna()]
+        assert (row.contacts, row.ok, row.covered) == (len(report), len(ok),
+                                                       int(ok.covered.sum()))
+        assert np.isclose(row.range_z_mean, ok.range_z.mean())
+        assert np.allclose([row.covered_lo, row.covered_hi], _wilson(row.covered, row.ok))
+    proc = run_stage_here("table", "input=logs", *data_paths(tmp_path), *QUIET, check=False)
+    assert proc.returncode == 0, proc.stderr
+    tables = tmp_path / "tables"
+    assert {"t1-lm.csv", "t2-lm.md", "logs-campaign-lm.md", "logs-campaign-lm.png"} <= {
+        p.name for p in tables.iterdir()}
+    written = pd.read_csv(tables / "logs-campaign-lm.csv")
+    assert list(written["log"]) == list(table["log"])
+    assert np.allclose(written["covered_share"], table["covered_share"], equal_nan=True)
+    md = (tables / "logs-campaign-lm.md").read_text()
+    assert "| `off.csv` | not scored: " in md and "(1 not scored)" in md
