@@ -372,3 +372,38 @@ def test_a_campaign_pools_each_logs_verdicts_in_one_table(trial, tmp_path, monke
     assert np.allclose(written["covered_share"], table["covered_share"], equal_nan=True)
     md = (tables / "logs-campaign-lm.md").read_text()
     assert "| `off.csv` | not scored: " in md and "(1 not scored)" in md
+
+
+# -- item 7: the truth's own uncertainty where the AIS is sparse -------------------------------
+
+def test_sparse_ais_truth_carries_its_own_uncertainty_into_z_and_covered(trial, tmp_path,
+                                                                        monkeypatch):
+    """Reports every 5 minutes: the truth at the last bearing is interpolated across a gap,
+    its position sd per axis is a tau (T - tau) / 2 (from the gap's reports, read off the
+    file independently), the z-scores divide by the estimate's and the truth's sd together,
+    the normalised error shrinks against the exact truth's, and the table says so."""
+    import tma
+
+    sparse = _sparse(ais_trial.ais_reports(), 300.0)
+    ais_trial.write_ais_csv(tmp_path / "sparse.csv", sparse)
+    truth = {"file": tmp_path / "sparse.csv", "max_gap_s": 620}
+    rec = tma.read_log(trial / "trial.csv", truth=truth)
+    exact = tma.read_log(trial / "trial.csv", truth={**truth, "accel_sd_m_s2": 0})
+    written = pd.to_datetime(pd.read_csv(tmp_path / "sparse.csv").Time, utc=True)
+    for row in rec.truth.itertuples():
+        t = pd.Timestamp(rec.start_utc) + pd.Timedelta(seconds=row.t_now_s)
+        times = written[(sparse.mmsi == row.mmsi).to_numpy()].sort_values()
+        before, after = times[times <= t].iloc[-1], times[times > t].iloc[0]
+        tau, rest = (t - before).total_seconds(), (after - t).total_seconds()
+        assert np.isclose(row.truth_pos_sd_m, 0.02 * tau * rest / 2, rtol=1e-6), row.label
+        assert row.truth_vel_sd_m_s > 0.1  # its 120-s span lies in a 5-min gap
+    assert (exact.truth.truth_pos_sd_m == 0).all()
+    scored, plain = tma.estimate(rec), tma.estimate(exact)
+    sd = np.hypot(scored.range_sd_m, scored.truth_pos_sd_m)
+    assert np.allclose(scored.range_z, scored.range_err_m / sd)
+    assert (scored.nees < plain.nees).all() and (plain.truth_pos_sd_m == 0).all()
+    monkeypatch.chdir(trial)
+    run_stage_here("table", "input=trial.csv", f"truth={tmp_path / 'sparse.csv'}",
+                   "truth.max_gap_s=620", "name=sparse", *data_paths(tmp_path), *QUIET)
+    md = (tmp_path / "tables" / "sparse-lm.md").read_text()
+    assert "include the truth's own uncertainty where its AIS is sparse" in md

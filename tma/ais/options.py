@@ -109,6 +109,12 @@ class TruthOptions(Params):
     velocity_span_s: float = param(120.0, "the true course and speed at the last bearing: the "
                                    "ship's mean velocity over this span before it (s)",
                                    "(0, 3600)")
+    accel_sd_m_s2: float = param(0.02, "the truth's own uncertainty where the AIS is sparse: "
+                                 "a ship's one-sigma acceleration (m/s^2); a position "
+                                 "interpolated tau s after a report, T - tau before the next, "
+                                 "is uncertain by accel tau (T - tau) / 2 (m) per axis, and the "
+                                 "z-scores and covered include it; 0: the AIS is exact",
+                                 "[0, 10]")
     own_mmsi: int | None = param(None, "own-ship's MMSI: its track from the same AIS is the "
                                  "own-ship of the log (interpolated at each bearing; a log of "
                                  "time, contact and bearing needs no navigation then); null: "

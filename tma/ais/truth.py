@@ -8,7 +8,12 @@ for each matched contact the truth is taken from its ship's track:
 - at each bearing time, its position (linear between reports; ``truth_track.parquet``:
   ``track_id``, ``t_s``, ``x_m``, ``y_m``, ``lat_deg``, ``lon_deg``);
 - at the last bearing ("now"), its position and its velocity as the mean over the
-  ``truth.velocity_span_s`` (120 s) before it, as ``truth.parquet`` holds a simulated
+  ``truth.velocity_span_s`` (120 s) before it, with their own uncertainty where the AIS is
+  sparse (``PlaneTrack.interpolation_sd``: a ship of one-sigma acceleration
+  ``truth.accel_sd_m_s2`` strays from the chord between two reports T s apart by up to
+  a tau (T - tau) / 2; ``truth_pos_sd_m``, ``truth_vel_sd_m_s`` per axis, and the
+  variances of (x0, vx): ``truth_var_x0_m2``, ``truth_cov_x0_v_m2_s``,
+  ``truth_var_v_m2_s2``), as ``truth.parquet`` holds a simulated
   target's: ``x0_m``, ``y0_m``, ``vx_m_s``, ``vy_m_s`` the straight line through that state
   (so the kinematics now are the truth), ``course_deg``, ``speed_m_s``; besides them
   ``label``, ``mmsi``, ``match`` (``given`` or ``bearings``), ``rms_deg`` (the fit),
@@ -174,7 +179,18 @@ def _truth_row(contact: Contact, ship, m: Match, options: TruthOptions, epoch_ns
     x, y = ship.at(t)
     vx, vy = ship.mean_velocity(ta, t)
     x, y, vx, vy = float(x), float(y), float(vx), float(vy)
+    sd_now, sd_before = (float(v) for v in ship.interpolation_sd([t, ta],
+                                                                 options.accel_sd_m_s2))
+    span = options.velocity_span_s
+    var_p, var_v = sd_now ** 2, (sd_now ** 2 + sd_before ** 2) / span ** 2  # v = dp / span
+    cov_pv = var_p / span
     return {
+        # the truth's own uncertainty (per axis, x and y alike and independent): position now,
+        # velocity, and (x0, vx) of the straight line, x0 = x - vx t
+        "truth_pos_sd_m": sd_now, "truth_vel_sd_m_s": float(np.sqrt(var_v)),
+        "truth_gap_s": float(ship.gap([t])[0]),
+        "truth_var_x0_m2": var_p - 2 * t * cov_pv + t * t * var_v,
+        "truth_cov_x0_v_m2_s": cov_pv - t * var_v, "truth_var_v_m2_s2": var_v,
         "track_id": contact.track_id, "label": contact.label, "mmsi": m.mmsi, "match": m.how,
         "rms_deg": m.rms_deg, "x0_m": x - vx * t, "y0_m": y - vy * t, "vx_m_s": vx,
         "vy_m_s": vy, "course_deg": float(np.rad2deg(np.arctan2(vx, vy)) % 360.0),
