@@ -407,3 +407,19 @@ def test_sparse_ais_truth_carries_its_own_uncertainty_into_z_and_covered(trial, 
                    "truth.max_gap_s=620", "name=sparse", *data_paths(tmp_path), *QUIET)
     md = (tmp_path / "tables" / "sparse-lm.md").read_text()
     assert "include the truth's own uncertainty where its AIS is sparse" in md
+
+
+# -- item 5: the README's files ------------------------------------------------------------------
+
+def test_the_readmes_trial_files_are_what_their_script_writes_and_small():
+    import importlib.util
+
+    from tests.conftest import REPO
+
+    here = REPO / "tests" / "data" / "trials"
+    spec = importlib.util.spec_from_file_location("trials_build", here / "build.py")
+    build = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(build)
+    for name, text in build.files().items():
+        assert (here / name).read_text() == text, name
+        assert len(text.encode()) < 40_000, name
