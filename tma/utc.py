@@ -241,15 +241,8 @@ def _iso_times(series, col, fmt, path, line, notes, local) -> tuple[np.ndarray, 
                              f"a zone as UTC and {local.prefix}time.zone={local.zone} as "
                              f"{local.zone}: give one of them")
         local.refuse_zoned(text.to_numpy(), zoned & ~missing)
-        try:
-            parsed = pd.to_datetime(text.where(~missing), format="ISO8601", errors="coerce")
-        except (ValueError, OverflowError) as exc:
-            raise InputError(f"{path}: column {col}: not ISO-8601 times ({exc})") from None
-        ok = parsed.notna().to_numpy()
-        if not ok.any() and (~missing).any():
-            k = int(np.argmax(~missing))
-            raise _no_pattern(text.iloc[k], line[k], col, path, local.prefix)
-        return local.utc_ns(parsed.dt.as_unit("ns").array.asi8, ok, text.to_numpy()), ok
+        ns, ok = _parsed_iso(text, ~missing, missing, False, local)
+        return local.utc_ns(ns, ok, text.to_numpy()), ok
     if fmt != "iso_utc" and unzoned.sum() * 2 >= (~missing).sum() and unzoned.any():
         k = int(np.argmax(unzoned))
         if pd.isna(pd.to_datetime(text.iloc[k], format="ISO8601", errors="coerce")):
@@ -267,18 +260,27 @@ def _iso_times(series, col, fmt, path, line, notes, local) -> tuple[np.ndarray, 
                          "times as UTC")
     if fmt == "iso_utc" and unzoned.any():
         notes.append(f"{path.name}: {col} without time zone read as UTC (time.format=iso_utc)")
+    ns, ok = _parsed_iso(text, ~missing & (zoned | (fmt == "iso_utc")), missing, True, local)
+    if fmt == "auto" and ok.any():
+        notes.append(f"{path.name}: {col} read as ISO-8601 times (time.format=iso)")
+    return np.where(ok, ns, 0), ok
+
+
+def _parsed_iso(text, rows, missing, utc: bool, local) -> tuple[np.ndarray, np.ndarray]:
+    """ISO-8601 ``text`` of ``rows`` as ns (UTC, or wall-clock times when not ``utc``) and
+    which rows hold one; one line with an example when no row does."""
+    import pandas as pd
+
     try:
-        parsed = pd.to_datetime(text.where(~missing & (zoned | (fmt == "iso_utc"))),
-                                format="ISO8601", utc=True, errors="coerce")
+        parsed = pd.to_datetime(text.where(rows), format="ISO8601", utc=utc, errors="coerce")
     except (ValueError, OverflowError) as exc:
-        raise InputError(f"{path}: column {col}: not ISO-8601 times ({exc})") from None
+        raise InputError(f"{local.path}: column {local.col}: not ISO-8601 times ({exc})"
+                         ) from None
     ok = parsed.notna().to_numpy()
     if not ok.any() and (~missing).any():
         k = int(np.argmax(~missing))
-        raise _no_pattern(text.iloc[k], line[k], col, path, local.prefix)
-    if fmt == "auto" and ok.any():
-        notes.append(f"{path.name}: {col} read as ISO-8601 times (time.format=iso)")
-    return np.where(ok, parsed.dt.as_unit("ns").array.asi8, 0), ok
+        raise _no_pattern(text.iloc[k], local.line[k], local.col, local.path, local.prefix)
+    return parsed.dt.as_unit("ns").array.asi8, ok
 
 
 # -- times as people write them: a strptime pattern, a local zone --------------------------
