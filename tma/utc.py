@@ -245,14 +245,15 @@ def _iso_times(series, col, fmt, path, line, notes, local) -> tuple[np.ndarray, 
         return local.utc_ns(ns, ok, text.to_numpy()), ok
     if fmt != "iso_utc" and unzoned.sum() * 2 >= (~missing).sum() and unzoned.any():
         k = int(np.argmax(unzoned))
-        if pd.isna(pd.to_datetime(text.iloc[k], format="ISO8601", errors="coerce")):
-            raise _no_pattern(text.iloc[k], line[k], col, path, local.prefix)
         named = re.search(rf"{ZONE_NAME.pattern}$", text.iloc[k])
         if named:  # "CET", "EST": no offset (summer time?): the offset is the user's to say
             raise InputError(f"{path}: {col} '{text.iloc[k]}' on line {line[k]} names its zone "
                              f"({named.group(1)}), which is no offset: write it as one "
                              f"({text.iloc[k][:named.start(1)].rstrip()}+01:00, say) or Z for "
                              "UTC")
+        if pd.to_datetime(text.where(~missing), format="ISO8601", utc=True,
+                          errors="coerce").isna().all():  # no ISO-8601 at all: a pattern
+            raise _no_pattern(text.iloc[k], line[k], col, path, local.prefix)
         raise InputError(f"{path}: {col} '{text.iloc[k]}' on line {line[k]} has no time zone: "
                          f"write times with one ({text.iloc[k]}Z for UTC), set "
                          f"{local.prefix}time.zone=<IANA zone> (Europe/Madrid) for local "
