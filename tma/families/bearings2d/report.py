@@ -441,9 +441,11 @@ def _report_without_truth(entry, tables_dir, name: str, progress=None) -> list[P
     warn_not_ok(report, dataset.name)
     write_parquet_atomic(entry.run_root / "report.parquet",
                          pa.Table.from_pandas(report, preserve_index=False))
-    from tma.ais.ownship import ownship_of  # own-ship's source, when not the log (issue 38)
+    own = {}
+    if m.get("navigation"):  # own-ship's source, when not the log (issue 38)
+        from tma.ais.ownship import ownship_of
 
-    own = ownship_of(m)
+        own = ownship_of(m)
     written = write_track_report(report, tables_dir, name,
                                  m.get("input", {}).get("path", dataset.name)
                                  + (f"; own-ship: {own['ownship']}" if own else ""),
