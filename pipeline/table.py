@@ -46,7 +46,46 @@ def _compile_ahead(cfg):
         return
 
 
+def campaign_stage(cfg):
+    """``input=`` a folder or a glob of logs: each log's table as ``input=LOG`` writes it, and
+    the campaign's table and plot (``tma.ais.campaign``)."""
+    import copy
+    from pathlib import Path
+
+    from tma.ais.campaign import (
+        campaign_logs,
+        campaign_name,
+        log_name,
+        run_campaign,
+        write_campaign_tables,
+    )
+
+    truth = cfg.get("truth", {}) or {}
+    pairs = campaign_logs(cfg.input, truth.get("file"))
+    estimator = str(cfg.estimator.get("name", "estimator"))
+    name = campaign_name(cfg.input, cfg.name)
+    tables_dir = Path(str(cfg.paths.tables_dir))
+
+    def score(log, ais):
+        one = copy.deepcopy(cfg)
+        dataset = log_name(name, log, cfg.name is not None)
+        with open_dict(one):
+            one.input, one.name, one.dataset = str(log), dataset, None
+            one.truth.file, one.table = str(ais), f"{dataset}-{estimator}"
+        table_stage(one)
+        import pandas as pd
+
+        return pd.read_csv(tables_dir / f"{one.table}.csv")
+
+    reports, refused = run_campaign(pairs, score, f"input={cfg.input}")
+    for path in write_campaign_tables(reports, refused, tables_dir,
+                                      f"{name}-campaign-{estimator}"):
+        log.info("wrote %s", path)
+
+
 def table_stage(cfg):
+    if "input" in cfg and cfg.input is not None and _is_campaign(cfg.input):
+        return campaign_stage(cfg)
     prefetch = None
     if "input" not in cfg and not cfg.dataset:
         _compile_ahead(cfg)
@@ -65,6 +104,12 @@ def table_stage(cfg):
         start = perf_counter()
         stage(cfg)
         log.info("stage %s: %.2f s", name, perf_counter() - start)
+
+
+def _is_campaign(input_path) -> bool:
+    from tma.ais.campaign import is_campaign
+
+    return is_campaign(input_path)
 
 
 def _config_name(arguments) -> str:

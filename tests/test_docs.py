@@ -17,6 +17,7 @@ import importlib
 import importlib.util
 import re
 import shlex
+import shutil
 import subprocess
 import tomllib
 from pathlib import Path
@@ -156,6 +157,8 @@ def write_logs(d: Path) -> Path:
     from tests.families.bearings2d.ais_trial import write_trial
 
     write_trial(d)  # trial.csv and its AIS: trial_ais.csv, trial_ais.nmea
+    shutil.copytree(REPO / "tests" / "data" / "trials", d / "tests" / "data" / "trials",
+                    ignore=shutil.ignore_patterns("*.py", "__pycache__"))  # named by path
     return d
 
 
@@ -168,7 +171,10 @@ class Session:
     def __init__(self, root: Path, logs: Path):
         self.root, self.ran = root, []
         for path in logs.iterdir():
-            (root / path.name).write_bytes(path.read_bytes())
+            if path.is_dir():  # files the docs name by their path (tests/data/trials/)
+                shutil.copytree(path, root / path.name)
+            else:
+                (root / path.name).write_bytes(path.read_bytes())
         self.paths = [f"paths.data_dir={root / 'data'}", f"paths.tables_dir={root / 'tables'}"]
 
     def run(self, command: str, monkeypatch):

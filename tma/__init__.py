@@ -6,14 +6,14 @@ scenario family documents otherwise.
 
 From Python (``docs/api.md``): ``tma.read_log``, ``tma.Recording.from_frames``,
 ``tma.estimate``, ``tma.plot_contact``, ``tma.write_map``, ``tma.open_dataset``,
-``tma.runs``, ``tma.runs_dataset`` and ``tma.simulate`` (``tma.api``), loaded when first
-used so that ``import tma`` stays light.
+``tma.runs``, ``tma.runs_dataset``, ``tma.simulate`` and ``tma.campaign`` (``tma.api``),
+loaded when first used so that ``import tma`` stays light.
 """
 
 from tma.version import __version__
 
 API = ("Recording", "read_log", "estimate", "plot_contact", "write_map", "open_dataset",
-       "runs", "runs_dataset", "simulate")
+       "runs", "runs_dataset", "simulate", "campaign")
 __all__ = [*API, "__version__"]
 
 

@@ -19,6 +19,7 @@ imported when a table is read).
 
 import re
 from datetime import UTC, datetime, timedelta
+from pathlib import Path
 
 import numpy as np
 
@@ -84,7 +85,8 @@ def stamp_text(t_ns: int) -> str:
 
 # -- a table's column of times (CSV, DataFrames: tma.sources.table) ---------------------------
 
-def time_column(series, col, fmt, path, line, notes, numbers):
+def time_column(series, col, fmt, path, line, notes, numbers, zone=None, ambiguous="refuse",
+                prefix="", utc_default=False):
     """A table's column ``col`` of times (``series``, pandas), written as ``fmt``
     (``time.format``): ``(values, format, ok, not_absolute)``, the times as read (ns since 1970
     for ISO text, else the numbers), their format (``iso``/``iso_utc``, ``s``, ``rel_ms``...,
@@ -92,11 +94,25 @@ def time_column(series, col, fmt, path, line, notes, numbers):
     where the others are (a 0 among Unix times, a 1970 stamp among UTC ones: a clock that was
     not set, never a relative clock). ``numbers()``: the column as float64, NaN where a cell is
     no number; ``line``: each row's line, ``path``: the table, for messages; what was found
-    automatically goes into ``notes``."""
+    automatically goes into ``notes``. ``fmt`` may be a strptime pattern
+    (``%d-%m-%y %H:%M``); ``zone`` (an IANA name, ``time.zone``) is the zone of times written
+    without one, its daylight-saving changes resolved as ``ambiguous`` says (``local_ns``);
+    ``prefix`` starts the options' names in messages (``truth.`` for the AIS);
+    ``utc_default``: a pattern's times without a zone are UTC (AIS time), else refused
+    without ``time.zone``."""
     import pandas as pd
 
     numeric = pd.api.types.is_numeric_dtype(series)  # true/false too: refused as numbers
     ns = None
+    local = TimeZone(zone, ambiguous, col, path, line, notes, prefix, utc_default)
+    if is_pattern(fmt):
+        ns, ok = _pattern_times(series, fmt, local)
+        early = ok & (ns < UTC_FROM_NS)
+        return ns, fmt, ok, early if np.median(ns[ok]) >= UTC_FROM_NS else np.zeros_like(ok)
+    if zone is not None and (numeric or pd.api.types.is_timedelta64_dtype(series)):
+        raise InputError(f"{path}: {prefix}time.zone={zone} is the zone of times written as a "
+                         f"date and time of day without one; column {col} holds numbers "
+                         f"({series.dtype}): leave {prefix}time.zone unset")
     if pd.api.types.is_timedelta64_dtype(series):  # a DataFrame's durations: relative times
         if fmt not in ("auto", "s"):
             raise InputError(f"{path}: {col} holds durations (timedelta64: times relative to "
@@ -108,9 +124,14 @@ def time_column(series, col, fmt, path, line, notes, numbers):
                 np.zeros_like(ok))
     if pd.api.types.is_datetime64_any_dtype(series) and fmt in ("auto", "iso", "iso_utc"):
         ok = series.notna().to_numpy()  # a DataFrame's UTC times, exact to the ns
-        ns = np.where(ok, series.dt.as_unit("ns").array.asi8, 0)
+        if getattr(series.dt, "tz", None) is None:  # local times (time.zone): to UTC
+            ns = local.utc_ns(series.dt.as_unit("ns").array.asi8, ok,
+                              series.astype(str).to_numpy())
+        else:
+            local.refuse_zoned(series.astype(str).to_numpy(), ok)
+            ns = np.where(ok, series.dt.as_unit("ns").array.asi8, 0)
     elif fmt in ("iso", "iso_utc") or (fmt == "auto" and not numeric and _mostly_text(series)):
-        ns, ok = _iso_times(series, col, fmt, path, line, notes)
+        ns, ok = _iso_times(series, col, fmt, path, line, notes, local)
     if ns is not None:
         early = ok & (ns < UTC_FROM_NS)
         absolute = ok.any() and np.median(ns[ok]) >= UTC_FROM_NS
@@ -147,7 +168,7 @@ def time_column(series, col, fmt, path, line, notes, numbers):
 def table_seconds(values, fmt, col, path, line) -> tuple[np.ndarray, int | None]:
     """Seconds (float64) since ``epoch_utc_ns`` (absolute times) or relative (epoch None), of
     times as ``time_column`` read them (every one usable)."""
-    if fmt in ("iso", "iso_utc"):
+    if fmt in ("iso", "iso_utc") or is_pattern(fmt):
         first = int(values.min())
         return _checked_span((values - first) / 1e9, values, col, path, line), first
     if fmt in ("s", "rel_ms", "rel_us", "rel_ns"):
@@ -191,10 +212,19 @@ def _mostly_text(series) -> bool:
     return numeric < 0.5
 
 
-def _iso_times(series, col, fmt, path, line, notes) -> tuple[np.ndarray, np.ndarray]:
+def _no_pattern(text, line, col, path, prefix) -> InputError:
+    """The refusal of a column of times none of which tma reads by itself."""
+    return InputError(f"{path}: {col} '{text}' on line {line} is not a time tma reads by "
+                      "itself (ISO-8601, Unix time): give the pattern it is written in, "
+                      f"{prefix}time.format='%d-%m-%y %H:%M' say (strptime), and "
+                      f"{prefix}time.zone=<IANA zone> for local times")
+
+
+def _iso_times(series, col, fmt, path, line, notes, local) -> tuple[np.ndarray, np.ndarray]:
     """ISO-8601 texts as UTC ns (int64) and which rows hold one. A column whose times mostly
-    have no zone is refused (unless ``iso_utc``): the times would be guessed; a few rows
-    without one among zoned times are rows without a readable time."""
+    have no zone is refused (unless ``iso_utc``, or ``time.zone`` names theirs): the times
+    would be guessed; a few rows without one among zoned times are rows without a readable
+    time."""
     import pandas as pd
 
     text = series.astype("str").str.strip()
@@ -205,6 +235,14 @@ def _iso_times(series, col, fmt, path, line, notes) -> tuple[np.ndarray, np.ndar
         notes.append(f"{path.name}: {col}: ' UTC' read as the zone Z")
     zoned = text.str.contains(ZONED, regex=True).to_numpy(dtype=bool)
     unzoned = ~zoned & ~missing
+    if local.zone is not None:  # local times without a zone: the zone is time.zone's
+        if fmt == "iso_utc":
+            raise InputError(f"{path}: {local.prefix}time.format=iso_utc reads times without "
+                             f"a zone as UTC and {local.prefix}time.zone={local.zone} as "
+                             f"{local.zone}: give one of them")
+        local.refuse_zoned(text.to_numpy(), zoned & ~missing)
+        ns, ok = _parsed_iso(text, ~missing, missing, False, local)
+        return local.utc_ns(ns, ok, text.to_numpy()), ok
     if fmt != "iso_utc" and unzoned.sum() * 2 >= (~missing).sum() and unzoned.any():
         k = int(np.argmax(unzoned))
         named = re.search(rf"{ZONE_NAME.pattern}$", text.iloc[k])
@@ -213,17 +251,164 @@ def _iso_times(series, col, fmt, path, line, notes) -> tuple[np.ndarray, np.ndar
                              f"({named.group(1)}), which is no offset: write it as one "
                              f"({text.iloc[k][:named.start(1)].rstrip()}+01:00, say) or Z for "
                              "UTC")
+        if pd.to_datetime(text.where(~missing), format="ISO8601", utc=True,
+                          errors="coerce").isna().all():  # no ISO-8601 at all: a pattern
+            raise _no_pattern(text.iloc[k], line[k], col, path, local.prefix)
         raise InputError(f"{path}: {col} '{text.iloc[k]}' on line {line[k]} has no time zone: "
-                         f"write times with one ({text.iloc[k]}Z for UTC) or set "
-                         "time.format=iso_utc to read zone-less times as UTC")
+                         f"write times with one ({text.iloc[k]}Z for UTC), set "
+                         f"{local.prefix}time.zone=<IANA zone> (Europe/Madrid) for local "
+                         f"times, or set {local.prefix}time.format=iso_utc to read zone-less "
+                         "times as UTC")
     if fmt == "iso_utc" and unzoned.any():
         notes.append(f"{path.name}: {col} without time zone read as UTC (time.format=iso_utc)")
-    try:
-        parsed = pd.to_datetime(text.where(~missing & (zoned | (fmt == "iso_utc"))),
-                                format="ISO8601", utc=True, errors="coerce")
-    except (ValueError, OverflowError) as exc:
-        raise InputError(f"{path}: column {col}: not ISO-8601 times ({exc})") from None
-    ok = parsed.notna().to_numpy()
+    ns, ok = _parsed_iso(text, ~missing & (zoned | (fmt == "iso_utc")), missing, True, local)
     if fmt == "auto" and ok.any():
         notes.append(f"{path.name}: {col} read as ISO-8601 times (time.format=iso)")
-    return np.where(ok, parsed.dt.as_unit("ns").array.asi8, 0), ok
+    return np.where(ok, ns, 0), ok
+
+
+def _parsed_iso(text, rows, missing, utc: bool, local) -> tuple[np.ndarray, np.ndarray]:
+    """ISO-8601 ``text`` of ``rows`` as ns (UTC, or wall-clock times when not ``utc``) and
+    which rows hold one; one line with an example when no row does."""
+    import pandas as pd
+
+    try:
+        parsed = pd.to_datetime(text.where(rows), format="ISO8601", utc=utc, errors="coerce")
+    except (ValueError, OverflowError) as exc:
+        raise InputError(f"{local.path}: column {local.col}: not ISO-8601 times ({exc})"
+                         ) from None
+    ok = parsed.notna().to_numpy()
+    if not ok.any() and (~missing).any():
+        k = int(np.argmax(~missing))
+        raise _no_pattern(text.iloc[k], local.line[k], local.col, local.path, local.prefix)
+    return parsed.dt.as_unit("ns").array.asi8, ok
+
+
+# -- times as people write them: a strptime pattern, a local zone --------------------------
+
+AMBIGUOUS = ("refuse", "earliest", "latest")
+
+
+def is_pattern(fmt) -> bool:
+    """``time.format`` is a strptime pattern (``%d-%m-%y %H:%M``), not one of the names."""
+    return isinstance(fmt, str) and "%" in fmt
+
+
+def zone_problem(value) -> str | None:
+    """What is wrong with ``time.zone`` (an IANA zone name), or None."""
+    from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
+
+    try:
+        ZoneInfo(str(value))
+    except (ZoneInfoNotFoundError, ValueError):
+        return "no such IANA time zone"
+    return None
+
+
+def pattern_problem(value) -> str | None:
+    """What is wrong with a ``time.format`` pattern: one that formats a date back as itself
+    (no % directive) or that strftime cannot write."""
+    try:
+        datetime(2001, 2, 3, 4, 5, 6).strftime(str(value))
+    except ValueError as exc:
+        return f"not a strptime pattern ({exc})"
+    return None
+
+
+class TimeZone:
+    """The zone of a column's times written without one (``time.zone``: an IANA name, None:
+    none given) and what a daylight-saving change makes of them (``time.ambiguous``):
+    ``refuse`` a time of day the change repeats (autumn) or skips (spring), or read it as
+    the ``earliest`` or ``latest`` of the instants it can mean (a skipped time: with the
+    offset after the change, or before it). ``col``, ``path``, ``line``: for messages."""
+
+    def __init__(self, zone, ambiguous, col, path, line, notes, prefix="", utc_default=False):
+        self.zone, self.ambiguous, self.prefix = zone, ambiguous, prefix
+        self.utc_default = utc_default
+        self.col, self.path, self.line, self.notes = col, path, line, notes
+
+    def refuse_zoned(self, text, zoned):
+        """InputError for times that carry their own zone where ``time.zone`` is given."""
+        if self.zone is not None and zoned.any():
+            k = int(np.argmax(zoned))
+            raise InputError(f"{self.path}: {self.prefix}time.zone={self.zone} is the zone of "
+                             f"times written without one; {self.col} '{text[k]}' on line "
+                             f"{self.line[k]} has one: leave {self.prefix}time.zone unset")
+
+    def utc_ns(self, wall_ns, ok, text) -> np.ndarray:
+        """UTC ns of wall-clock times (``wall_ns``: their ns as if UTC; rows ``ok`` hold
+        one) in ``zone``; without a zone they must be UTC (InputError naming the option)."""
+        import pandas as pd
+
+        wall_ns = np.where(ok, wall_ns, 0)
+        if self.zone is None:
+            if ok.any() and not self.utc_default:
+                k = int(np.argmax(ok))
+                raise InputError(f"{self.path}: {self.col} '{text[k]}' on line {self.line[k]} "
+                                 "has no time zone: set "
+                                 f"{self.prefix}time.zone=<IANA zone> (Europe/Madrid; UTC) to "
+                                 "say which")
+            if ok.any():
+                self.notes.append(f"{Path(str(self.path)).name}: {self.col} without time zone "
+                                  "read as UTC")
+            return wall_ns
+        local = pd.Series(pd.to_datetime(wall_ns)).dt.tz_localize(
+            self.zone, ambiguous="NaT", nonexistent="NaT")
+        ns = local.dt.as_unit("ns").array.asi8.copy()
+        changed = ok & local.isna().to_numpy()
+        for k in np.flatnonzero(changed):
+            ns[k] = self._changed(int(wall_ns[k]), text[k], self.line[k])
+        self.notes.append(f"{Path(str(self.path)).name}: {self.col} read as local time in "
+                          f"{self.zone} ({self.prefix}time.zone)"
+                          + (f"; {int(changed.sum())} time(s) repeated or skipped by a "
+                             f"daylight-saving change read as the {self.ambiguous} "
+                             f"({self.prefix}time.ambiguous)" if changed.any() else ""))
+        return np.where(ok, ns, 0)
+
+    def _changed(self, wall_ns: int, text, line) -> int:
+        """UTC ns of a wall time a daylight-saving change repeats or skips, by
+        ``ambiguous``."""
+        from zoneinfo import ZoneInfo
+
+        zone = ZoneInfo(self.zone)
+        wall = _UNIX_EPOCH.replace(tzinfo=None) + timedelta(microseconds=wall_ns // 1000)
+        offsets = [wall.replace(tzinfo=zone, fold=f).utcoffset() for f in (0, 1)]
+        instants = sorted(wall_ns - off // timedelta(microseconds=1) * 1000 for off in offsets)
+        utc = datetime.fromtimestamp(instants[0] / 1e9, UTC)
+        back = utc.astimezone(zone).replace(tzinfo=None)
+        repeated = abs((back - wall) / timedelta(seconds=1)) < 1e-3
+        if self.ambiguous == "refuse":
+            what = ("repeated when the clocks went back (two instants)" if repeated else
+                    "skipped when the clocks went forward (no such local time)")
+            raise InputError(f"{self.path}: {self.col} '{text}' on line {line} is a time of "
+                             f"day in {self.zone} {what}: set {self.prefix}time.ambiguous="
+                             "earliest or latest to read it as the earlier or later instant")
+        return instants[0] if self.ambiguous == "earliest" else instants[-1]
+
+
+def _pattern_times(series, fmt, local: "TimeZone") -> tuple[np.ndarray, np.ndarray]:
+    """Texts written as the strptime pattern ``fmt`` as UTC ns and which rows hold one; the
+    zone from the pattern (``%z``) or ``local``; InputError with an example row when the
+    pattern matches no row."""
+    import pandas as pd
+
+    text = series.astype("str").str.strip()
+    missing = series.isna().to_numpy() | (text == "").to_numpy()
+    zoned = "%z" in fmt or "%Z" in fmt
+    try:
+        parsed = pd.to_datetime(text.where(~missing), format=fmt, errors="coerce",
+                                utc=zoned)
+    except (ValueError, OverflowError) as exc:
+        raise InputError(f"{local.path}: {local.prefix}time.format='{fmt}': not a pattern "
+                         f"of column {local.col}'s times ({exc})") from None
+    ok = parsed.notna().to_numpy()
+    if not ok.any():
+        k = int(np.argmin(missing)) if not missing.all() else 0
+        raise InputError(f"{local.path}: {local.prefix}time.format='{fmt}' matches no time of "
+                         f"column {local.col} (line {local.line[k]}: '{text.iloc[k]}'); write "
+                         "the pattern as strptime does (%d-%m-%y %H:%M, %Y/%m/%d %H:%M:%S)")
+    wall = parsed.dt.as_unit("ns").array.asi8
+    if zoned:
+        local.refuse_zoned(text.to_numpy(), ok)
+        return np.where(ok, wall, 0), ok
+    return local.utc_ns(wall, ok, text.to_numpy()), ok

@@ -247,6 +247,11 @@ def _with_gap(match: Match, f: Fit, options: TruthOptions, epoch_ns: int) -> Mat
         return match
     match.verdict = "gap"
     match.note = (f"{match.note}; but its AIS has a gap of {f.max_gap_s:.0f} s at "
-                  f"{_utc(epoch_ns, f.gap_at_s)} (truth.max_gap_s = {options.max_gap_s:g} s): "
-                  "no truth")
+                  f"{_utc(epoch_ns, f.gap_at_s)} (truth.max_gap_s = {options.max_gap_s:g} s; "
+                  f"truth.max_gap_s={gap_bound(f.max_gap_s)} accepts it): no truth")
     return match
+
+
+def gap_bound(gap_s: float) -> int:
+    """A ``truth.max_gap_s`` that accepts a gap of ``gap_s``: the next multiple of 10 s."""
+    return int(np.ceil(gap_s / 10.0 + 1e-9) * 10)

@@ -6,12 +6,14 @@ and the errors a truth file causes.
 ``tma.read_log(path, truth="ais.csv")`` or ``truth={"file": ..., "match": {...}}``.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
-from tma.config import Form, Params, param
+from tma.config import Form, Params, param, to_plain
 from tma.errors import ConfigError, InputError
+from tma.sources.csv_table import TIME_FORMAT, ZONE, CsvFormat
+from tma.utc import AMBIGUOUS
 
 FIT_SIGMAS = 3.0  # a ship fits when its RMS bearing difference is within this many sigma
 MIN_FIT_DEG = 0.1  # ... and never needs to fit closer than this (sigma 0, or tiny)
@@ -41,6 +43,46 @@ MATCH = Form("a map {contact: MMSI} (truth.match={T1:235031617}), MMSIs of 7 to 
              _match_problem)
 
 
+SOG_UNITS = {"kn": 1852.0 / 3600.0, "m_s": 1.0, "km_h": 1.0 / 3.6}  # to m/s
+
+
+def _column(role: str, found: str):
+    return param(None, f"the AIS table's column of {role}; null: found by its name ({found}), "
+                 "any case")
+
+
+@dataclass
+class AisColumns:
+    """Which column of an AIS table (CSV, Parquet) holds what (``truth.columns.*``)."""
+
+    time: str | None = _column("the reports' times", "Timestamp, BaseDateTime, Time...")
+    mmsi: str | None = _column("the MMSI", "MMSI, UserID...")
+    lat: str | None = _column("the latitude (deg)", "Latitude, LAT, lat_deg...")
+    lon: str | None = _column("the longitude (deg)", "Longitude, LON, lon_deg...")
+    sog: str | None = _column("the speed over ground (truth.sog_units)", "SOG, SOG_knots...")
+    cog: str | None = _column("the course over ground (deg)", "COG, COG_degrees...")
+
+
+@dataclass
+class AisTime:
+    """How an AIS table's times are written (``truth.time.*``): as the logs' (``time.*``),
+    but a time without a zone is UTC, as AIS time is, unless ``truth.time.zone`` says
+    another."""
+
+    format: str = param("auto", "how the times are written: auto: Unix time by magnitude, "
+                        "ISO-8601 (without a zone: UTC) or dd/mm/yyyy HH:MM:SS (the Danish "
+                        "Maritime Authority's); unix_s|ms|us|ns; iso; iso_utc; or a strptime "
+                        "pattern ('%d-%m-%y %H:%M')", form=TIME_FORMAT)
+    zone: str | None = param(None, "the IANA time zone (Europe/Madrid) of times written "
+                             "without one; null: UTC (AIS time)", form=ZONE)
+    ambiguous: str = param("refuse", "a local time (truth.time.zone) that a daylight-saving "
+                           "change repeats or skips: refuse, or read it as the earliest or "
+                           "latest instant it can mean", choices=AMBIGUOUS)
+
+
+GROUPS = {"columns": AisColumns, "time": AisTime, "csv": CsvFormat}
+
+
 @dataclass
 class TruthOptions(Params):
     """What ``ingest`` scores a recorded log against (``truth.*``)."""
@@ -67,6 +109,21 @@ class TruthOptions(Params):
     velocity_span_s: float = param(120.0, "the true course and speed at the last bearing: the "
                                    "ship's mean velocity over this span before it (s)",
                                    "(0, 3600)")
+    accel_sd_m_s2: float = param(0.02, "the truth's own uncertainty where the AIS is sparse: "
+                                 "a ship's one-sigma acceleration (m/s^2); a position "
+                                 "interpolated tau s after a report, T - tau before the next, "
+                                 "is uncertain by accel tau (T - tau) / 2 (m) per axis, and the "
+                                 "z-scores and covered include it; 0: the AIS is exact",
+                                 "[0, 10]")
+    own_mmsi: int | None = param(None, "own-ship's MMSI: its track from the same AIS is the "
+                                 "own-ship of the log (interpolated at each bearing; a log of "
+                                 "time, contact and bearing needs no navigation then); null: "
+                                 "own-ship from the log or navigation=", "[1000000, 999999999]")
+    sog_units: str = param("kn", "units of an AIS table's speed over ground: kn (knots, as "
+                           "AIS), m_s, km_h", choices=tuple(SOG_UNITS))
+    columns: AisColumns = param(factory=AisColumns)
+    time: AisTime = param(factory=AisTime)
+    csv: CsvFormat = param(factory=CsvFormat)
 
     @property
     def where(self) -> str:
@@ -83,6 +140,25 @@ class TruthOptions(Params):
         self.match = _match_map(self.match)
         if self.match and self.file is None:
             raise ConfigError("truth.match needs the AIS file: give truth=FILE")
+        if self.own_mmsi is not None and self.file is None:
+            raise ConfigError("truth.own_mmsi needs the AIS file: give truth=FILE")
+        try:
+            self.csv.rules()
+        except ConfigError as exc:
+            raise ConfigError(f"truth.{exc}") from None
+
+    def table_options(self) -> dict:
+        """The options of an AIS table that are set (``{"truth.columns.time": ...}``)."""
+        out = {}
+        for group, cls in GROUPS.items():
+            value, default = getattr(self, group), cls()
+            out.update({f"truth.{group}.{f.name}": getattr(value, f.name) for f in fields(cls)
+                        if getattr(value, f.name) != getattr(default, f.name)})
+        return out
+
+    def record(self) -> dict:
+        """The options as a manifest keeps them (the file is in its sources)."""
+        return {k: v for k, v in to_plain(self).items() if k != "file"}
 
 
 def _match_map(value) -> dict[str, int] | None:
@@ -108,13 +184,38 @@ def truth_options(node) -> TruthOptions:
 
         node = (OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig)
                 else {"file": str(node)})
+    nested: dict = {}
+    for key, value in node.items():  # dotted keys ({"columns.time": ...}) as groups
+        group, _, name = str(key).partition(".")
+        if name:
+            nested.setdefault(group, {})[name] = value
+        elif isinstance(value, dict) and isinstance(nested.get(group), dict):
+            nested[group] = {**value, **nested[group]}
+        else:
+            nested[group] = value
+    node = nested
     known = TruthOptions.__dataclass_fields__
     unknown = [k for k in node if k not in known]
     if unknown:
         raise ConfigError(f"unknown option truth.{unknown[0]} (the truth options: "
                           f"{', '.join(f'truth.{k}' for k in known)})")
+    node = dict(node)
     if isinstance(node.get("file"), Path):
-        node = {**node, "file": str(node["file"])}
+        node["file"] = str(node["file"])
+    for group, cls in GROUPS.items():
+        values = node.get(group)
+        if values is None or isinstance(values, cls):
+            node.pop(group, None) if values is None else None
+            continue
+        names = [f.name for f in fields(cls)]
+        if not isinstance(values, dict):
+            raise ConfigError(f"truth.{group} holds options (truth.{group}.<name>=...), not a "
+                              f"value: got truth.{group}='{values}'")
+        wrong = [k for k in values if k not in names]
+        if wrong:
+            raise ConfigError(f"unknown option truth.{group}.{wrong[0]} (the truth.{group} "
+                              f"options: {', '.join(f'truth.{group}.{k}' for k in names)})")
+        node[group] = cls(**values)
     return TruthOptions(**node)
 
 

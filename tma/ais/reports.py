@@ -2,12 +2,13 @@
 
 Two kinds of file, told apart by their content:
 
-- **decoded reports** (CSV; gzip too), as the common exports write them: a time, an MMSI, a
-  latitude and a longitude column, found by name in any case (``TIME``, ``MMSI``, ``LAT``,
-  ``LON`` below: Danish Maritime Authority ``# Timestamp`` (dd/mm/yyyy), MarineCadastre
-  ``BaseDateTime``, Stone Soup's Solent file ``Time``/``Latitude_degrees``...), other
-  columns ignored. Times: ISO-8601 (a time without zone is UTC, as AIS time is, and noted),
-  DMA's dd/mm/yyyy HH:MM:SS, or Unix time (s, ms, us, ns by magnitude);
+- **decoded reports**: a table (CSV, gzip'd CSV or Parquet) as the common exports write
+  them, read by the logs' table reader with the ``truth.*`` table options
+  (``tma.ais.table``): a time, an MMSI, a latitude and a longitude column, found by name in
+  any case (Danish Maritime Authority ``# Timestamp`` (dd/mm/yyyy), MarineCadastre
+  ``BaseDateTime``, Stone Soup's Solent file ``Time``/``Latitude_degrees``...) or named by
+  ``truth.columns.*``, speed and course over ground when there; other columns ignored. Times
+  as the logs' (``truth.time.*``), a time without a zone UTC, as AIS time is;
 - **raw NMEA** ``!AIVDM``/``!AIVDO`` sentences (any talker), each with a time stamp: a tag
   block's ``c:`` (Unix time), an ISO-8601 or Unix time before the sentence, or a Unix time
   after its checksum. Decoded by pyais; multi-part messages are assembled (their time is
@@ -22,28 +23,25 @@ MCAP log, own-ship NMEA, a bearing log) or with no usable report left is refused
 Times are the receiver's stamps (the reports' own UTC second is not used).
 """
 
+import functools
 import gzip
+import json
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
-from tma.ais.options import TruthError, TruthFileNotFound
-from tma.sources.base import Dropped, line_places
-from tma.utc import UNIX_FROM_S, UNIX_MAGNITUDE, UNIX_SCALE_NS, UTC_FROM_NS
+from tma.ais.options import TruthError, TruthFileNotFound, TruthOptions, truth_options
+from tma.sources.base import Dropped
+from tma.utc import UNIX_MAGNITUDE, UNIX_SCALE_NS, UTC_FROM_NS
 
 POSITION_TYPES = (1, 2, 3, 18, 19, 27)
-TIME = ("timestamp_utc", "timestamp", "basedatetime", "time_utc", "datetime", "date_time",
-        "time", "utc", "t", "received", "time_s")
-MMSI = ("mmsi", "userid", "user_id", "mmsi_number", "shipid")
-LAT = ("latitude_deg", "latitude_degrees", "latitude", "lat_deg", "lat")
-LON = ("longitude_deg", "longitude_degrees", "longitude", "lon_deg", "lon", "long", "lng")
 SENTENCE = re.compile(rb"(?:\\[^\\]*\\)?![A-Z]{2}VD[MO],[^*\s]*\*[0-9A-Fa-f]{2}")
 AIS_IN = re.compile(rb"![A-Z]{2}VD[MO],")
+OTHER_NMEA = re.compile(rb"[$!]([A-Z][A-Z0-9]{1,5}),")  # a receiver's $PGHP, own-ship's $GPRMC
 TAG_TIME = re.compile(rb"^\\[^\\]*\bc:(\d+(?:\.\d+)?)")
-DMA_TIME = re.compile(r"^\d{2}/\d{2}/\d{4}")
 MCAP_MAGIC = b"\x89MCAP"
 GZIP_MAGIC = b"\x1f\x8b"
 TYPE_NAMES = {4: "base station", 5: "static and voyage data", 8: "binary broadcast",
@@ -64,6 +62,8 @@ class Reports:
     lon_deg: np.ndarray
     dropped: Dropped = field(default_factory=Dropped)
     notes: list[str] = field(default_factory=list)
+    sog_m_s: np.ndarray | None = None  # speed over ground (m/s), NaN where not known
+    cog_deg: np.ndarray | None = None  # course over ground (deg), NaN where not known
 
     def __len__(self) -> int:
         return self.mmsi.size
@@ -81,10 +81,12 @@ class Reports:
                 "dropped": self.dropped.record(), "notes": list(self.notes)}
 
 
-def read_reports(path) -> Reports:
-    """The position reports of an AIS file (module docstring); ``TruthError`` for a file of
-    another kind or without a usable report, ``TruthFileNotFound`` for no file."""
+def read_reports(path, options: TruthOptions | None = None) -> Reports:
+    """The position reports of an AIS file (module docstring) read with the ``truth.*``
+    ``options`` (a table's columns, times, layout: ``tma.ais.table``); ``TruthError`` for a
+    file of another kind or without a usable report, ``TruthFileNotFound`` for no file."""
     path = Path(path)
+    options = TruthOptions() if options is None else options
     try:
         data = path.read_bytes()
     except FileNotFoundError:
@@ -100,18 +102,46 @@ def read_reports(path) -> Reports:
         raise TruthError(f"truth={path}: an MCAP log, not AIS: truth= takes decoded AIS "
                          "position reports (CSV: time, MMSI, latitude, longitude) or NMEA "
                          "!AIVDM/!AIVDO sentences; give the log as input=")
-    if b"\x00" in data[:4096]:
+    if b"\x00" in data[:4096] and not data.startswith(b"PAR1"):  # Parquet: a table
         raise TruthError(f"truth={path}: a binary file, not AIS position reports (CSV) or "
                          "NMEA !AIVDM/!AIVDO sentences")
-    reports = (_read_nmea(path, data) if AIS_IN.search(data[:65536]) else
-               _read_csv(path, data))
+    if AIS_IN.search(data[:65536]):
+        table = options.table_options()
+        if table:
+            key, value = next(iter(table.items()))
+            raise TruthError(f"{key}={value} does not apply to truth={path} (NMEA !AIVDM "
+                             "sentences, not a table): leave it unset")
+        reports = _read_nmea(path, data)
+    else:
+        reports = _read_table(path, data, options)
     if not len(reports):
         why = reports.dropped.text() or "the file holds none"
         raise TruthError(f"truth={path}: no AIS position report could be read ({why})")
     order = np.lexsort((reports.t_ns, reports.mmsi))
-    for name in ("mmsi", "t_ns", "lat_deg", "lon_deg"):
-        setattr(reports, name, getattr(reports, name)[order])
+    for name in ("mmsi", "t_ns", "lat_deg", "lon_deg", "sog_m_s", "cog_deg"):
+        if getattr(reports, name) is not None:
+            setattr(reports, name, getattr(reports, name)[order])
     return reports
+
+
+@functools.lru_cache(maxsize=2)
+def _cached(path: str, stamp: tuple, options_json: str) -> Reports:
+    return read_reports(path, truth_options(json.loads(options_json)))
+
+
+def cached_reports(options: TruthOptions) -> Reports:
+    """``read_reports`` of ``options.file``, read once while the file and the table options
+    stay the same (own-ship and the truth read the same AIS)."""
+    path = Path(options.file)
+    try:
+        stat = path.stat()
+    except FileNotFoundError:
+        raise TruthFileNotFound(f"truth={path}: no such file") from None
+    table = {"file": str(path), "sog_units": options.sog_units,
+             **{k.removeprefix("truth."): v for k, v in options.table_options().items()}}
+    reports = _cached(str(path), (stat.st_mtime_ns, stat.st_size),
+                      json.dumps(table, sort_keys=True))
+    return replace(reports, dropped=reports.dropped, notes=list(reports.notes))
 
 
 # -- raw NMEA ----------------------------------------------------------------------------------
@@ -120,7 +150,7 @@ def _read_nmea(path: Path, data: bytes) -> Reports:
     from pyais.exceptions import AISBaseException
     from pyais.messages import AISSentence, NMEASentenceFactory
 
-    dropped, rows, others, pending = Dropped("drop"), [], {}, {}
+    dropped, rows, others, pending, not_ais = Dropped("drop"), [], {}, {}, {}
     bad = {"bad checksum": [], "not a readable AIS sentence": [], "no time stamp": [],
            "undecodable AIS message": [], "position not available (lat 91, lon 181)": [],
            "multi-part message missing a part": []}
@@ -128,7 +158,11 @@ def _read_nmea(path: Path, data: bytes) -> Reports:
     for number, line in enumerate(data.splitlines(), start=1):
         found = SENTENCE.search(line)
         if found is None:
-            if line.strip():
+            other = None if AIS_IN.search(line) else OTHER_NMEA.search(line)
+            if other is not None:  # NMEA of another kind (a receiver's $PGHP, own GPS)
+                name = other.group(0)[:1].decode() + other.group(1).decode()
+                not_ais[name] = not_ais.get(name, 0) + 1
+            elif line.strip():
                 bad["not a readable AIS sentence"].append(number)
             continue
         raw = found.group(0)
@@ -185,6 +219,10 @@ def _read_nmea(path: Path, data: bytes) -> Reports:
                      "reports, not used (" + ", ".join(
                          f"{n} of type {k}" + (f" {TYPE_NAMES[k]}" if k in TYPE_NAMES else "")
                          for k, n in sorted(others.items())) + ")")
+    if not_ais:
+        notes.append(f"{path.name}: {sum(not_ais.values())} NMEA sentence(s) that are not AIS, "
+                     "not used (" + ", ".join(f"{n} {name}" for name, n in sorted(
+                         not_ais.items(), key=lambda item: -item[1])) + ")")
     if zoneless:
         notes.append(f"{path.name}: time stamps without a zone taken as UTC (AIS time is UTC)")
     table = np.array(rows, dtype=float).reshape(-1, 4)
@@ -229,88 +267,16 @@ def _text_ns(text: str) -> tuple[int | None, bool]:
     return (ns if ns >= UTC_FROM_NS else None), naive
 
 
-# -- decoded reports (CSV) ---------------------------------------------------------------------
+# -- decoded reports (CSV, Parquet) ----------------------------------------------------------
 
-def _normal(name: str) -> str:
-    return re.sub(r"\s+", "_", str(name).strip().lstrip("#").strip().lower())
+def _read_table(path: Path, data: bytes, options: TruthOptions) -> Reports:
+    from tma.ais.table import read_table
 
-
-def _read_csv(path: Path, data: bytes) -> Reports:
-    import io
-
-    import pandas as pd
-
-    text = data.decode("utf-8-sig", errors="replace")
-    first = next((line for line in text.splitlines() if line.strip()), "")
-    if first.lstrip().startswith("$"):
+    first = next((line for line in data[:4096].splitlines() if line.strip()), b"")
+    if first.lstrip().startswith(b"$"):
         raise TruthError(f"truth={path}: NMEA without AIS sentences (own-ship navigation: "
                          "GGA/RMC?); truth= takes the ships' AIS: NMEA !AIVDM/!AIVDO sentences "
                          "or decoded position reports (CSV: time, MMSI, latitude, longitude)")
-    delimiter = max(",;\t|", key=first.count)
-    try:
-        frame = pd.read_csv(io.StringIO(text), sep=delimiter, dtype=str, keep_default_na=False,
-                            skipinitialspace=True)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, ValueError) as exc:
-        raise TruthError(f"truth={path}: not a table of AIS position reports ("
-                         f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__})"
-                         ) from None
-    names = {_normal(c): c for c in frame.columns}
-    found = {role: next((names[n] for n in spellings if n in names), None)
-             for role, spellings in (("time", TIME), ("mmsi", MMSI), ("lat", LAT),
-                                     ("lon", LON))}
-    missing = [role for role, col in found.items() if col is None]
-    if missing:
-        shown = ", ".join(map(str, frame.columns[:12])) + (", ..." if frame.shape[1] > 12 else "")
-        kind = (" (a bearing log? truth= takes the ships' AIS, input= the bearings)"
-                if any("bearing" in _normal(c) for c in frame.columns) else "")
-        raise TruthError(f"truth={path}: not AIS position reports: no {' or '.join(missing)} "
-                         f"column among {shown}{kind}; the reports need a time "
-                         f"({', '.join(TIME[:6])}...), an MMSI ({', '.join(MMSI[:2])}), a "
-                         f"latitude ({', '.join(LAT)}) and a longitude ({', '.join(LON)}) column")
-    line = np.arange(len(frame)) + 2  # the header is line 1
-    dropped, notes = Dropped("drop"), [f"{path.name}: AIS columns " + ", ".join(
-        f"{role} {col}" for role, col in found.items())]
-    t_ns = _times(frame[found["time"]], path, found["time"], notes)
-    mmsi = pd.to_numeric(frame[found["mmsi"]].str.strip(), errors="coerce").to_numpy(float)
-    lat = pd.to_numeric(frame[found["lat"]].str.strip(), errors="coerce").to_numpy(float)
-    lon = pd.to_numeric(frame[found["lon"]].str.strip(), errors="coerce").to_numpy(float)
-    keep = np.ones(len(frame), dtype=bool)
-    places = line_places(line)
-    for bad, reason in (
-            (t_ns < 0, "time missing or unreadable"),
-            (~((mmsi > 0) & (mmsi < 1e9) & (mmsi == np.round(mmsi))),
-             "MMSI missing or not a whole number"),
-            (~(np.isfinite(lat) & np.isfinite(lon)), "position missing or not a number"),
-            (~((np.abs(lat) <= 90) & (np.abs(lon) <= 180)),
-             "position not available (lat 91, lon 181) or off the globe")):
-        bad &= keep
-        keep &= dropped.drop(bad, reason, places, "")
-    return Reports(str(path), "csv", mmsi[keep].astype(np.int64), t_ns[keep], lat[keep],
-                   lon[keep], dropped, notes)
-
-
-def _times(series, path: Path, column: str, notes: list[str]) -> np.ndarray:
-    """A time column as UTC ns (int64), -1 where missing or unreadable."""
-    import pandas as pd
-
-    text = series.str.strip()
-    numbers = pd.to_numeric(text, errors="coerce").to_numpy(float)
-    if np.isfinite(numbers).mean() > 0.5:  # Unix time
-        median = float(np.nanmedian(numbers))
-        unit = next((u for bound, u in UNIX_MAGNITUDE if median >= bound), None)
-        if unit is None:
-            raise TruthError(f"truth={path}: {column} holds relative times (median "
-                             f"{median:g}); AIS reports need UTC times (ISO-8601 or Unix time "
-                             f"from {UNIX_FROM_S:g} s)")
-        notes.append(f"{path.name}: {column} read as Unix time ({unit})")
-        ns = numbers * UNIX_SCALE_NS[unit]
-        return np.where(np.isfinite(ns), np.round(np.nan_to_num(ns)), -1).astype(np.int64)
-    dma = text.str.match(DMA_TIME.pattern).mean() > 0.5
-    stamps = (pd.to_datetime(text, format="%d/%m/%Y %H:%M:%S", errors="coerce", utc=True)
-              if dma else pd.to_datetime(text, format="ISO8601", errors="coerce", utc=True))
-    zoned = text.str.contains(r"(?:[Zz]|[+-]\d\d:?\d\d)$", regex=True).mean() > 0.5
-    if not zoned:
-        notes.append(f"{path.name}: {column} has no time zone: taken as UTC (AIS time is UTC)")
-    ns = stamps.dt.as_unit("ns").array.asi8.copy()
-    ns[stamps.isna().to_numpy() | (ns < UTC_FROM_NS)] = -1
-    return ns
+    mmsi, t_ns, lat, lon, sog, cog, dropped, notes = read_table(path, data, options)
+    return Reports(str(path), "parquet" if data.startswith(b"PAR1") else "csv", mmsi, t_ns,
+                   lat, lon, dropped, notes, sog, cog)

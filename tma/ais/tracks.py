@@ -66,6 +66,18 @@ class PlaneTrack:
         at_report = np.isin(t, self.t_s)
         return np.where(inside, np.where(at_report, 0.0, hi - lo), np.inf)
 
+    def interpolation_sd(self, t, accel_sd_m_s2: float) -> np.ndarray:
+        """Per time in ``t`` the one-sigma error (m, per axis) of the position interpolated
+        there: a ship whose acceleration is at most ``accel_sd_m_s2`` strays from the chord
+        between its two bracketing reports by at most a tau (T - tau) / 2 (T the gap, tau
+        the time since its first report), taken as one sigma; 0 at a report, inf outside."""
+        t = np.asarray(t, float)
+        i = np.clip(np.searchsorted(self.t_s, t, side="right"), 1, self.t_s.size - 1)
+        inside = (t >= self.t_s[0]) & (t <= self.t_s[-1])
+        tau = np.clip(t - self.t_s[i - 1], 0.0, None)
+        rest = np.clip(self.t_s[i] - t, 0.0, None)
+        return np.where(inside, accel_sd_m_s2 * tau * rest / 2.0, np.inf)
+
     def max_gap(self, t0: float, t1: float) -> float:
         """The longest interval (s) without a report over [t0, t1], counting the reports that
         bracket it; inf when the reports do not cover [t0, t1]."""

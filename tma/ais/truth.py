@@ -8,7 +8,12 @@ for each matched contact the truth is taken from its ship's track:
 - at each bearing time, its position (linear between reports; ``truth_track.parquet``:
   ``track_id``, ``t_s``, ``x_m``, ``y_m``, ``lat_deg``, ``lon_deg``);
 - at the last bearing ("now"), its position and its velocity as the mean over the
-  ``truth.velocity_span_s`` (120 s) before it, as ``truth.parquet`` holds a simulated
+  ``truth.velocity_span_s`` (120 s) before it, with their own uncertainty where the AIS is
+  sparse (``PlaneTrack.interpolation_sd``: a ship of one-sigma acceleration
+  ``truth.accel_sd_m_s2`` strays from the chord between two reports T s apart by up to
+  a tau (T - tau) / 2; ``truth_pos_sd_m``, ``truth_vel_sd_m_s`` per axis, and the
+  variances of (x0, vx): ``truth_var_x0_m2``, ``truth_cov_x0_v_m2_s``,
+  ``truth_var_v_m2_s2``), as ``truth.parquet`` holds a simulated
   target's: ``x0_m``, ``y0_m``, ``vx_m_s``, ``vy_m_s`` the straight line through that state
   (so the kinematics now are the truth), ``course_deg``, ``speed_m_s``; besides them
   ``label``, ``mmsi``, ``match`` (``given`` or ``bearings``), ``rms_deg`` (the fit),
@@ -28,9 +33,9 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from tma.ais.match import Contact, Match, bearings_from, match_contacts
+from tma.ais.match import Contact, Match, bearings_from, gap_bound, match_contacts
 from tma.ais.options import TruthError, TruthOptions
-from tma.ais.reports import read_reports
+from tma.ais.reports import cached_reports
 from tma.ais.tracks import vessel_tracks
 from tma.io.atomic import sha256_file
 from tma.maths.geo import local_to_geodetic
@@ -38,6 +43,7 @@ from tma.utc import format_utc
 
 log = logging.getLogger(__name__)
 TRUTH, TRUTH_TRACK = "truth.parquet", "truth_track.parquet"
+BRACKET_S = 6 * 3600.0  # a ship's reports this far around the log bracket it (sparse AIS)
 
 
 @dataclass
@@ -62,7 +68,7 @@ def log_truth(contacts: list[Contact], origin_deg, epoch_ns, options: TruthOptio
             else "", "own-ship latitude/longitude (a plane with a geographic origin: give "
                      "origin.lat/origin.lon for x/y navigation)" if origin_deg is None else ""]))
         raise TruthError(f"truth={path}: scoring {where} against AIS needs {missing}")
-    reports = read_reports(path)
+    reports = cached_reports(options)
     t0 = min(float(c.t_s[0]) for c in contacts)
     t1 = max(float(c.t_s[-1]) for c in contacts)
     log_span = f"{format_utc(epoch_ns + int(t0 * 1e9))} to {format_utc(epoch_ns + int(t1 * 1e9))}"
@@ -72,9 +78,9 @@ def log_truth(contacts: list[Contact], origin_deg, epoch_ns, options: TruthOptio
     if not near.any():
         raise TruthError(f"truth={path}: its AIS covers {reports.span_text()} and {where} "
                          f"{log_span}: AIS of another time, not this log's trial")
-    kept = _subset(reports, near)
+    kept = _subset(reports, near | _bracketing(reports, lo, hi))
     ships = {m: t.on_plane(origin_deg, epoch_ns) for m, t in vessel_tracks(kept).items()}
-    ships = {m: s for m, s in ships.items() if s.t_s.size >= 2}
+    ships = {m: s for m, s in ships.items() if s.t_s.size >= 2 and m != options.own_mmsi}
     _check_place(ships, contacts, options, path, where)
     matches = match_contacts(contacts, ships, options, epoch_ns, where)
     rows, track = [], []
@@ -88,6 +94,13 @@ def log_truth(contacts: list[Contact], origin_deg, epoch_ns, options: TruthOptio
                                            "x_m": x, "y_m": y}))
         (log.info if m.has_truth else log.warning)("%s contact %s: %s", where, m.label, m.note)
     if not rows:
+        gaps = [m.max_gap_s for m in matches if m.verdict == "gap"]
+        if gaps:  # the one way out, first: the contacts were matched, their AIS is sparse
+            raise TruthError(
+                f"truth={path}: no contact of {where} has a truth: {len(gaps)} of "
+                f"{len(matches)} matched to their ship, whose AIS has gaps up to "
+                f"{max(gaps):.0f} s, longer than truth.max_gap_s = {options.max_gap_s:g} s; "
+                f"set truth.max_gap_s={gap_bound(max(gaps))} to take the truth across them")
         shown = "; ".join(f"{m.label}: {m.note}" for m in matches[:3])
         raise TruthError(f"truth={path}: no contact of {where} has a truth ({shown}"
                          f"{'; ...' if len(matches) > 3 else ''})")
@@ -99,7 +112,7 @@ def log_truth(contacts: list[Contact], origin_deg, epoch_ns, options: TruthOptio
         track["x_m"].to_numpy(), track["y_m"].to_numpy(), origin_deg)
     record = {"path": str(path), "sha256": sha256_file(path), **reports.record(),
               "ships_in_log_times": len(ships),
-              "options": {k: v for k, v in vars(options).items() if k != "file"},
+              "options": options.record(),
               "contacts": [m.record() for m in matches],
               "with_truth": int(len(truth))}
     log.info("%s: truth for %d of %d contact(s) from %s (%d reports of %d ships in the log's "
@@ -110,11 +123,25 @@ def log_truth(contacts: list[Contact], origin_deg, epoch_ns, options: TruthOptio
     return LogTruth(truth, track, matches, record)
 
 
+def _bracketing(reports, lo: int, hi: int) -> np.ndarray:
+    """Per ship its last report before ``lo`` and its first after ``hi`` (UTC ns), within
+    ``BRACKET_S``: sparse AIS (a satellite's, every few minutes) still covers the log, and the
+    gap it bridges is said (``truth.max_gap_s``) rather than the ship lost."""
+    t, same = reports.t_ns, reports.mmsi[1:] == reports.mmsi[:-1]  # sorted by MMSI, time
+    before = (t < lo) & (t >= lo - BRACKET_S * 10**9)
+    after = (t > hi) & (t <= hi + BRACKET_S * 10**9)
+    last_before = before & ~np.r_[same & before[1:], False]
+    first_after = after & ~np.r_[False, same & after[:-1]]
+    return last_before | first_after
+
+
 def _subset(reports, mask):
     from dataclasses import replace
 
     return replace(reports, mmsi=reports.mmsi[mask], t_ns=reports.t_ns[mask],
-                   lat_deg=reports.lat_deg[mask], lon_deg=reports.lon_deg[mask])
+                   lat_deg=reports.lat_deg[mask], lon_deg=reports.lon_deg[mask],
+                   sog_m_s=None if reports.sog_m_s is None else reports.sog_m_s[mask],
+                   cog_deg=None if reports.cog_deg is None else reports.cog_deg[mask])
 
 
 def _check_place(ships, contacts, options, path, where):
@@ -142,15 +169,28 @@ def _truth_row(contact: Contact, ship, m: Match, options: TruthOptions, epoch_ns
     ta = t - options.velocity_span_s
     gap = ship.max_gap(ta, t)
     if gap > options.max_gap_s:
-        m.verdict = "gap"
+        m.verdict, m.max_gap_s = "gap", gap
         m.note += (f"; but its AIS does not cover the {options.velocity_span_s:g} s before the "
                    f"last bearing ({format_utc(epoch_ns + int(round(t * 1e9)))}) without a gap "
-                   f"over truth.max_gap_s = {options.max_gap_s:g} s: no truth")
+                   f"over truth.max_gap_s = {options.max_gap_s:g} s"
+                   + (f" (truth.max_gap_s={gap_bound(gap)} accepts it)" if np.isfinite(gap)
+                      else "") + ": no truth")
         return None
     x, y = ship.at(t)
     vx, vy = ship.mean_velocity(ta, t)
     x, y, vx, vy = float(x), float(y), float(vx), float(vy)
+    sd_now, sd_before = (float(v) for v in ship.interpolation_sd([t, ta],
+                                                                 options.accel_sd_m_s2))
+    span = options.velocity_span_s
+    var_p, var_v = sd_now ** 2, (sd_now ** 2 + sd_before ** 2) / span ** 2  # v = dp / span
+    cov_pv = var_p / span
     return {
+        # the truth's own uncertainty (per axis, x and y alike and independent): position now,
+        # velocity, and (x0, vx) of the straight line, x0 = x - vx t
+        "truth_pos_sd_m": sd_now, "truth_vel_sd_m_s": float(np.sqrt(var_v)),
+        "truth_gap_s": float(ship.gap([t])[0]),
+        "truth_var_x0_m2": var_p - 2 * t * cov_pv + t * t * var_v,
+        "truth_cov_x0_v_m2_s": cov_pv - t * var_v, "truth_var_v_m2_s2": var_v,
         "track_id": contact.track_id, "label": contact.label, "mmsi": m.mmsi, "match": m.how,
         "rms_deg": m.rms_deg, "x0_m": x - vx * t, "y0_m": y - vy * t, "vx_m_s": vx,
         "vy_m_s": vy, "course_deg": float(np.rad2deg(np.arctan2(vx, vy)) % 360.0),

@@ -9,6 +9,8 @@ code the commands run (``docs/api.md``).
   (``Estimator.estimate`` on each log) and returns one row per track: the family's per-track
   results (its report module's ``results`` hook), while the estimator's own columns, which
   ``plot_contact`` and ``write_map`` draw from, stay in ``results.tma`` (``Results``).
+- ``campaign(input, truth=None, **options)`` scores every log of a folder or a glob against
+  its AIS and pools the verdicts (``tma.ais.campaign``) as ``pipeline.table input=DIR`` does.
 - ``plot_contact`` and ``write_map`` draw and write what aggregate draws and writes, for the
   families whose report module has those hooks.
 - ``open_dataset``, ``runs``, ``runs_dataset`` and ``simulate`` read stored datasets and
@@ -24,6 +26,7 @@ Every error is one line of the kind pandas users catch: ``ValueError`` (``tma.er
 for a map that cannot be written the ``OSError`` the system gave.
 """
 
+from tma.api.campaign import campaign
 from tma.api.datasets import (
     SimulatedDataset,
     StoredDataset,
@@ -37,5 +40,5 @@ from tma.api.recording import Recording, read_log
 from tma.api.results import Results, ResultsAccessor, plot_contact, write_map
 
 __all__ = ["Estimated", "Recording", "Results", "ResultsAccessor", "SimulatedDataset",
-           "StoredDataset", "estimate", "open_dataset", "plot_contact", "read_log", "runs",
-           "runs_dataset", "simulate", "write_map"]
+           "StoredDataset", "campaign", "estimate", "open_dataset", "plot_contact", "read_log",
+           "runs", "runs_dataset", "simulate", "write_map"]

@@ -168,6 +168,25 @@ def read_log(path, *, navigation=None, format: str = "auto", sigma_deg: float | 
                         f"{type(truth).__name__}")
     options = _nested(options, groups)
     _plain({"sigma_deg": sigma_deg, "min_bearings": min_bearings, "truth": truth}, "read_log")
+    truth = _with_dotted_truth(truth, options.pop("truth", None))
     return Recording(read(path, family=_recorded(), fmt=format, navigation=navigation,
                           options=options, sigma_deg=sigma_deg, min_bearings=min_bearings,
                           truth=truth))
+
+
+def _with_dotted_truth(truth, dotted: dict | None):
+    """The ``truth`` argument with the ``truth.*`` options given dotted in ``options``
+    (``{"truth.max_gap_s": 700}``), as the command line takes them beside ``truth=FILE``."""
+    if dotted is None:
+        return truth
+    if not isinstance(dotted, dict):  # options={"truth": "ais.csv"}: the file
+        dotted = {"file": dotted}
+    if truth is None:
+        return dotted
+    node = dict(truth) if isinstance(truth, dict) else {"file": truth}
+    for key, value in dotted.items():
+        if isinstance(value, dict) and isinstance(node.get(key), dict):
+            node[key] = {**node[key], **value}
+        else:
+            node[key] = value
+    return node

@@ -34,6 +34,7 @@ import numpy as np
 from tma.config import Form, param
 from tma.errors import ConfigError, InputError
 from tma.sources.base import Reader, Recording, file_head
+from tma.utc import AMBIGUOUS, is_pattern, pattern_problem, zone_problem
 
 DOCUMENTED = {"time": "time_s", "x": "own_x_m", "y": "own_y_m", "track": "track_id"}
 COMMON = {  # candidates per role, in order of preference (lower case)
@@ -101,15 +102,34 @@ class CsvFormat:
 TIME_FORMATS = ("auto", "s", "unix_s", "unix_ms", "unix_us", "unix_ns", "iso", "iso_utc")
 
 
+def _format_problem(value) -> str | None:
+    if value in TIME_FORMATS:
+        return None
+    return pattern_problem(value) if is_pattern(value) else ""
+
+
+TIME_FORMAT = Form(f"one of {', '.join(TIME_FORMATS)} or a strptime pattern with % "
+                   "('%d-%m-%y %H:%M')", _format_problem)
+ZONE = Form("an IANA time zone (Europe/Madrid, UTC)", zone_problem)
+
+
 @dataclass
 class TimeFormat:
-    """How a table's times are written (``time.format``)."""
+    """How a table's times are written (``time.format``, ``time.zone``,
+    ``time.ambiguous``)."""
 
     format: str = param("auto", "how the times are written: auto: numbers by magnitude (Unix "
                         "s from 1e8, ms from 1e11, us from 1e14, ns from 1e17; smaller: relative "
                         "s), text as ISO-8601 with a zone; s: relative seconds; unix_s|ms|us|ns: "
                         "Unix time; iso: ISO-8601 with a zone (Z, +01:00); iso_utc: ISO-8601, a "
-                        "time without zone taken as UTC", choices=TIME_FORMATS)
+                        "time without zone taken as UTC; or a strptime pattern ('%d-%m-%y "
+                        "%H:%M': day first, two-digit year)", form=TIME_FORMAT)
+    zone: str | None = param(None, "the IANA time zone (Europe/Madrid) of times written as "
+                             "text without one (local time, with its daylight saving); null: "
+                             "such times are refused (iso_utc: UTC)", form=ZONE)
+    ambiguous: str = param("refuse", "a local time (time.zone) that a daylight-saving change "
+                           "repeats (autumn) or skips (spring): refuse the file, or read it as "
+                           "the earliest or latest instant it can mean", choices=AMBIGUOUS)
 
 
 def options(observation) -> dict:
@@ -132,9 +152,12 @@ class CsvFile:
     mark, header, units row), and which column holds what (``columns``); ``read`` reads the
     chosen columns with pandas. ``tma.sources.table.Frame`` is a DataFrame's."""
 
-    def __init__(self, path: Path, options):
+    id_hint = ""  # what a refusal of duplicate times per contact adds (a frame's float ids)
+
+    def __init__(self, path: Path, options, head: bytes | None = None):
         self.path, self.options, self.notes = path, options, []
-        raw = file_head(path, SAMPLE_BYTES, "a CSV file")
+        raw = file_head(path, SAMPLE_BYTES, "a CSV file") if head is None else \
+            head[:SAMPLE_BYTES]  # a file read already (decompressed: an AIS export)
         try:
             text = raw.decode("utf-8-sig")
         except UnicodeDecodeError as exc:
@@ -274,7 +297,8 @@ class CsvFile:
         raise InputError(f"{self.path}: no own-ship position: columns found: "
                          f"{', '.join(self.header)}; set columns.lat=<name> columns.lon=<name> "
                          "(degrees) or columns.x=<name> columns.y=<name> (metres east, north), "
-                         "or give the own-ship in a separate file with navigation=FILE")
+                         "give the own-ship in a separate file with navigation=FILE, or take it "
+                         "from the AIS with truth.own_mmsi=<MMSI>")
 
     def read(self, cols: dict[str, str]):
         """The chosen columns (by position, so odd header spellings cannot get in the way).
@@ -358,6 +382,7 @@ class Frame(CsvFile):
         if len(set(self.header)) != len(self.header):
             raise InputError(f"{name}: two columns share a name: {', '.join(self.header)}")
         self.units, self.delimiter, self.decimal = None, ",", "."
+        self.zone = options.time.zone
 
     def read(self, cols: dict[str, str]):
         """The chosen columns; datetime64 ones in UTC (``tma.utc.time_column`` takes their
@@ -369,11 +394,19 @@ class Frame(CsvFile):
         for role, name in cols.items():
             series = self.frame.iloc[:, self.header.index(name)]
             if pd.api.types.is_datetime64_any_dtype(series):
-                if getattr(series.dt, "tz", None) is None:
+                if getattr(series.dt, "tz", None) is None and self.zone is not None:
+                    pass  # local times of time.zone: tma.utc.time_column says which instants
+                elif getattr(series.dt, "tz", None) is None:
                     self.notes.append(f"{self.path}: {name} without time zone read as UTC")
                     series = series.dt.tz_localize("UTC")
                 series = series.dt.tz_convert("UTC")
             elif role == "track":
+                if pd.api.types.is_float_dtype(series):  # 7 and 7.0 are one float there
+                    self.id_hint = (f"; the frame's column {name} holds floats ({series.dtype}), "
+                                    "in which ids such as 7 and 7.0 are one number: two "
+                                    "contacts may have been read as one; give the ids as text "
+                                    f"(frame[{name!r}].astype(str) before they are mixed) to "
+                                    "keep them apart")
                 series = series.astype(str).where(series.notna(), "").astype(object)
             out[name] = series
         return pd.DataFrame(out)

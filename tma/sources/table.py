@@ -27,7 +27,7 @@ import pandas as pd
 
 from tma.errors import InputError
 from tma.sources.base import Caution, Contacts, Navigation, Recording, line_places
-from tma.utc import table_seconds, time_column
+from tma.utc import is_pattern, table_seconds, time_column
 
 MAX_TRACK_ID = 2**53  # an id written as a larger integer is kept as text
 NAMED_ALIKE = 3  # groups of alike ids named in the warning
@@ -50,13 +50,14 @@ def read_table(table, options, *, navigation: bool, contacts: bool) -> list[Reco
         keep[:] &= rows.drop(bad & keep, reason, line_places(line), f"{path}: {refusal}")
 
     tcol = cols["time"]
-    t_raw, fmt, t_ok, not_absolute = time_column(df[tcol], tcol, options.time.format, path,
-                                                 line, notes,
-                                                 lambda: _number_column(df, tcol, path))
+    t_raw, fmt, t_ok, not_absolute = time_column(
+        df[tcol], tcol, options.time.format, path, line, notes,
+        lambda: _number_column(df, tcol, path), options.time.zone, options.time.ambiguous)
     drop(~t_ok, "time missing or unreadable",
          f"column {tcol} has missing times or values that are not "
          + ("ISO-8601 times such as 2024-05-01T10:00:00Z; set columns.time or time.format"
-            if fmt in ("iso", "iso_utc") else "numbers"))
+            if fmt in ("iso", "iso_utc") else f"times written as time.format='{fmt}'"
+            if is_pattern(fmt) else "numbers"))
     unit = fmt.replace("unix_", "")
     drop(not_absolute, "time not absolute among absolute times",
          f"column {tcol} has times that are not Unix times ({unit}) like the others: times "
@@ -87,7 +88,7 @@ def read_table(table, options, *, navigation: bool, contacts: bool) -> list[Reco
         b, stated = _values(b_raw[keep], cols[role], options, table, path, line, notes)
         track = _tracks(None if track_raw is None else track_raw[keep], len(t), notes,
                         f"{path}: {cols.get('track')}")
-        _check_increasing(t, track, tcol, path, line)
+        _check_increasing(t, track, tcol, path, line, table.id_hint)
     if not navigation:
         return [Recording(None, Contacts(t, epoch, track, b, str(path), stated), notes=notes,
                           dropped=rows)]
@@ -230,7 +231,7 @@ def _codes(track: np.ndarray) -> np.ndarray:
     return pd.factorize(track)[0] if track.dtype == object else track
 
 
-def _check_increasing(t, track, col, path, line):
+def _check_increasing(t, track, col, path, line, hint=""):
     """Times must increase strictly within each track, in file order."""
     code = _codes(track)
     order = np.argsort(code, kind="stable")
@@ -240,7 +241,7 @@ def _check_increasing(t, track, col, path, line):
         k = int(np.argmax(bad))
         kind = "duplicate" if ts[k + 1] == ts[k] else "non-increasing"
         raise InputError(f"{path}: {kind} {col} for track {track[order[k + 1]]} on line "
-                         f"{line[order[k + 1]]} ({col} must increase within a track)")
+                         f"{line[order[k + 1]]} ({col} must increase within a track){hint}")
 
 
 def _check_lat_lon(lat, lon, cols, path, line):

@@ -82,9 +82,11 @@ def _file(value, option) -> Path:
     return path
 
 
-def read_recordings(path: Path, fmt, navigation: Path | None, options):
+def read_recordings(path: Path, fmt, navigation: Path | None, options, own=None):
     """The input's (and the navigation file's) recordings, each with own-ship and contacts.
-    An option set that neither file's kind reads is refused (``bearing.topic`` on a CSV)."""
+    An option set that neither file's kind reads is refused (``bearing.topic`` on a CSV).
+    ``own``: the truth options when own-ship comes from the AIS (``truth.own_mmsi``,
+    ``tma.ais.ownship``)."""
     kind = source_kind(path, fmt)
     kinds = {path: kind}
     if navigation is not None:
@@ -92,6 +94,15 @@ def read_recordings(path: Path, fmt, navigation: Path | None, options):
     complaint = inapplicable(options, kinds)
     if complaint:
         raise ConfigError(complaint)
+    if own is not None:
+        from tma.ais.ownship import ownship_recording, source_text
+
+        if navigation is not None:
+            raise ConfigError(f"own-ship comes from navigation={navigation} or from "
+                              f"truth.own_mmsi={own.own_mmsi}, not both: give one")
+        found = read_source(path, kind, options, navigation=False, contacts=True)
+        nav = [ownship_recording(own, options, found, str(path))]
+        return [_with_navigation(found, nav, path, source_text(own), options)], kind, "ais"
     if navigation is None:
         recordings = read_source(path, kind, options, navigation=True, contacts=True)
         for r in recordings:
@@ -170,13 +181,20 @@ def read_log(input_path, *, family: str, fmt="auto", navigation=None, options=No
                           ".csv, .tsv or .mcap>")
     settings = reader.Settings(**settings)
     options = source_options(options, reader.OBSERVATION)
+    from tma.ais.options import truth_options
+
+    truth = truth_options(truth)
     path = _file(input_path, "input")
     nav_path = None if navigation is None else _file(navigation, "navigation")
-    recordings, kind, nav_kind = read_recordings(path, fmt, nav_path, options)
+    own = truth if truth.own_mmsi is not None else None
+    recordings, kind, nav_kind = read_recordings(path, fmt, nav_path, options, own)
     sources = {"input": {"path": str(path), "sha256": sha256_file(path), "kind": kind}}
     if nav_path is not None:
         sources["navigation"] = {"path": str(nav_path), "sha256": sha256_file(nav_path),
                                  "kind": nav_kind}
+    elif own is not None:  # own-ship from the AIS of the trial (tma.ais.ownship)
+        sources["navigation"] = {"path": str(own.file), "sha256": sha256_file(own.file),
+                                 "kind": "ais", "mmsi": own.own_mmsi}
     return with_truth(_read(family, recordings, options, settings, {"format": fmt}, sources,
                             str(path)), truth, str(path))
 
@@ -194,7 +212,7 @@ def with_truth(read: Read, truth, where: str) -> Read:
     lg = read.logs[0]
     read.truth = log_truth(family_named(read.family).ingest.contacts(read.logs), lg.origin_deg,
                            lg.epoch_utc_ns, options, where)
-    read.config["truth"] = {k: v for k, v in vars(options).items() if k != "file"}
+    read.config["truth"] = options.record()
     read.sources["truth"] = read.truth.record
     return read
 

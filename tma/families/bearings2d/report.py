@@ -441,8 +441,14 @@ def _report_without_truth(entry, tables_dir, name: str, progress=None) -> list[P
     warn_not_ok(report, dataset.name)
     write_parquet_atomic(entry.run_root / "report.parquet",
                          pa.Table.from_pandas(report, preserve_index=False))
+    own = {}
+    if m.get("navigation"):  # own-ship's source, when not the log (issue 38)
+        from tma.ais.ownship import ownship_of
+
+        own = ownship_of(m)
     written = write_track_report(report, tables_dir, name,
-                                 m.get("input", {}).get("path", dataset.name),
+                                 m.get("input", {}).get("path", dataset.name)
+                                 + (f"; own-ship: {own['ownship']}" if own else ""),
                                  geographic=origin is not None)
     paths = run_path(entry.run_root)
     written += write_track_plots(report, entry.estimates, logs, tables_dir, name, progress,
@@ -458,7 +464,8 @@ def _report_without_truth(entry, tables_dir, name: str, progress=None) -> list[P
     else:
         written.append(write_map_mcap(Path(tables_dir) / f"{name}.mcap", report,
                                       entry.estimates, logs, epoch, origin,
-                                      {"dataset": dataset.name, "estimator": entry.estimator},
+                                      {"dataset": dataset.name, "estimator": entry.estimator,
+                                       **own},
                                       truth_track=truth_track, paths=paths))
     return written
 

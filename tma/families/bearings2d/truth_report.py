@@ -50,7 +50,8 @@ def with_truth(report: pd.DataFrame, estimates: pd.DataFrame, truth: pd.DataFram
                ) -> pd.DataFrame:
     """``report`` (``report.track_report``, one row per track of ``estimates``) with the truth
     columns (module docstring); blank for tracks the truth lacks."""
-    df = estimates.merge(truth[["track_id", "mmsi", "match", "rms_deg", *THETA]],
+    own = [c for c in TRUTH_SD if c in truth]  # the truth's own uncertainty (sparse AIS)
+    df = estimates.merge(truth[["track_id", "mmsi", "match", "rms_deg", *THETA, *own]],
                          on="track_id", how="left", suffixes=("", "_true"), validate="one_to_one")
     has = df["mmsi"].notna().to_numpy()
     at = (df["t_last_s"].to_numpy(float), df["own_x_last_m"].to_numpy(float),
@@ -69,19 +70,56 @@ def with_truth(report: pd.DataFrame, estimates: pd.DataFrame, truth: pd.DataFram
     out["true_y_m"] = (df["y0_m_true"] + df["vy_m_s_true"] * t).to_numpy(float)
     for q, (_, _, unit) in QUANTITIES.items():
         out[f"true_{q}_{unit}"] = true[q]
+    truth_sd = _truth_sd(df, true, own)
     for q, (column, sd, unit) in QUANTITIES.items():
         err = report[column].to_numpy(float) - true[q]
         if unit == "deg":
             err = wrap_to_180(err)
         with np.errstate(divide="ignore", invalid="ignore"):
             out[f"{q}_err_{unit}"] = err
-            out[f"{q}_z"] = err / report[sd].to_numpy(float)
-    nees = np.where(has, normalised_error(df.assign(**{f"{c}_true": df[f"{c}_true"].fillna(0.0)
-                                                       for c in THETA})), np.nan)
+            out[f"{q}_z"] = err / np.hypot(report[sd].to_numpy(float), truth_sd[q])
+    filled = df.assign(**{f"{c}_true": df[f"{c}_true"].fillna(0.0) for c in THETA})
+    nees = np.where(has, normalised_error(filled), np.nan)
+    if own:  # where the truth is uncertain: e^T (Sigma + Sigma_truth)^-1 e
+        out["truth_pos_sd_m"] = df["truth_pos_sd_m"].to_numpy(float)
+        out["truth_vel_sd_m_s"] = df["truth_vel_sd_m_s"].to_numpy(float)
+        nees = np.where(has & (truth_sd["range"] > 0), _nees_with_truth(filled), nees)
     out["nees"] = nees
     out["covered"] = pd.array([bool(v <= NEES_95) if np.isfinite(v) else pd.NA for v in nees],
                               dtype="boolean")
     return out
+
+
+TRUTH_SD = ("truth_pos_sd_m", "truth_vel_sd_m_s", "truth_var_x0_m2", "truth_cov_x0_v_m2_s",
+            "truth_var_v_m2_s2")
+
+
+def _truth_sd(df, true, own) -> dict:
+    """Per quantity the truth's own one-sigma error (``tma.ais.truth``: sparse AIS); 0 for a
+    truth without one (a simulation's, or one from before issue 38)."""
+    if not own:
+        return {q: 0.0 for q in QUANTITIES}
+    pos = df["truth_pos_sd_m"].fillna(0.0).to_numpy(float)
+    vel = df["truth_vel_sd_m_s"].fillna(0.0).to_numpy(float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return {"range": pos, "bearing": np.rad2deg(pos / true["range"]), "speed": vel,
+                "course": np.rad2deg(np.where(vel > 0, vel / true["speed"], 0.0))}
+
+
+def _nees_with_truth(df) -> np.ndarray:
+    """The normalised error with the truth's covariance of (x0, y0, vx, vy) added to the
+    estimate's (x and y alike, independent)."""
+    from tma.families.bearings2d.metrics import jtj_matrices
+
+    e = df[list(THETA)].to_numpy() - df[[f"{c}_true" for c in THETA]].to_numpy()
+    sigma2 = np.deg2rad(df["sigma_used_deg"].to_numpy()) ** 2
+    cov = np.linalg.pinv(jtj_matrices(df)) * sigma2[:, None, None]
+    for a, b in ((0, 2), (1, 3)):  # (x0, vx) and (y0, vy)
+        cov[:, a, a] += df["truth_var_x0_m2"].fillna(0.0).to_numpy()
+        cov[:, b, b] += df["truth_var_v_m2_s2"].fillna(0.0).to_numpy()
+        cov[:, a, b] += df["truth_cov_x0_v_m2_s"].fillna(0.0).to_numpy()
+        cov[:, b, a] = cov[:, a, b]
+    return np.einsum("ni,ni->n", e, np.linalg.solve(cov, e[..., None])[..., 0])
 
 
 def coverage(report: pd.DataFrame) -> dict:
@@ -101,10 +139,14 @@ def coverage_text(report: pd.DataFrame) -> str:
     if not c["ok"]:
         return (f"Against the AIS truth: {c['with_truth']} of {c['contacts']} contacts have a "
                 "truth, none of them `ok`.")
+    sd = report.get("truth_pos_sd_m", pd.Series(dtype=float)).max()
+    own = (f" The z-scores and covered include the truth's own uncertainty where its AIS is "
+           f"sparse (position sd up to {sd:.0f} m: truth.accel_sd_m_s2)."
+           if np.isfinite(sd) and sd >= 1.0 else "")
     return (f"Against the AIS truth: {c['with_truth']} of {c['contacts']} contacts have a truth; "
             f"{c['covered']} of the {c['ok']} `ok` ones are covered by their errors "
             f"({100 * c['share']:.0f} %, 95 % interval {100 * c['share_lo']:.0f}-"
-            f"{100 * c['share_hi']:.0f} %; honest errors cover 95 %).")
+            f"{100 * c['share_hi']:.0f} %; honest errors cover 95 %).{own}")
 
 
 def shown_columns(report: pd.DataFrame) -> dict:

@@ -1,0 +1,425 @@
+"""A sea-trial kit (issue 38): logs and AIS as real exports write them, own-ship from its AIS,
+a campaign in one command. The trial is ``tests/families/bearings2d/ais_trial.py``'s (the
+Solent recording, two contacts, 0.5 deg noise); each test changes what a real export would
+change and checks what tma reads against what was written."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tests.conftest import data_paths, run_stage_here
+from tests.families.bearings2d import ais_trial
+from tma.ais.reports import read_reports
+
+QUIET = ["progress=false", "parallel=serial"]
+
+
+@pytest.fixture(scope="module")
+def trial(tmp_path_factory):
+    return ais_trial.write_trial(tmp_path_factory.mktemp("trial"))
+
+
+def _sparse(reports: pd.DataFrame, every_s: float) -> pd.DataFrame:
+    """Each ship's reports thinned to one per ``every_s`` (a satellite AIS's)."""
+    slot = np.floor((reports.t_s - reports.t_s.min()) / every_s)
+    return reports[~pd.DataFrame({"m": reports.mmsi, "s": slot}).duplicated()]
+
+
+# -- item 7: the small fixes -------------------------------------------------------------------
+
+def test_sparse_ais_is_refused_naming_truth_max_gap_s_and_a_value_that_works(trial, tmp_path,
+                                                                             monkeypatch):
+    """Ships reported every 5 minutes: every contact is matched, none has a truth under the
+    90 s bound; the one line names truth.max_gap_s and a value, which then works (from the
+    command line, and dotted in Python as the reader's options are)."""
+    import tma
+
+    ais_trial.write_ais_csv(tmp_path / "sparse.csv", _sparse(ais_trial.ais_reports(), 300.0))
+    with pytest.raises(ValueError, match=r"truth\.max_gap_s=(\d+) to take") as caught:
+        tma.read_log(trial / "trial.csv", truth=tmp_path / "sparse.csv")
+    value = int(caught.value.args[0].split("truth.max_gap_s=")[1].split()[0])
+    assert 300 <= value <= 620, caught.value
+    rec = tma.read_log(trial / "trial.csv", truth=tmp_path / "sparse.csv",
+                       options={"truth.max_gap_s": value})
+    assert list(rec.truth["label"]) == ["T1", "T2"]
+    rec = tma.read_log(trial / "trial.csv", options={"truth.file": str(tmp_path / "sparse.csv"),
+                                                     "truth.max_gap_s": value})
+    assert list(rec.truth["label"]) == ["T1", "T2"]
+    monkeypatch.chdir(trial)
+    proc = run_stage_here("ingest", "input=trial.csv", f"truth={tmp_path / 'sparse.csv'}",
+                          *data_paths(tmp_path), *QUIET, check=False)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+    assert f"set truth.max_gap_s={value}" in lines[0]
+
+
+def test_nmea_sentences_that_are_not_ais_are_counted_as_such(tmp_path):
+    """A satellite receiver's ``$PGHP`` lines and own-ship's ``$GPRMC`` between the
+    ``!AIVDM`` sentences are NMEA of another kind, noted as such; only the garbage line is
+    'not a readable AIS sentence'."""
+    reports = ais_trial.ais_reports().head(20)
+    lines = ais_trial.nmea_lines(reports)
+    other = ["$PGHP,1,2016,1,12,13,28,0,0,219,1,,1,,*2A",
+             "$GPRMC,132800,A,5047.500,N,00106.300,W,5.0,90.0,120116,,*1D"]
+    (tmp_path / "sat.nmea").write_text("\n".join(lines[:10] + other * 3 + lines[10:]
+                                                 + ["garbage"]) + "\n")
+    got = read_reports(tmp_path / "sat.nmea")
+    assert len(got) == 20
+    assert got.dropped.reasons["not a readable AIS sentence"]["count"] == 1
+    assert any("6 NMEA sentence(s) that are not AIS" in n and "3 $PGHP" in n
+               and "3 $GPRMC" in n for n in got.notes), got.notes
+
+
+# -- item 6: ids as written, from frames too ---------------------------------------------------
+
+def test_a_frame_whose_ids_are_floats_says_that_two_ids_may_be_one(trial):
+    """Contacts 7 and 7.0 mixed in a frame: pandas makes the column float64, where they are
+    one number; the refusal says so and how to keep them apart, and the ids as text are two
+    contacts, as in a CSV."""
+    import tma
+
+    frame = pd.read_csv(trial / "trial.csv")
+    ids = np.where(frame.contact == "T1", 7, 7.0).astype(object)
+    ids[frame.contact.to_numpy() == "T1"] = 7  # the Python int 7 and the float 7.0
+    mixed = frame.assign(contact=pd.Series(list(ids)).astype(float))
+    with pytest.raises(ValueError, match=r"holds floats .*7 and 7\.0 are one number.*as text"):
+        tma.Recording.from_frames(mixed)
+    apart = frame.assign(contact=pd.Series(list(ids), dtype=object))
+    rec = tma.Recording.from_frames(apart)
+    assert sorted(rec.bearings["label"].unique()) == ["7", "7.0"]
+    assert any("alike but written differently" in n for n in rec.notes), rec.notes
+
+
+def test_truth_options_dotted_in_python_are_those_of_the_command_line(trial):
+    import tma
+
+    with pytest.raises(ValueError, match="unknown option truth.nothing"):
+        tma.read_log(trial / "trial.csv", truth=trial / "trial_ais.csv",
+                     options={"truth.nothing": 1})
+    rec = tma.read_log(trial / "trial.csv", truth=trial / "trial_ais.csv",
+                       options={"truth.match": {"T1": 235031618}})
+    assert list(rec.matches["how"]) == ["given", "bearings"]
+
+
+# -- item 2: times as written ------------------------------------------------------------------
+
+def _local_log(trial, d, zone="Europe/Madrid", pattern="%d-%m-%y %H:%M:%S"):
+    """The trial's log with its times as a local clock writes them: day first, two-digit
+    year, no zone, a column named in Spanish."""
+    log = pd.read_csv(trial / "trial.csv")
+    utc = pd.to_datetime(log.pop("timestamp_utc"), utc=True)
+    log.insert(0, "Fecha", utc.dt.tz_convert(zone).dt.strftime(pattern))
+    log.to_csv(d / "local.csv", index=False)
+    return d / "local.csv", utc
+
+
+def test_a_local_time_log_is_read_by_its_pattern_and_zone(trial, tmp_path):
+    """14:33 in Madrid (CET, +01:00, in January) is 13:33 UTC: the bearings' UTC times are
+    those written, from the command's options and the API's."""
+    import tma
+
+    path, utc = _local_log(trial, tmp_path)
+    with pytest.raises(ValueError, match=r"'12-01-16 14:33:00' on line 2 has no time zone.*"
+                                         r"time\.zone="):
+        tma.read_log(path, columns={"time": "Fecha"}, time={"format": "%d-%m-%y %H:%M:%S"})
+    with pytest.raises(ValueError, match=r"time\.format='%Y/%m/%d %H:%M' matches no time of "
+                                         r"column Fecha \(line 2: '12-01-16 14:33:00'\)"):
+        tma.read_log(path, columns={"time": "Fecha"},
+                     time={"format": "%Y/%m/%d %H:%M", "zone": "Europe/Madrid"})
+    with pytest.raises(ValueError, match="time.zone=Mars/Olympus: no such IANA time zone"):
+        tma.read_log(path, options={"time.zone": "Mars/Olympus"})
+    rec = tma.read_log(path, options={"columns.time": "Fecha", "time.format": "%d-%m-%y %H:%M:%S",
+                                      "time.zone": "Europe/Madrid"})
+    got = rec.bearings.sort_values(["t_s", "label"])["time_utc"].reset_index(drop=True)
+    want = utc.sort_values().reset_index(drop=True)
+    assert (got == want).all()
+    assert rec.start_utc == "2016-01-12T13:33:00Z"
+
+
+def test_daylight_saving_repeats_and_gaps_are_refused_or_resolved_as_said():
+    """Madrid's clocks went back at 03:00 CEST on 27 October 2019 (02:30 happened twice: at
+    00:30 and 01:30 UTC) and forward at 02:00 CET on 31 March 2019 (02:30 never happened:
+    00:30 UTC by the summer offset, 01:30 UTC by the winter one)."""
+    import tma
+
+    def frame(day, times):
+        return pd.DataFrame({"time": [f"{day} {t}" for t in times],
+                             "bearing_deg": np.arange(len(times), dtype=float),
+                             "x": np.arange(len(times)) * 10.0, "y": 0.0})
+
+    times = ["01:50", "02:30", "03:10", "03:30", "03:50"]
+    both = {"earliest": "00:30", "latest": "01:30"}
+    cases = {"27/10/2019": (times, "repeated when the clocks went back", both),
+             "31/03/2019": (times, "skipped when the clocks went forward", both)}
+    for day, (times, refusal, resolved) in cases.items():
+        options = {"time.format": "%d/%m/%Y %H:%M", "time.zone": "Europe/Madrid",
+                   "nav.max_gap_s": 1e5}
+        with pytest.raises(ValueError, match=f"'{day} 02:30' on line 1 is a time of day in "
+                                             f"Europe/Madrid {refusal}.*time.ambiguous="):
+            tma.Recording.from_frames(frame(day, times), options=options)
+        for how, hhmm in resolved.items():
+            later = ["04:10", "04:30", "04:50", "05:10"]  # after the change: one instant each
+            rec = tma.Recording.from_frames(frame(day, ["02:30", *later]),
+                                            options={**options, "time.ambiguous": how})
+            first = rec.bearings["time_utc"].iloc[0]
+            iso = f"{day[6:]}-{day[3:5]}-{day[:2]}T{hhmm}:00Z"
+            assert first == pd.Timestamp(iso), (day, how, first)
+
+
+# -- item 1: AIS through the logs' table reader -------------------------------------------------
+
+OTHER_NAMES = {"time": "Zeit", "mmsi": "Schiff", "lat": "Breite", "lon": "Laenge",
+               "sog": "Fahrt"}
+LOCAL = "%d-%m-%y %H:%M:%S"
+
+
+def _other_export(reports: pd.DataFrame, path):
+    """The reports as an export of another country writes them: its own column names, ';'
+    between fields, a decimal comma, local (Madrid) times day first with a two-digit year,
+    speed in knots."""
+    utc = pd.to_datetime(np.round(reports.t_s) * 1e9, utc=True)
+    pd.DataFrame({"Zeit": utc.dt.tz_convert("Europe/Madrid").dt.strftime(LOCAL),
+                  "Schiff": reports.mmsi, "Breite": reports.lat_deg,
+                  "Laenge": reports.lon_deg, "Fahrt": reports.sog_kn,
+                  "Name": "X"}).to_csv(path, sep=";", decimal=",", index=False)
+    return path
+
+
+def _table_options(prefix="truth."):
+    return {**{f"{prefix}columns.{r}": c for r, c in OTHER_NAMES.items()},
+            f"{prefix}time.format": LOCAL, f"{prefix}time.zone": "Europe/Madrid"}
+
+
+def test_an_ais_export_with_other_names_times_and_layout_is_read_by_its_options(trial,
+                                                                             tmp_path):
+    """Refused naming the options that fix it; read with them, the reports are those written
+    (times to the second, positions exactly, SOG from knots to m/s), and the trial's contacts
+    are matched to their ships as from the Stone Soup file."""
+    import tma
+    from tma.ais.options import truth_options
+
+    reports = ais_trial.ais_reports()
+    path = _other_export(reports, tmp_path / "export.csv")
+    with pytest.raises(ValueError, match=r"no time or mmsi or lat or lon column among Zeit, "
+                                         r"Schiff.*truth\.columns\.time=<name>"):
+        read_reports(path)
+    with pytest.raises(ValueError, match=r"Zeit '12-01-16 14:28:00' on line 2 is not a time "
+                                         r"tma reads by itself.*truth\.time\.format="):
+        read_reports(path, truth_options({k: v for k, v in _table_options("").items()
+                                          if "time." not in k} | {"file": str(path)}))
+    got = read_reports(path, truth_options({"file": str(path), **_table_options("")}))
+    want = reports.sort_values(["mmsi", "t_s"], kind="stable")
+    assert got.kind == "csv" and len(got) == len(want) and got.dropped.count == 0
+    assert (got.mmsi == want.mmsi.to_numpy()).all()
+    assert np.abs(got.t_ns / 1e9 - np.round(want.t_s.to_numpy())).max() < 1e-6
+    assert np.abs(got.lat_deg - want.lat_deg.to_numpy()).max() < 1e-12
+    assert np.allclose(got.sog_m_s, want.sog_kn.to_numpy() * 1852 / 3600, equal_nan=True)
+    rec = tma.read_log(trial / "trial.csv", truth=path, options=_table_options())
+    assert dict(zip(rec.truth["label"], rec.truth["mmsi"], strict=True)) == ais_trial.TRUTH
+
+
+def test_an_ais_parquet_is_read_as_its_csv(trial, tmp_path):
+    reports = ais_trial.ais_reports()
+    frame = pd.DataFrame({"BaseDateTime": pd.to_datetime(reports.t_s * 1e9, utc=True),
+                          "MMSI": reports.mmsi, "LAT": reports.lat_deg,
+                          "LON": reports.lon_deg, "SOG": reports.sog_kn})
+    frame.to_parquet(tmp_path / "ais.parquet")
+    got = read_reports(tmp_path / "ais.parquet")
+    csv = read_reports(trial / "trial_ais.csv")
+    assert got.kind == "parquet" and len(got) == len(csv)
+    assert (got.mmsi == csv.mmsi).all() and np.abs(got.t_ns - csv.t_ns).max() <= 10**6
+    assert np.allclose(got.lat_deg, csv.lat_deg, rtol=0, atol=1e-9)
+
+
+def test_the_command_reads_an_ais_export_by_its_options(trial, tmp_path, monkeypatch):
+    monkeypatch.chdir(trial)
+    path = _other_export(ais_trial.ais_reports(), tmp_path / "export.csv")
+    options = [f"{k}={v}" if " " not in v else f"{k}='{v}'" for k, v in _table_options().items()]
+    proc = run_stage_here("ingest", "input=trial.csv", f"truth={path}", "name=export", *options,
+                          *data_paths(tmp_path), *QUIET, check=False)
+    assert proc.returncode == 0, proc.stderr
+    truth = pd.read_parquet(tmp_path / "data" / "datasets" / "export" / "truth.parquet")
+    assert dict(zip(truth["label"], truth["mmsi"], strict=True)) == ais_trial.TRUTH
+    proc = run_stage_here("ingest", "input=trial.csv", f"truth={path}", "name=export2",
+                          *options[:4], *data_paths(tmp_path), *QUIET, check=False)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1 and "truth.time.zone=" in lines[0], lines
+
+
+# -- item 3: own-ship from its AIS -------------------------------------------------------------
+
+def _bare_log(trial, d):
+    """The trial's log as a sonar alone writes it: time, contact, bearing."""
+    pd.read_csv(trial / "trial.csv")[["timestamp_utc", "contact", "bearing_deg"]].to_csv(
+        d / "bare.csv", index=False)
+    return d / "bare.csv"
+
+
+def test_own_ship_from_its_ais_scores_a_log_of_bearings_alone(trial, tmp_path, monkeypatch):
+    """``truth.own_mmsi``: own-ship is its AIS track (the trial's own-ship positions were
+    built from it: they agree to centimetres), the contacts are scored as with the full log,
+    and the table, the map and the manifest say where own-ship came from."""
+    import json
+
+    import tma
+
+    bare = _bare_log(trial, tmp_path)
+    ais = trial / "trial_ais.csv"
+    with pytest.raises(ValueError, match=r"no own-ship position.*truth\.own_mmsi=<MMSI>"):
+        tma.read_log(bare, truth=ais)
+    with pytest.raises(ValueError, match=r"truth.own_mmsi=211000003: no position report of "
+                                         r"MMSI 211000003 in truth="):
+        tma.read_log(bare, truth={"file": ais, "own_mmsi": 211000003})
+    own = {"truth.own_mmsi": ais_trial.OWN, "nav.max_gap_s": 30}
+    rec = tma.read_log(bare, truth=ais, options=own)
+    full = tma.read_log(trial / "trial.csv", truth=ais)
+    assert np.abs(rec.ownship.lat_deg - full.ownship.lat_deg).max() * 111e3 < 0.05
+    assert np.allclose(rec.truth.range_now_m, full.truth.range_now_m, rtol=0, atol=0.05)
+    assert ais_trial.OWN not in set(rec.matches["mmsi"])
+    # own-ship reports every ~10 s: under nav.max_gap_s = 10 s the bearings in its longer
+    # gaps are left out and counted, never interpolated across
+    strict = tma.read_log(bare, truth=ais, options={"truth.own_mmsi": ais_trial.OWN})
+    assert len(strict.bearings) < len(rec.bearings) == len(full.bearings)
+    assert "own-ship's AIS longer than nav.max_gap_s" in json.dumps(strict.dropped)
+    monkeypatch.chdir(tmp_path)
+    run_stage_here("table", "input=bare.csv", f"truth={ais}",
+                   f"truth.own_mmsi={ais_trial.OWN}", "nav.max_gap_s=30", "name=bare",
+                   *data_paths(tmp_path), *QUIET)
+    table = pd.read_csv(tmp_path / "tables" / "bare-lm.csv")
+    assert list(table["truth_mmsi"]) == list(ais_trial.TRUTH.values()) and table.covered.all()
+    md = (tmp_path / "tables" / "bare-lm.md").read_text()
+    assert f"own-ship: AIS of MMSI {ais_trial.OWN} in {ais}" in md
+    manifest = json.loads((tmp_path / "data" / "datasets" / "bare" / "manifest.json")
+                          .read_text())
+    assert manifest["navigation"]["kind"] == "ais"
+    assert manifest["navigation"]["mmsi"] == ais_trial.OWN
+    from mcap.reader import make_reader
+
+    with open(tmp_path / "tables" / "bare-lm.mcap", "rb") as f:
+        meta = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
+    assert f"MMSI {ais_trial.OWN}" in json.dumps(meta)
+
+
+def test_own_ship_ais_too_sparse_for_nav_max_gap_s_is_one_line(trial, tmp_path):
+    import tma
+
+    ais_trial.write_ais_csv(tmp_path / "sparse.csv", _sparse(ais_trial.ais_reports(), 60.0))
+    with pytest.raises(ValueError, match=r"every bearing lies in a gap of own-ship's AIS.*set "
+                                         r"nav\.max_gap_s=(\d+) to interpolate"):
+        tma.read_log(_bare_log(trial, tmp_path), truth=tmp_path / "sparse.csv",
+                     options={"truth.own_mmsi": ais_trial.OWN})
+
+
+# -- item 4: a campaign in one command -----------------------------------------------------------
+
+def _campaign(trial, d):
+    """Three logs in a folder, each with its AIS beside it: the trial (CSV AIS), the trial
+    again with the NMEA AIS, and a log whose bearings are 20 deg off (no ship fits: not
+    scored, said)."""
+    logs = d / "logs"
+    logs.mkdir()
+    log = pd.read_csv(trial / "trial.csv")
+    log.to_csv(logs / "t1.csv", index=False)
+    (logs / "t1_ais.csv").write_bytes((trial / "trial_ais.csv").read_bytes())
+    log.to_csv(logs / "t2.csv", index=False)
+    (logs / "t2_ais.nmea").write_bytes((trial / "trial_ais.nmea").read_bytes())
+    log.assign(bearing_deg=(log.bearing_deg + 20) % 360).to_csv(logs / "off.csv", index=False)
+    (logs / "off_ais.csv").write_bytes((trial / "trial_ais.csv").read_bytes())
+    return logs
+
+
+def _wilson(k, n, z=1.959963984540054):
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return centre - half, centre + half
+
+
+def test_a_campaign_pools_each_logs_verdicts_in_one_table(trial, tmp_path, monkeypatch):
+    """Each log's own table as ``input=LOG`` writes it, and the campaign's: per log and
+    pooled, the counts and z-scores of each log's own scores, the covered share with its
+    Wilson interval; the log no ship fits is not scored and says why. The API returns the
+    same table."""
+    import tma
+
+    logs = _campaign(trial, tmp_path)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(FileNotFoundError, match=r"log t3\.csv has no AIS: name it t3_ais\.csv"):
+        (logs / "t3.csv").write_bytes((logs / "t1.csv").read_bytes())
+        tma.campaign(logs)
+    (logs / "t3.csv").unlink()
+    table = tma.campaign(logs)
+    assert list(table["log"]) == ["off.csv", "t1.csv", "t2.csv", "pooled"]
+    off = table.set_index("log").loc["off.csv"]
+    assert "no contact" in off.note and pd.isna(off.contacts)
+    own = {name: tma.estimate(tma.read_log(logs / name, truth=logs / ais))
+           for name, ais in (("t1.csv", "t1_ais.csv"), ("t2.csv", "t2_ais.nmea"))}
+    pooled = pd.concat(own.values())
+    for name, report in [*own.items(), ("pooled", pooled)]:
+        row = table.set_index("log").loc[name]
+        ok = report[(report.status == "ok") & report.covered.notna()]
+        assert (row.contacts, row.ok, row.covered) == (len(report), len(ok),
+                                                       int(ok.covered.sum()))
+        assert np.isclose(row.range_z_mean, ok.range_z.mean())
+        assert np.allclose([row.covered_lo, row.covered_hi], _wilson(row.covered, row.ok))
+    proc = run_stage_here("table", "input=logs", *data_paths(tmp_path), *QUIET, check=False)
+    assert proc.returncode == 0, proc.stderr
+    tables = tmp_path / "tables"
+    assert {"t1-lm.csv", "t2-lm.md", "logs-campaign-lm.md", "logs-campaign-lm.png"} <= {
+        p.name for p in tables.iterdir()}
+    written = pd.read_csv(tables / "logs-campaign-lm.csv")
+    assert list(written["log"]) == list(table["log"])
+    assert np.allclose(written["covered_share"], table["covered_share"], equal_nan=True)
+    md = (tables / "logs-campaign-lm.md").read_text()
+    assert "| `off.csv` | not scored: " in md and "(1 not scored)" in md
+
+
+# -- item 7: the truth's own uncertainty where the AIS is sparse -------------------------------
+
+def test_sparse_ais_truth_carries_its_own_uncertainty_into_z_and_covered(trial, tmp_path,
+                                                                        monkeypatch):
+    """Reports every 5 minutes: the truth at the last bearing is interpolated across a gap,
+    its position sd per axis is a tau (T - tau) / 2 (from the gap's reports, read off the
+    file independently), the z-scores divide by the estimate's and the truth's sd together,
+    the normalised error shrinks against the exact truth's, and the table says so."""
+    import tma
+
+    sparse = _sparse(ais_trial.ais_reports(), 300.0)
+    ais_trial.write_ais_csv(tmp_path / "sparse.csv", sparse)
+    truth = {"file": tmp_path / "sparse.csv", "max_gap_s": 620}
+    rec = tma.read_log(trial / "trial.csv", truth=truth)
+    exact = tma.read_log(trial / "trial.csv", truth={**truth, "accel_sd_m_s2": 0})
+    written = pd.to_datetime(pd.read_csv(tmp_path / "sparse.csv").Time, utc=True)
+    for row in rec.truth.itertuples():
+        t = pd.Timestamp(rec.start_utc) + pd.Timedelta(seconds=row.t_now_s)
+        times = written[(sparse.mmsi == row.mmsi).to_numpy()].sort_values()
+        before, after = times[times <= t].iloc[-1], times[times > t].iloc[0]
+        tau, rest = (t - before).total_seconds(), (after - t).total_seconds()
+        assert np.isclose(row.truth_pos_sd_m, 0.02 * tau * rest / 2, rtol=1e-6), row.label
+        assert row.truth_vel_sd_m_s > 0.1  # its 120-s span lies in a 5-min gap
+    assert (exact.truth.truth_pos_sd_m == 0).all()
+    scored, plain = tma.estimate(rec), tma.estimate(exact)
+    sd = np.hypot(scored.range_sd_m, scored.truth_pos_sd_m)
+    assert np.allclose(scored.range_z, scored.range_err_m / sd)
+    assert (scored.nees < plain.nees).all() and (plain.truth_pos_sd_m == 0).all()
+    monkeypatch.chdir(trial)
+    run_stage_here("table", "input=trial.csv", f"truth={tmp_path / 'sparse.csv'}",
+                   "truth.max_gap_s=620", "name=sparse", *data_paths(tmp_path), *QUIET)
+    md = (tmp_path / "tables" / "sparse-lm.md").read_text()
+    assert "include the truth's own uncertainty where its AIS is sparse" in md
+
+
+# -- item 5: the README's files ------------------------------------------------------------------
+
+def test_the_readmes_trial_files_are_what_their_script_writes_and_small():
+    import importlib.util
+
+    from tests.conftest import REPO
+
+    here = REPO / "tests" / "data" / "trials"
+    spec = importlib.util.spec_from_file_location("trials_build", here / "build.py")
+    build = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(build)
+    for name, text in build.files().items():
+        assert (here / name).read_text() == text, name
+        assert len(text.encode()) < 40_000, name
