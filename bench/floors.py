@@ -139,9 +139,11 @@ def in_memory_work(job_overrides, data_dir: Path) -> Work:
     from pipeline._common import jobs, scenario_nodes
     from tma.families import build_estimator, dataset_name, estimator_class, load_scenario
     from tma.io.atomic import sha256_json
+    from tma.io.runs import run_path
+    from tma.plan.datasets import full_config
     from tma.runtime.forkserver import keep_freed_memory
     from tma.runtime.sharding import n_shards
-    from tma.stages.estimate import estimate_log, full_config, run_path
+    from tma.stages.estimate import estimate_log
 
     keep_freed_memory()  # as in the workers
     work, handler = Work(), _Artefacts()

@@ -58,7 +58,7 @@ class Estimator:
       shards (e.g. training an artefact), returning the config the run records;
     - ``recorded_defaults``: config values that replace its defaults on a recorded log (a
       dataset not simulated) where the command line sets none
-      (``tma.stages.estimate.dataset_config``), e.g. a start from the first bearing instead of
+      (``tma.plan.datasets.dataset_config``), e.g. a start from the first bearing instead of
       the simulated scenario's prior.
     """
 
