@@ -12,7 +12,7 @@ from tma.families.bearing_doppler3d.estimators.base import (
     AuvEstimator,
     dataset_model_record,
 )
-from tma.families.bearing_doppler3d.estimators.bundle import MAX_PATHS, training_bundle
+from tma.families.bearing_doppler3d.training_bundle import MAX_PATHS, training_bundle
 from tma.io.artefacts import is_record, load_arrays
 
 

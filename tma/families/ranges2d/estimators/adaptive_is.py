@@ -18,7 +18,7 @@ from tma.families.ranges2d.estimators.base import (
     no_estimate_columns,
     sampling_columns,
 )
-from tma.families.ranges2d.estimators.ratio import SamplerConfig
+from tma.families.ranges2d.importance_sampling import SamplerConfig
 
 MAX_CHECK = 10_000_000  # prior draws held in memory at once by the mass check
 MAX_BISECTIONS = 10_000_000  # cells, tree and heap take ~200 B per bisection

@@ -1,15 +1,15 @@
 """``prior_is``: importance sampling from the prior: ratio of the Monte Carlo means of
-x_s L(x) and L(x), x ~ prior, with the delta-method error (``ratio.py``)."""
+x_s L(x) and L(x), x ~ prior, with the delta-method error (``importance_sampling.py``)."""
 
 from dataclasses import dataclass
 
 from tma.families.ranges2d.estimators.base import RangesEstimator, sampling_columns
-from tma.families.ranges2d.estimators.ratio import SamplerConfig
+from tma.families.ranges2d.importance_sampling import SamplerConfig
 
 
 @dataclass
 class Config(SamplerConfig):
-    pass  # the sampler's settings (ratio.SamplerConfig) are all it has
+    pass  # the sampler's settings (importance_sampling.SamplerConfig) are all it has
 
 
 class PriorIS(RangesEstimator):
