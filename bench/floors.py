@@ -209,9 +209,7 @@ def in_memory_work(job_overrides, data_dir: Path) -> Work:
                         work.seconds["estimate"][f"{kind} artefact"] += built
                         seconds -= built
                     work.seconds["estimate"][f"{est_cfg['name']} prepare"] += max(seconds, 0.0)
-                    estimator = build_estimator(prepared)
-                    estimator.data_dir = Path(scratch)
-                    estimators.append(estimator)
+                    estimators.append(build_estimator(prepared, scratch))
                 if not estimators:
                     continue
                 _, config = load_scenario(dataset.manifest["config"])

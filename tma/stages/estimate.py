@@ -18,6 +18,7 @@ import numpy as np
 import pyarrow as pa
 
 from tma.errors import TmaError
+from tma.estimator import Estimates
 from tma.families import build_estimator, estimator_class, scenario_module
 from tma.io import arrow
 from tma.io.atomic import sha256_json, write_json_atomic, write_parquet_atomic
@@ -45,14 +46,12 @@ log = logging.getLogger(__name__)
 
 
 def columns_to_table(track_id, columns: dict) -> pa.Table:
-    """Estimator output -> table. Columns are (n_tracks,) or, for per-step outputs such as
-    filter estimates at every scan, (n_tracks, n_steps): then the table is long, one row per
-    (track_id, step), and per-track columns repeat on each of their rows."""
+    """``Estimates.columns`` (checked: ``Estimates.check``) -> table: a row per track or, with
+    per-step outputs such as filter estimates at every scan, (n_tracks, n_steps), a long table,
+    one row per (track_id, step), the per-track columns repeated on each of their rows."""
     steps = {c.shape[1] for c in columns.values() if np.ndim(c) == 2}
     if not steps:
         return arrow.table({"track_id": track_id, **columns})
-    if len(steps) > 1:
-        raise ValueError(f"per-step columns disagree on the number of steps: {steps}")
     n_steps = steps.pop()
     long = {"track_id": np.repeat(track_id, n_steps),
             "step": np.tile(np.arange(n_steps, dtype=np.int64), track_id.size)}
@@ -88,7 +87,7 @@ def estimate_shard_group(tasks: list[ShardTask]) -> list[dict]:
 def _finished_record(task: ShardTask):
     """The sidecar record of a finished shard output, if it is whole (else: recompute)."""
     record = finished_record(task.out_path, task.key, record_path(Path(task.out_path)))
-    whole = (record is not None and isinstance(record.get("extras"), list)
+    whole = (record is not None and isinstance(record.get("side_tables"), list)
              and all(isinstance(record.get(k), int) for k in ("rows", "epochs"))
              and isinstance(record.get("seconds"), int | float))
     return record if whole else None
@@ -99,27 +98,26 @@ def estimate_log(estimator, log):
     first), its side tables (small tables it declares, e.g. sample points for plots) and the
     seconds it took. What every shard of a run, and ``tma.estimate``, computes."""
     start = perf_counter()
-    columns = estimator.estimate(log)
+    out = estimator.estimate(log)
     seconds = perf_counter() - start
-    extras = columns.pop("extras", {})
-    if not set(extras) <= set(estimator.side_tables):  # a shard may hold none of them
-        raise RuntimeError(f"estimator '{estimator.name}' returned side tables "
-                           f"{sorted(extras)}, declared {sorted(estimator.side_tables)}")
-    return columns_to_table(log.track_id, columns), extras, seconds
+    if not isinstance(out, Estimates):
+        raise RuntimeError(f"estimator '{estimator.name}' returned a {type(out).__name__}, "
+                           "not Estimates (tma.estimator)")
+    out.check(estimator, log.track_id.size)
+    return columns_to_table(log.track_id, out.columns), out.side_tables, seconds
 
 
 def estimate_shard(task: ShardTask, log) -> dict:
     """Run one estimator over one dataset shard's log and write its output."""
     out = Path(task.out_path)
-    estimator = build_estimator(task.estimator_config)
-    estimator.data_dir = Path(task.data_dir)
-    table, extras, seconds = estimate_log(estimator, log)
-    for name, side in extras.items():  # written beside the shard
+    estimator = build_estimator(task.estimator_config, task.data_dir)
+    table, side_tables, seconds = estimate_log(estimator, log)
+    for name, side in side_tables.items():  # written beside the shard
         write_parquet_atomic(extra_path(out, name), arrow.table(side))
     write_parquet_atomic(out, table)
     epochs = int(log.t_s.size)
     return mark_finished(out, task.key, record_path(out), rows=int(log.n_tracks),
-                         epochs=epochs, seconds=seconds, extras=sorted(extras))
+                         epochs=epochs, seconds=seconds, side_tables=sorted(side_tables))
 
 
 def plan_run(data_dir, dataset: Dataset, estimator_config: dict, key: str, stage: Path):
@@ -173,7 +171,7 @@ def finish_run(stage: Path, dataset: Dataset, estimator_config: dict, tasks, rec
     shards = {Path(t.out_path).name: file_record(t.out_path, rows=r["rows"])
               for t, r in zip(tasks, records, strict=True)}
     files = {}
-    for name in sorted({n for r in records for n in r.get("extras", [])}):
+    for name in sorted({n for r in records for n in r.get("side_tables", [])}):
         parts = [extra_path(Path(t.out_path), name) for t in tasks]
         extra = pa.concat_tables(arrow.read_table(p) for p in parts if p.exists())
         write_parquet_atomic(stage / f"{name}.parquet", extra)

@@ -14,7 +14,7 @@ import numpy as np
 
 from tma.config import param, require
 from tma.errors import InputError
-from tma.estimator import Estimator, EstimatorConfig
+from tma.estimator import Estimates, Estimator, EstimatorConfig
 from tma.families.bearings2d import estimated_path, manoeuvres, ncv
 from tma.families.bearings2d.end_bearing import end_bearing
 from tma.families.bearings2d.log import BearingsLog
@@ -184,9 +184,8 @@ class BearingsEstimator(Estimator):
     tests_motion = False  # runs the trend test even where the log declares its motion
     conformance_scenario = {"sigma_deg": 0.5, "seed": 3}
 
-    def estimate(self, log: BearingsLog) -> dict:
-        """Output columns by name for every track of ``log``: ``read``, ``solve``,
-        ``judge``."""
+    def estimate(self, log: BearingsLog) -> Estimates:
+        """The ``Estimates`` of every track of ``log``: ``read``, ``solve``, ``judge``."""
         bearings, motion = self.read(log), self.motion(log)
         return self.judge(bearings, motion, self.solve(bearings, motion), log)
 
@@ -239,8 +238,8 @@ class BearingsEstimator(Estimator):
         raise NotImplementedError
 
     def judge(self, bearings: Bearings, motion: TargetMotion, solution: Solution,
-              log: BearingsLog) -> dict:
-        """The output columns of ``solution``: the noise fit, the targets' motion fitted about
+              log: BearingsLog) -> Estimates:
+        """The ``Estimates`` of ``solution``: the noise fit, the targets' motion fitted about
         it (``models_motion``), the trend test, the status and one-sigma errors
         (``status.assess``)."""
         cfg, b = self.config, bearings
@@ -373,9 +372,8 @@ class BearingsEstimator(Estimator):
         for i in range(4):
             for j in range(i, 4):
                 columns[f"jtj_{i}{j}"] = jtj[:, i, j]
-        if points > 0:
-            columns["extras"] = {"path": estimated_path.joined(paths, log.track_id.dtype)}
-        return columns
+        return Estimates(columns, {"path": estimated_path.joined(paths, log.track_id.dtype)}
+                         if points > 0 else {})
 
     @staticmethod
     def _leg_start(t, start, solution: Solution):
