@@ -233,7 +233,7 @@ def bench_cmnf_memory(paths: int):
     with tempfile.TemporaryDirectory() as tmp:
         simulate = f"""
 import time, numpy as np
-from tma.families.bearing_doppler3d.estimators.bundle import _bundle_shard, SHARD
+from tma.families.bearing_doppler3d.training_bundle import _bundle_shard, SHARD
 from tma.families.bearing_doppler3d.model import model_record
 from tma.families.bearing_doppler3d.scenario import Config
 record = model_record(Config(truth_step_s=1e-2))

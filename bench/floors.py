@@ -139,9 +139,11 @@ def in_memory_work(job_overrides, data_dir: Path) -> Work:
     from pipeline._common import jobs, scenario_nodes
     from tma.families import build_estimator, dataset_name, estimator_class, load_scenario
     from tma.io.atomic import sha256_json
+    from tma.io.runs import run_path
+    from tma.plan.datasets import full_config
     from tma.runtime.forkserver import keep_freed_memory
     from tma.runtime.sharding import n_shards
-    from tma.stages.estimate import estimate_log, full_config, run_path
+    from tma.stages.estimate import estimate_log
 
     keep_freed_memory()  # as in the workers
     work, handler = Work(), _Artefacts()
@@ -207,9 +209,7 @@ def in_memory_work(job_overrides, data_dir: Path) -> Work:
                         work.seconds["estimate"][f"{kind} artefact"] += built
                         seconds -= built
                     work.seconds["estimate"][f"{est_cfg['name']} prepare"] += max(seconds, 0.0)
-                    estimator = build_estimator(prepared)
-                    estimator.data_dir = Path(scratch)
-                    estimators.append(estimator)
+                    estimators.append(build_estimator(prepared, scratch))
                 if not estimators:
                     continue
                 _, config = load_scenario(dataset.manifest["config"])

@@ -34,9 +34,9 @@ def ingest_stage(cfg):
 
 def _compile_ahead(cfg):
     """The kernels the table's estimators run, compiled while it simulates, on a machine whose
-    numba cache is empty (``tma.stages.estimate.compile_ahead``; nothing when it is warm, or
+    numba cache is empty (``tma.runtime.compile_ahead``; nothing when it is warm, or
     when the shards run on a Dask cluster, whose workers have caches of their own)."""
-    from tma.stages.estimate import compile_ahead
+    from tma.runtime.compile_ahead import compile_ahead
 
     try:
         todo = command(cfg)

@@ -90,27 +90,40 @@ def test_every_family_is_estimated_as_its_commands_measure(family, tmp_path):
                                    rtol=1e-9)
     elif family == "radar2d":
         pd.testing.assert_frame_equal(results.tma.tables["errors"], measured)
-        assert list(results["status"]) == list(measured.groupby("track_id")["status"].first())
-        assert set(results["status"]) <= {"ok", "track_lost"}
+        assert list(results["track_lost"]) == list(
+            measured.groupby("track_id")["track_lost"].first())
+        last = results.tma.estimates.groupby("track_id").tail(1)
+        assert list(results["status"]) == list(last["status"])  # the tracker's verdict
+        assert set(results["status"]) <= {"ok", "divergent"}
         end = truth[truth["step"] == truth["step"].max()].set_index("track_id")
-        np.testing.assert_allclose(results["error_now_m"], np.hypot(
+        np.testing.assert_allclose(results["position_err_m"], np.hypot(
             results["x_now_m"] - end.loc[results["track_id"], "x_m"].to_numpy(),
             results["y_now_m"] - end.loc[results["track_id"], "y_m"].to_numpy()), rtol=1e-12)
         late = measured[measured["t_s"] >= 27.0 - 1e-9]  # the window of J = 10 scans fills
-        np.testing.assert_allclose(results["error_max_m"],
+        np.testing.assert_allclose(results["position_err_max_m"],
                                    late.groupby("track_id")["error_m"].max(), rtol=1e-12)
         assert "m" in results.tma.estimates.columns and "m" not in results.columns
     elif family == "ranges2d":
-        np.testing.assert_allclose(results["truth_err_m"], measured["truth_err_m"], rtol=1e-12)
-        np.testing.assert_allclose(results["truth_err_x_m"], results["x_m"] - truth["x_m"])
+        np.testing.assert_allclose(results["position_err_m"], measured["position_err_m"],
+                                   rtol=1e-12)
+        np.testing.assert_allclose(results["x_err_m"], results["x_now_m"] - truth["x_m"])
         assert (results["status"] == "ok").all()
     else:
-        pd.testing.assert_series_equal(results["status"], measured["status"])
+        pd.testing.assert_series_equal(results["track_lost"], measured["track_lost"])
+        assert list(results["status"]) == list(np.where(results["filter_ok"], "ok", "divergent"))
         np.testing.assert_allclose(results["horizontal_err_max_m"],
                                    measured["horizontal_err_max_m"], rtol=1e-12)
         end = truth[truth["step"] == truth["step"].max()].reset_index(drop=True)
-        np.testing.assert_allclose(results["err_X_m"], results["X_m"] - end["X_m"], rtol=1e-12)
-        assert results["nees_now"].between(0, 100).all()
+        np.testing.assert_allclose(results["x_err_m"], results["x_now_m"] - end["X_m"],
+                                   rtol=1e-12)
+        # the heading phi (rad, counter-clockwise from east) as a course (deg, clockwise
+        # from north), as every family's results give it
+        true_course = np.rad2deg(np.arctan2(np.cos(end["phi_rad"]), np.sin(end["phi_rad"])))
+        np.testing.assert_allclose(
+            (results["course_deg"] - true_course + 180.0) % 360.0 - 180.0,
+            results["course_err_deg"], rtol=0, atol=1e-9)
+        assert results["course_deg"].between(0, 360).all()
+        assert results["nees"].between(0, 100).all()
         assert set(results.tma.tables) == {"estimates", "covariance"}
 
 

@@ -1,18 +1,24 @@
 """One conformance suite applied to every registered estimator (the idea of scikit-learn's
 ``parametrize_with_checks``): a new estimator is checked the day its family registers it.
 
-Each estimator builds from its defaults, refuses a bad value naming the key, is
-deterministic, gives per-track results that do not depend on which other tracks share the
-shard (nor on their order), handles a one-track shard, gives the columns it declares, has
-its name written once, and runs through the stages a user runs, estimate and aggregate (a
-field the metrics or the report need and it forgot fails there). It runs on the small
-scenario and with the fast settings it declares itself (``conformance_scenario``,
-``conformance_config``): a new family or estimator needs no edit here.
+Each estimator builds from its defaults and what it needs (``data_dir``, at construction),
+refuses a bad value naming the key, returns the one output type of every family
+(``tma.estimator.Estimates``: columns of its log's tracks, the side tables it declares) from
+its family's typed result, is deterministic, gives per-track results that do not depend on
+which other tracks share the shard (nor on their order), handles a one-track shard, gives the
+columns it declares, has its name written once, lives in its family's ``estimators/`` with
+nothing there but estimators and the family's base, and runs through the stages a user runs,
+estimate and aggregate (a field the metrics or the report need and it forgot fails there).
+It runs on the small scenario and with the fast settings it declares itself
+(``conformance_scenario``, ``conformance_config``): a new family or estimator needs no edit
+here.
 """
 
 import dataclasses
+import inspect
 import re
 import sys
+import typing
 from dataclasses import fields
 from pathlib import Path
 from types import SimpleNamespace
@@ -22,7 +28,9 @@ import pytest
 
 from tma.config import to_plain
 from tma.errors import ConfigError
-from tma.families import build_estimator, estimator_class, estimator_names, family
+from tma.estimator import Estimates
+from tma.families import NAMES, build_estimator, estimator_class, estimator_names, family
+from tma.stages.estimate import estimate_log
 
 N_TRACKS = 7  # differs from every other dimension of the logs below
 
@@ -54,9 +62,7 @@ def estimators(logs, tmp_path_factory):
         config = cls.prepare(to_plain(build_estimator({"name": name,
                                                        **cls.conformance_config}).config),
                              dataset, data_dir)
-        estimator = build_estimator(config)
-        estimator.data_dir = data_dir
-        built[name] = estimator
+        built[name] = build_estimator(config, data_dir)
     return built
 
 
@@ -70,9 +76,7 @@ def _subset(log, rows):
 
 
 def _run(estimator, log):
-    out = estimator.estimate(log)
-    out.pop("extras", None)  # side tables, e.g. one track's draws for a plot
-    return out
+    return estimator.estimate(log).columns  # (not the side tables: one track's draws...)
 
 
 def _assert_rows_equal(full, part, rows):
@@ -89,9 +93,69 @@ def _assert_rows_equal(full, part, rows):
 def test_builds_from_its_defaults_and_refuses_a_bad_value(name):
     cls = estimator_class(name)
     assert build_estimator({"name": name}).config == cls.Config()
-    numeric = next(f.name for f in fields(cls.Config) if f.type in (float, int, "float", "int"))
+    # a number, or a number or null (an estimator whose settings are all optional)
+    numeric = next(f.name for f in fields(cls.Config)
+                   if {f.type, *typing.get_args(f.type)} & {float, int, "float", "int"})
     with pytest.raises(ConfigError, match=numeric):
         build_estimator({"name": name, numeric: float("nan")})
+
+
+@pytest.mark.parametrize("name", estimator_names())
+def test_it_returns_the_one_output_type(name, logs, estimators):
+    """``Estimates`` whatever the family: a column per output, each of the log's tracks
+    first; what the estimate stage writes of it is a table of those tracks."""
+    log = logs[estimator_class(name).family][1]
+    out = estimators[name].estimate(log)
+    assert type(out) is Estimates
+    out.check(estimators[name], N_TRACKS)
+    assert all(isinstance(v, np.ndarray) for v in out.columns.values())
+    for side in out.side_tables.values():
+        assert all(isinstance(v, np.ndarray) for v in side.values())
+    table, side_tables, seconds = estimate_log(estimators[name], log)
+    assert sorted(set(table.column("track_id").to_pylist())) == sorted(log.track_id.tolist())
+    assert side_tables.keys() == out.side_tables.keys() and seconds > 0
+
+
+@pytest.mark.parametrize("name", estimator_names())
+def test_its_solve_is_typed_as_its_familys(name):
+    """The hook an estimator writes, ``solve``, takes and returns its family's declared
+    types (the family's base says which; no dict, no tuple, no magic key), and what it needs
+    from outside comes at construction."""
+    cls = estimator_class(name)
+    base = next(b for b in cls.__mro__ if b.__dict__.get("family") == cls.family)
+    declared = typing.get_type_hints(base.solve)
+    assert "return" in declared and dataclasses.is_dataclass(declared["return"]), declared
+    assert typing.get_type_hints(cls.solve).get("return", declared["return"]) is \
+        declared["return"]
+    params = [p for p in inspect.signature(base.solve).parameters if p != "self"]
+    assert all(dataclasses.is_dataclass(declared[p]) for p in params), declared
+    assert list(inspect.signature(cls.__init__).parameters) == ["self", "config", "data_dir"]
+
+
+def test_the_contract_refuses_what_breaks_it(logs, estimators):
+    """What the core refuses of an estimator's output (``Estimates.check``): a column that is
+    not one value per track, per-step columns of two lengths, an undeclared side table."""
+    estimator = next(e for e in estimators.values() if e.side_tables)
+    declared = estimator.side_tables[0]
+    ok = np.zeros(N_TRACKS)
+    for bad, says in (({"x": np.zeros(N_TRACKS - 1)}, "shaped"),
+                      ({"x": np.zeros((N_TRACKS, 2)), "y": np.zeros((N_TRACKS, 3))}, "steps")):
+        with pytest.raises(RuntimeError, match=says):
+            Estimates(bad).check(estimator, N_TRACKS)
+    with pytest.raises(RuntimeError, match="declared"):
+        Estimates({"x": ok}, {f"not_{declared}": {"x": ok}}).check(estimator, N_TRACKS)
+    with pytest.raises(RuntimeError, match="one length"):
+        Estimates({"x": ok}, {declared: {"x": ok[:3], "y": ok}}).check(estimator, N_TRACKS)
+    Estimates({"x": ok}, {declared: {"x": ok[:3], "y": ok[:3]}}).check(estimator, N_TRACKS)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_its_estimators_folder_holds_estimators(name):
+    """Every file of a family's ``estimators/`` is one of its registered estimators (or the
+    family's base): what is not an estimator lives beside them, named for what it is."""
+    package = Path(sys.modules[family(name).scenario.__name__].__file__).parent
+    files = {p.stem for p in (package / "estimators").glob("*.py")} - {"__init__", "base"}
+    assert files == set(family(name).estimators)
 
 
 @pytest.mark.parametrize("name", estimator_names())
@@ -115,8 +179,8 @@ def test_a_track_does_not_depend_on_its_batch(name, logs, estimators):
 def test_its_declared_outputs_appear(name, logs, estimators):
     cls = estimator_class(name)
     out = estimators[name].estimate(logs[cls.family][1])
-    assert set(cls.outputs) <= set(out), set(cls.outputs) - set(out)
-    assert set(cls.side_tables) <= set(out.get("extras", {})), cls.side_tables
+    assert set(cls.outputs) <= set(out.columns), set(cls.outputs) - set(out.columns)
+    assert set(cls.side_tables) <= set(out.side_tables), cls.side_tables
 
 
 @pytest.mark.parametrize("name", estimator_names())

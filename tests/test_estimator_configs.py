@@ -210,8 +210,8 @@ def check_auv(node, model, data_dir=None):
     cfg, log = made
     if node["name"] in ("cmnf", "prior_mean"):  # train (or reuse) the artefact first
         dataset = SimpleNamespace(family=cfg.family, manifest={"config": asdict(cfg)})
-        est = build_estimator(type(est).prepare(asdict(est.config), dataset, data_dir))
-        est.data_dir = data_dir
+        est = build_estimator(type(est).prepare(asdict(est.config), dataset, data_dir),
+                              data_dir)
     out = est.estimate(log)
     ok = out["filter_ok"]
     for key in (*STATE_NAMES, *[f"sd_{c}" for c in STATE_NAMES]):

@@ -109,15 +109,15 @@ def test_processes_starting_at_once_compile_a_kernel_once(tmp_path):
 
 
 AHEAD = """
-from tma.stages import estimate
-run = estimate.estimate_log
+from tma.runtime import compile_ahead
+run = compile_ahead.run_ahead
 def traced(estimator, log):
     import sys
     sys.stdout.write(estimator.name + "\\n")  # one write: the processes run side by side
     sys.stdout.flush()  # flushed: the forked processes end with os._exit
     return run(estimator, log)
-estimate.estimate_log = traced
-estimate._compile_ahead([{"family": "bearings2d", "sigma_deg": 0.5}],
+compile_ahead.run_ahead = traced
+compile_ahead._compile_ahead([{"family": "bearings2d", "sigma_deg": 0.5}],
                         [{"name": "lm"}, {"name": "nbearings"}])
 """
 

@@ -216,8 +216,8 @@ def test_a_runs_estimates_are_its_shard_files_read_as_one_dataset(paths, tmp_pat
     import pyarrow.dataset as pds
 
     from tma.io.dataset import Dataset
+    from tma.io.runs import open_run
     from tma.stages.aggregate import metrics_dataset
-    from tma.stages.estimate import open_run
 
     cfg = compose_cfg([*SMALL, *paths, "parallel.n_jobs=2"])
     simulate_stage(cfg)

@@ -95,9 +95,9 @@ def estimate(data, estimator: str | None = None, sigma_deg: float | None = None,
         logs = _with_sigma(logs, sigma_deg, fam.name)
     tables, sides = [], {}
     for lg in logs:
-        table, extras, _ = estimate_log(est, lg)
+        table, side_tables, _ = estimate_log(est, lg)
         tables.append(table.to_pandas())
-        for name, side in extras.items():
+        for name, side in side_tables.items():
             sides.setdefault(name, []).append(pd.DataFrame(side))
     estimates = pd.concat(tables, ignore_index=True)
     truth, truth_track, scenario = _sources(data)

@@ -97,13 +97,14 @@ def estimator_class(name: str):
     return owners[name].estimator_class(name)
 
 
-def build_estimator(node):
-    """Validate an estimator config node (must hold ``name``) and build the estimator."""
+def build_estimator(node, data_dir=None):
+    """Validate an estimator config node (must hold ``name``) and build the estimator, given
+    where its artefacts live (``data_dir``; None: nowhere, for an estimator that needs none)."""
     name = node.get("name") if node is not None else None
     if name is None:
         raise ConfigError("estimator: missing 'name'")
     cls = estimator_class(name)
-    return cls(validate(cls.Config, node, f"estimator '{name}'"))
+    return cls(validate(cls.Config, node, f"estimator '{name}'"), data_dir)
 
 
 def scenario_module(name: str):

@@ -200,3 +200,12 @@ class Dataset:
         if not self.has_truth:
             return None
         return arrow.read_table(self.verified_path("truth.parquet")).to_pandas()
+
+
+def check_datasets(datasets) -> None:
+    """``Dataset.check_files`` of each dataset once, however many jobs read it: a missing or
+    truncated file stops the stage before it starts. Each file's sha256 is checked where its
+    bytes are read (an estimate worker its shard, a report the truth), so no stage reads a
+    dataset twice and every byte read is verified."""
+    for dataset in {id(ds): ds for ds in datasets}.values():
+        dataset.check_files()

@@ -27,7 +27,7 @@ therefore compiles them under an exclusive file lock beside its cache index (``c
 around numba's ``_compile_for_args``): one process compiles and saves it, the others wait
 for the lock and then load it from the cache. So each kernel is compiled once per machine,
 and the note that says so is printed once, by the process that compiles
-(``tma.stages.estimate.compile_ahead`` compiles a command's kernels ahead, while it
+(``tma.runtime.compile_ahead`` compiles a command's kernels ahead, while it
 simulates).
 """
 

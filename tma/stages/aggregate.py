@@ -24,25 +24,17 @@ if TYPE_CHECKING:  # pandas (0.2 s) and pyarrow.dataset load where used, not at 
 
 from tma.errors import ConfigError, InputError
 from tma.families import family as family_of
-from tma.io.dataset import Dataset, datasets_dir
+from tma.io.dataset import Dataset, check_datasets, datasets_dir
 from tma.io.owned import plain_name, remove_stale_temporaries
+from tma.io.runs import MANIFEST, open_run, run_path, runs_dir, seconds_per_track
+from tma.plan.datasets import full_config, missing_run_line
 from tma.runtime.parallel import in_threads
-from tma.stages.estimate import (
-    MANIFEST,
-    check_datasets,
-    full_config,
-    missing_run_line,
-    open_run,
-    run_path,
-    runs_dir,
-    seconds_per_track,
-)
 
 
 @dataclass
 class RunEntry:
     """A finished run as a report sees it: its dataset, estimator, directory, manifest and
-    estimates, and its wall seconds per track (``tma.stages.estimate.seconds_per_track``; NaN when
+    estimates, and its wall seconds per track (``tma.io.runs.seconds_per_track``; NaN when
     unknown), read once here."""
 
     dataset: Dataset

@@ -11,7 +11,7 @@ import pytest
 
 from tma.families import build_estimator
 from tma.families.bearing_doppler3d.estimators import ekf, srekf
-from tma.families.bearing_doppler3d.estimators.base import output_columns
+from tma.families.bearing_doppler3d.estimators.base import Solution, output_columns
 from tma.families.bearing_doppler3d.estimators.srekf import INVERSE, ORDER
 from tma.families.bearing_doppler3d.model import PHI, A, AuvModel, euler_columns, model_record
 from tma.families.bearing_doppler3d.scenario import Config, simulate_shard
@@ -170,8 +170,8 @@ def test_srekf_equals_ekf():
     for key in ("X_m", "Y_m", "Z_m", "v_m_s", "phi_rad", "a_m_s2", "sd_X_m", "sd_phi_rad"):
         np.testing.assert_allclose(sr[key], ekf_out[key], rtol=1e-8, atol=1e-10)
     for key in ("P_00", "P_01", "P_35", "P_55"):
-        ref = ekf_out["extras"]["covariance"][key]
-        np.testing.assert_allclose(sr["extras"]["covariance"][key], ref, rtol=1e-8,
+        ref = ekf_out.side_tables["covariance"][key]
+        np.testing.assert_allclose(sr.side_tables["covariance"][key], ref, rtol=1e-8,
                                    atol=1e-9 * np.abs(ref).max())
 
 
@@ -192,6 +192,6 @@ def test_negative_variance_is_flagged_not_a_silent_nan_std():
     cov = np.broadcast_to(np.eye(6), (2, 3, 6, 6)).copy()
     cov[1, 2, 4, 4] = -1e-9  # a covariance that lost definiteness
     with np.errstate(invalid="ignore"):
-        out = output_columns(est, cov, np.array([True, True]), np.arange(3.0), 1,
+        out = output_columns(Solution(est, cov, np.array([True, True])), np.arange(3.0), 1,
                              np.array([0, 1]))
     np.testing.assert_array_equal(out["filter_ok"], [True, False])

@@ -16,13 +16,13 @@ def test_divergence_counting_on_a_constructed_case():
     np.testing.assert_array_equal(divergent_paths(e, t, ok), [True, False, True, True, True])
 
 
-def test_path_status_counts_nan_and_flagged_paths_as_divergent():
+def test_path_metrics_count_nan_and_flagged_paths_as_lost():
     t = np.arange(0.0, 21.0)
     e = np.zeros((4, t.size, 6))
     e[1, 15:, :2] = np.nan  # no estimate from 15 s on
     e[2, 12, 0] = 1500.0
     ok = np.array([True, True, True, False])
     m = path_metrics([10, 11, 12, 13], e, t, ok)
-    assert list(m["status"]) == ["ok", "divergent", "divergent", "divergent"]
+    assert list(m["track_lost"]) == [False, True, True, True]
     assert list(m["track_id"]) == [10, 11, 12, 13]
     assert m["horizontal_err_max_m"].iloc[2] == 1500.0 and np.isnan(m["horizontal_err_max_m"][1])

@@ -55,7 +55,7 @@ def test_wrong_family_and_pipeline(tmp_path):
     assert (table.training_paths.dropna() == 400).all()
     paths = sorted((tmp_path / "data" / "runs").glob("*/*/path_metrics.parquet"))
     assert len(paths) == 8
-    shares = sorted((pd.read_parquet(p)["status"] == "divergent").mean() for p in paths)
+    shares = sorted(pd.read_parquet(p)["track_lost"].mean() for p in paths)
     assert shares == sorted(table.divergence_share)
     ekf = table[(table.estimator == "ekf") & table.doppler].iloc[0]
     prior = table[(table.estimator == "prior_mean") & table.doppler].iloc[0]

@@ -12,8 +12,9 @@ from pipeline._common import estimator_nodes, open_datasets, scenario_nodes
 from tests.conftest import compose_cfg, run_stage_here
 from tma.families.bearings2d import benchmark, metrics
 from tma.families.bearings2d.log import read_bearings_log
+from tma.io.runs import open_run, run_path, seconds_per_track
+from tma.plan.datasets import full_config
 from tma.stages.aggregate import RunEntry
-from tma.stages.estimate import full_config, open_run, run_path, seconds_per_track
 
 N = 40
 

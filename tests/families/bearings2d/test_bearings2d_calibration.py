@@ -14,9 +14,9 @@ from tests.conftest import compose_cfg, run_stage_here
 from tma.families.bearings2d import calibration, manoeuvre_table
 from tma.families.bearings2d.benchmark import estimator_label
 from tma.families.bearings2d.status import kinematics_now
+from tma.io.runs import open_run, seconds_per_track
 from tma.maths.stats import chi2_mean_interval
 from tma.stages.aggregate import RunEntry
-from tma.stages.estimate import open_run, seconds_per_track
 
 P1, P2 = chi2.cdf(1, 1), chi2.cdf(4, 1)  # P(|Z| <= 1), P(|Z| <= 2): 0.683, 0.954
 T_LAST = 1200.0  # s, own-ship at the origin then

@@ -190,7 +190,7 @@ def test_the_path_errors_cover_the_truth_along_the_track():
     track lies on the first bearings' lines of sight."""
     log, X, Y = _turning_log(120, seed=2)
     out = LevenbergMarquardt(Config(initial_bearing_deg=None, path_points=200)).estimate(log)
-    paths = pd.DataFrame(out["extras"]["path"])
+    paths = pd.DataFrame(out.side_tables["path"])
     ok = np.flatnonzero((out["status"] == "ok") & np.isfinite(out["range_sd_m"]))
     assert ok.size >= 40
     inside, early, z_first = [], [], []

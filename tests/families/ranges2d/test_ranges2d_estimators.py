@@ -7,7 +7,7 @@ import pytest
 from tma.families import build_estimator
 from tma.families.ranges2d.estimators.quadrature import Config as QuadConfig
 from tma.families.ranges2d.estimators.quadrature import posterior_mean
-from tma.families.ranges2d.estimators.ratio import RatioMoments
+from tma.families.ranges2d.importance_sampling import RatioMoments
 from tma.families.ranges2d.model import RangeModel
 from tma.families.ranges2d.scenario import Config, simulate_shard
 

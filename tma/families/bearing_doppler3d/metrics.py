@@ -1,10 +1,10 @@
 """Metrics of ``bearing_doppler3d``: per epoch and component bias, RMSE, the filter's own std
 beside the measured std, NEES with its chi-square band, and divergence.
 
-A path diverges when its horizontal position error exceeds ``divergence_m`` (or is not
-finite) at any epoch t >= ``divergence_after_s``, or when its filter flagged it
-(``filter_ok`` False). Its ``status`` is then ``divergent``, else ``ok``. Heading errors are
-wrapped to [-pi, pi).
+A path diverges, and is lost (``track_lost``, as a ``radar2d`` run past its gate), when its
+horizontal position error exceeds ``divergence_m`` (or is not finite) at any epoch
+t >= ``divergence_after_s``, or when its filter flagged it (``filter_ok`` False). Heading
+errors are wrapped to [-pi, pi).
 """
 
 import numpy as np
@@ -16,7 +16,6 @@ from tma.maths.angles import wrap_to_pi
 
 DIVERGENCE_M = 1000.0
 DIVERGENCE_AFTER_S = 10.0
-STATUSES = ("ok", "divergent")
 
 
 def _cube(df: pd.DataFrame, columns, n_steps):
@@ -48,14 +47,14 @@ def divergent_paths(e, t, ok, threshold_m=DIVERGENCE_M, after_s=DIVERGENCE_AFTER
 
 
 def path_metrics(track_ids, e, t, ok) -> pd.DataFrame:
-    """Per path: ``status`` (ok | divergent), the filter's flag and the largest horizontal
+    """Per path: ``track_lost`` (it diverged), the filter's flag and the largest horizontal
     error (m) from ``DIVERGENCE_AFTER_S`` on (NaN if any is not finite)."""
     horizontal = np.hypot(e[..., 0], e[..., 1])[:, t >= DIVERGENCE_AFTER_S]
     with np.errstate(invalid="ignore"):  # NaN propagates: no finite maximum
         worst = horizontal.max(axis=1) if horizontal.size else np.full(len(ok), np.nan)
-    return pd.DataFrame({"track_id": np.asarray(track_ids), "status": np.where(
-        divergent_paths(e, t, ok), "divergent", "ok"), "filter_ok": ok,
-        "horizontal_err_max_m": worst})
+    return pd.DataFrame({"track_id": np.asarray(track_ids),
+                         "track_lost": divergent_paths(e, t, ok), "filter_ok": ok,
+                         "horizontal_err_max_m": worst})
 
 
 def nees(e, covariance: pd.DataFrame, track_ids):

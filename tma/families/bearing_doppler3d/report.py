@@ -26,6 +26,7 @@ from tma.families.bearing_doppler3d.metrics import (  # noqa: E402
 from tma.families.bearing_doppler3d.model import STATE_NAMES  # noqa: E402
 from tma.io import arrow  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
+from tma.maths.angles import wrap_to_180  # noqa: E402
 from tma.report.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
 
 SHORT = {"X_m": "X", "Y_m": "Y", "Z_m": "Z", "v_m_s": "v", "phi_rad": "phi", "a_m_s2": "a"}
@@ -49,7 +50,7 @@ def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) 
         paths = path_metrics(np.unique(est["track_id"]), err, t, ok)
         write_parquet_atomic(e.run_root / "path_metrics.parquet",
                              pa.Table.from_pandas(paths, preserve_index=False))
-        divergent = (paths["status"] == "divergent").to_numpy()
+        divergent = paths["track_lost"].to_numpy()
         keep = ~divergent
         steps = per_step(err, est, t, keep, K)
         covariance = arrow.read_table(e.run_root / "covariance.parquet").to_pandas()
@@ -100,7 +101,7 @@ def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) 
     intro = f"""Passive tracking of a manoeuvring AUV by 8 fixed hydrophones
 (`../shared/specs/bearing_doppler3d.md`): elevation sine, bearing cosine and Doppler frequency
 every second, with and without the Doppler readings. RMSE over the non-divergent test paths at
-t = 50 s and t = T (units: m, m, m, m/s, rad, m/s^2); a path diverges (status `divergent` in
+t = 50 s and t = T (units: m, m, m, m/s, rad, m/s^2); a path diverges (`track_lost` in
 the run's `path_metrics.parquet`) when its horizontal error exceeds {DIVERGENCE_M:g} m, or is
 not finite, at any t >= {DIVERGENCE_AFTER_S:g} s, or its filter flagged it (the CSV also gives the
 RMSE over all paths at T, `rmse_*_T_all`: for `prior_mean`, whose paths mostly count as
@@ -142,22 +143,47 @@ def _plot(path, curves, doppler):
 
 # -- the Python API's hook (tma.api): what tma.estimate returns of bearing_doppler3d estimates
 
+# each state as the results of every family name it (bearings2d's: the position now, its
+# one-sigma error ``_sd``, its error against the truth ``_err``; angles in degrees)
+RESULT_NAMES = {"X_m": "x", "Y_m": "y", "Z_m": "z", "v_m_s": "speed", "phi_rad": "course",
+                "a_m_s2": "a"}
+
+
+def _result_columns(state: str, values: np.ndarray, kind: str) -> tuple[str, np.ndarray]:
+    """A state's ``values`` (the estimate, ``kind`` ``now``; its ``sd``; its ``err``) under its
+    results name and unit: the heading phi (rad, counter-clockwise from +X) as the course
+    (deg, clockwise from north, as ``radar2d``'s and ``bearings2d``'s)."""
+    name, unit = RESULT_NAMES[state], state.partition("_")[2]
+    if state == "phi_rad":
+        unit, values = "deg", np.rad2deg(values)
+        values = (90.0 - values) % 360.0 if kind == "now" else (
+            values if kind == "sd" else wrap_to_180(-values))
+    if kind == "now":
+        return (f"{name}_now_{unit}" if name in "xyz" else f"{name}_{unit}"), values
+    return f"{name}_{kind}_{unit}", values
+
+
 def results(run) -> tuple[pd.DataFrame, dict]:
     """``tma.estimate``'s results of ``run`` (``tma.api.Estimated``): one row per path, the
-    filter's state at its last epoch (``t_now_s``; ``X_m``, ``Y_m``, ``Z_m``, ``v_m_s``,
-    ``phi_rad``, ``a_m_s2``) with its own standard deviations (``sd_*``), its flag
-    (``filter_ok``) and ``status``; against the truth, as the table measures it
-    (``metrics``): the errors then (``err_*``, heading wrapped), the largest horizontal
-    error from ``DIVERGENCE_AFTER_S`` on, the NEES then (6 degrees of freedom) and ``status``
-    ``ok`` or ``divergent``. Tables: ``estimates`` (per epoch) and ``covariance`` (every
+    filter's state at its last epoch (``t_now_s``; ``x_now_m``, ``y_now_m``, ``z_now_m``,
+    ``speed_m_s``, ``course_deg`` clockwise from north, ``a_m_s2``) with its own standard
+    deviations (``x_sd_m``..., ``course_sd_deg``), its flag (``filter_ok``) and ``status``,
+    the filter's verdict (``ok``, or ``divergent`` where it flagged the path); against the
+    truth, as the table measures it (``metrics``): the errors then (``x_err_m``...,
+    ``course_err_deg`` wrapped), the largest horizontal error from ``DIVERGENCE_AFTER_S`` on,
+    the NEES then (``nees``, 6 degrees of freedom) and ``track_lost`` (the path diverged).
+    Tables: ``estimates`` (per epoch, the model's states) and ``covariance`` (every
     ``covariance_every`` epochs)."""
     est = run.estimates.sort_values(["track_id", "step"], kind="stable").reset_index(drop=True)
     last = est.groupby("track_id", sort=False).tail(1).reset_index(drop=True)
     ok = last["filter_ok"].astype(bool)
-    frame = pd.DataFrame({"track_id": last["track_id"], "t_now_s": last["t_s"],
-                          **{c: last[c] for c in STATE_NAMES},
-                          **{f"sd_{c}": last[f"sd_{c}"] for c in STATE_NAMES},
-                          "filter_ok": ok, "status": np.where(ok, "ok", "divergent")})
+    frame = pd.DataFrame({"track_id": last["track_id"], "t_now_s": last["t_s"]})
+    for c in STATE_NAMES:
+        for kind, column in (("now", c), ("sd", f"sd_{c}")):
+            name, values = _result_columns(c, last[column].to_numpy(), kind)
+            frame[name] = values
+    frame["filter_ok"] = ok
+    frame["status"] = np.where(ok, "ok", "divergent")
     tables = {"estimates": est, **run.side_tables}
     if run.truth is None:
         return frame, tables
@@ -165,11 +191,12 @@ def results(run) -> tuple[pd.DataFrame, dict]:
     ids = frame["track_id"].to_numpy()
     paths = path_metrics(ids, err, t, flags)
     for k, c in enumerate(STATE_NAMES):
-        frame[f"err_{c}"] = err[:, -1, k]
+        name, values = _result_columns(c, err[:, -1, k], "err")
+        frame[name] = values
     frame["horizontal_err_max_m"] = paths["horizontal_err_max_m"].to_numpy()
     covariance = run.side_tables.get("covariance")
     if covariance is not None:  # the last epoch's covariance is always kept
         path_nees, stored = nees(err, covariance, ids)
-        frame["nees_now"] = path_nees[:, -1] if stored[-1] == t.size - 1 else np.nan
-    frame["status"] = paths["status"].to_numpy()
+        frame["nees"] = path_nees[:, -1] if stored[-1] == t.size - 1 else np.nan
+    frame["track_lost"] = paths["track_lost"].to_numpy()
     return frame, tables

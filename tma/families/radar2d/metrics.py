@@ -10,10 +10,11 @@ The segments follow from the dataset's scenario config (legs, scan period) and t
 memory J (``segments``), so other legs give other segments; the default legs with J = 10
 give the spec's 27-42 s, 45-90 s and 93-120 s.
 
-Per run, ``status``: ``track_lost`` when the error exceeds the gate, or is not finite (no
-estimate), at any scan from the window fill on, or when the tracker flagged the run
-(``status`` other than ``ok`` in its estimates); else ``ok``. Track loss is the share of runs
-``track_lost``. A segment the scans do not reach (a shorter scenario) gives NaN statistics.
+Per run, ``track_lost`` (True or False, on each of its scans): the error exceeds the gate, or
+is not finite (no estimate), at any scan from the window fill on, or the tracker flagged the
+run (its ``status`` in its estimates, the tracker's own verdict, other than ``ok``). Track
+loss is the share of runs ``track_lost``. A segment the scans do not reach (a shorter
+scenario) gives NaN statistics.
 """
 
 from dataclasses import dataclass
@@ -26,7 +27,6 @@ from tma.families.radar2d.estimators.alphabeta import Config as AlphaBetaConfig
 from tma.families.radar2d.scenario import Config, scan_times, vessel_path
 
 GATE_M = 30.0
-STATUSES = ("ok", "track_lost")
 SEGMENT_NAMES = ("straight1", "turn", "straight2")
 # The window of the spec's alpha-beta (J = 10): the segment rule's J for runs of trackers
 # without a memory (the IMM alone), so their rows match those of a full table.
@@ -97,10 +97,9 @@ def per_scan_errors(estimates: pd.DataFrame, truth: pd.DataFrame, segs: Segments
     df["error_m"] = np.hypot(df["x_m"] - df["x_m_true"], df["y_m"] - df["y_m_true"])
     late = df["t_s"] >= segs.loss_from_s - EPS_S
     lost = (~(df["error_m"] <= GATE_M) & late) | (df["status"] != "ok")  # NaN: no estimate
-    lost_runs = lost.groupby(df["track_id"]).transform("any")
-    df["status"] = np.where(lost_runs, "track_lost", "ok")
+    df["track_lost"] = lost.groupby(df["track_id"]).transform("any").astype(bool)
     keep = ["track_id", "step", "t_s", "error_m"] + [c for c in ("m", "sigma_hat_m", "p_turn")
-                                                     if c in df] + ["status"]
+                                                     if c in df] + ["track_lost"]
     return df[keep].sort_values(["track_id", "step"], kind="stable").reset_index(drop=True)
 
 
@@ -122,8 +121,7 @@ def summary_row(per_scan: pd.DataFrame, estimator: str, speed: float, segs: Segm
         row[f"{name}_mean_m"] = seg.mean() if seg.size else np.nan
         row[f"{name}_max_median_m"] = np.median(per_run_max)
         row[f"{name}_max_p95_m"] = np.percentile(per_run_max, 95)
-    status = per_scan.groupby("track_id")["status"].first()
-    row["track_loss"] = float(np.mean(status == "track_lost"))
+    row["track_loss"] = float(np.mean(per_scan.groupby("track_id")["track_lost"].first()))
     row.update(memory_stats(per_scan, memory, segs))
     if "p_turn" in per_scan:
         p, _ = scan_matrix(per_scan, "p_turn")

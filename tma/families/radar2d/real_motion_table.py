@@ -39,13 +39,13 @@ memory m. Read beside the simulated `radar2d` table (a boat turning on a 300 m r
 def _row(name, kind, per_scan, runs, fill_s) -> dict:
     late = per_scan[per_scan["t_s"] >= fill_s - 1e-9]
     per_run = late.groupby("track_id")["error_m"].agg(["mean", "max"])
-    status = per_scan.groupby("track_id")["status"].first()
-    k, n = int((status == "track_lost").sum()), len(status)
+    lost = per_scan.groupby("track_id")["track_lost"].first()
+    k, n = int(lost.sum()), len(lost)
     lo, hi = wilson_interval(k, n)
     finite = per_run["max"].to_numpy(float)
     finite = np.where(np.isfinite(finite), finite, np.inf)
     return {"estimator": name, "windows": kind, "n_runs": n,
-            "n_windows": int(runs.loc[status.index, "window"].nunique()),
+            "n_windows": int(runs.loc[lost.index, "window"].nunique()),
             "error_mean_m": float(np.nanmean(late["error_m"])),
             "error_max_median_m": float(np.median(finite)),
             "error_max_p95_m": float(np.percentile(finite, 95)),

@@ -31,7 +31,7 @@ INTRO = """Tracking a small fast boat that turns sharply{radius} in front of a c
 radar (`../shared/specs/radar2d.md`); one row per tracker and boat speed over the Monte Carlo
 runs. Segment columns: mean position error over runs and scans, and the median and 95th
 percentile of each run's maximum error ({segments}). Track loss: share of runs
-whose error exceeds {gate:g} m, or that have no estimate, at any scan from {loss} on (status
+whose error exceeds {gate:g} m, or that have no estimate, at any scan from {loss} on (column
 `track_lost` in each run's `metrics.parquet`). For `fuzzy_mm`: the selected memory
 m (median; median over runs of the minimum in the turn; P(m = J) on the straight legs; median
 time to recover m = J after the turn) and sigma_hat at {sigma}. For `imm`: the mean
@@ -200,20 +200,22 @@ def _plot(error_path, memory_path, curves):
 
 def results(run) -> tuple[pd.DataFrame, dict]:
     """``tma.estimate``'s results of ``run`` (``tma.api.Estimated``): one row per run (a
-    track), its state at its last scan (``t_now_s``, ``x_now_m``, ``y_now_m``, velocity,
-    ``speed_now_m_s``, ``course_now_deg`` clockwise from north) and ``status``; against its
-    truth, as the table measures it (``metrics.per_scan_errors``, the segments of the
-    scenario and of the tracker's memory J), the error now, its mean and maximum from the
-    scan where the window fills, and ``status`` ``ok`` or ``track_lost``. Tables:
-    ``estimates`` (per scan) and, with a truth, ``errors`` (per scan)."""
+    track), its state at its last scan (``t_now_s``, ``x_now_m``, ``y_now_m``, velocity
+    ``vx_now_m_s``, ``vy_now_m_s``, ``speed_m_s``, ``course_deg`` clockwise from north) and
+    its ``status``, the tracker's verdict (``ok`` or ``divergent``); against its truth, as the
+    table measures it (``metrics.per_scan_errors``, the segments of the scenario and of the
+    tracker's memory J), the position error now (``position_err_m``), its mean and maximum
+    from the scan where the window fills (``position_err_mean_m``, ``position_err_max_m``)
+    and ``track_lost``. Tables: ``estimates`` (per scan) and, with a truth, ``errors`` (per
+    scan)."""
     est = run.estimates.sort_values(["track_id", "step"], kind="stable").reset_index(drop=True)
     last = est.groupby("track_id", sort=False).tail(1).reset_index(drop=True)
     frame = pd.DataFrame({
         "track_id": last["track_id"], "t_now_s": last["t_s"],
         "x_now_m": last["x_m"], "y_now_m": last["y_m"],
         "vx_now_m_s": last["vx_m_s"], "vy_now_m_s": last["vy_m_s"],
-        "speed_now_m_s": np.hypot(last["vx_m_s"], last["vy_m_s"]),
-        "course_now_deg": np.rad2deg(np.arctan2(last["vx_m_s"], last["vy_m_s"])) % 360.0,
+        "speed_m_s": np.hypot(last["vx_m_s"], last["vy_m_s"]),
+        "course_deg": np.rad2deg(np.arctan2(last["vx_m_s"], last["vy_m_s"])) % 360.0,
         "status": last["status"]})
     tables = {"estimates": est}
     if run.truth is None:
@@ -228,9 +230,10 @@ def results(run) -> tuple[pd.DataFrame, dict]:
     by_run = late.groupby("track_id")["error_m"]
     gaps = late["error_m"].isna().groupby(late["track_id"]).any()  # a scan without estimate
     ids = frame["track_id"]
-    frame["error_now_m"] = per_scan.groupby("track_id").tail(1).set_index("track_id")[
+    frame["position_err_m"] = per_scan.groupby("track_id").tail(1).set_index("track_id")[
         "error_m"].reindex(ids).to_numpy()
-    frame["error_mean_m"] = by_run.mean().mask(gaps).reindex(ids).to_numpy()
-    frame["error_max_m"] = by_run.max().mask(gaps).reindex(ids).to_numpy()
-    frame["status"] = per_scan.groupby("track_id")["status"].first().reindex(ids).to_numpy()
+    frame["position_err_mean_m"] = by_run.mean().mask(gaps).reindex(ids).to_numpy()
+    frame["position_err_max_m"] = by_run.max().mask(gaps).reindex(ids).to_numpy()
+    frame["track_lost"] = per_scan.groupby("track_id")["track_lost"].first().reindex(
+        ids).to_numpy()
     return frame, {**tables, "errors": per_scan}

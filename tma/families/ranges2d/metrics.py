@@ -23,8 +23,9 @@ COLUMNS = [
 
 
 def track_metrics(estimates: pd.DataFrame, reference: pd.DataFrame, truth, confidence):
-    """Per run: error against the quadrature reference and whether it lies within the
-    estimator's own stated error (z x SE per coordinate)."""
+    """Per run: error against the quadrature reference (``err_x_m``, ``err_y_m``) and whether
+    it lies within the estimator's own stated error (z x SE per coordinate); with a truth,
+    the distance to it (``position_err_m``)."""
     ref = reference.set_index("track_id").loc[estimates["track_id"]]
     z = ndtri(0.5 + confidence / 2)
     out = pd.DataFrame({"track_id": estimates["track_id"].to_numpy()})
@@ -36,7 +37,7 @@ def track_metrics(estimates: pd.DataFrame, reference: pd.DataFrame, truth, confi
                                      + 1e-9))
     if truth is not None:
         t = truth.set_index("track_id").loc[estimates["track_id"]]
-        out["truth_err_m"] = np.hypot(estimates["x_m"].to_numpy() - t["x_m"].to_numpy(),
+        out["position_err_m"] = np.hypot(estimates["x_m"].to_numpy() - t["x_m"].to_numpy(),
                                       estimates["y_m"].to_numpy() - t["y_m"].to_numpy())
     for col in ("re_x", "re_y", "corr_x", "corr_y", "samples_used", "n_evaluations",
                 "reached_accuracy", "x_m", "y_m", "status"):
@@ -63,8 +64,8 @@ def summary_row(name, m: pd.DataFrame, seconds_per_run) -> dict:
         "samples_median": m["samples_used"].median(),
         "evaluations_mean": m["n_evaluations"].mean(),
         "reached_accuracy": float((all_runs["status"] == "ok").mean()),
-        "truth_rms_m": (np.sqrt((m["truth_err_m"] ** 2).mean())
-                        if "truth_err_m" in m else np.nan),
+        "truth_rms_m": (np.sqrt((m["position_err_m"] ** 2).mean())
+                        if "position_err_m" in m else np.nan),
         "seconds_per_run": seconds_per_run,
         **counts,
     }

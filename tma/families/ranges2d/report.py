@@ -125,22 +125,26 @@ def _plot(path, dataset, reference, samples):
 
 # -- the Python API's hook (tma.api): what tma.estimate returns of ranges2d estimates
 
-SHOWN = ["track_id", "x_m", "y_m", "se_x_m", "se_y_m", "samples_used", "status"]
+# the estimates' columns the results show, by the results' names of every family (bearings2d's:
+# the position now)
+SHOWN = {"track_id": "track_id", "x_m": "x_now_m", "y_m": "y_now_m", "se_x_m": "se_x_m",
+         "se_y_m": "se_y_m", "samples_used": "samples_used", "status": "status"}
 
 
 def results(run) -> tuple[pd.DataFrame, dict]:
     """``tma.estimate``'s results of ``run`` (``tma.api.Estimated``): one row per track, its
-    posterior mean ``x_m``, ``y_m`` with the estimator's own standard errors (Monte Carlo;
-    0 for ``quadrature``), the samples it used (bisection evaluations included) and
-    ``status``; against the truth of a ``population`` scenario (``concrete`` has none) the
-    error of each coordinate and the distance (``truth_err_m``, as ``metrics.track_metrics``).
-    Tables: ``estimates`` (every column: relative errors, correlations, counts) and the
-    sampler's first draws (``samples``) where it keeps them."""
+    position, the posterior mean ``x_now_m``, ``y_now_m``, with the estimator's own standard
+    errors ``se_x_m``, ``se_y_m`` (Monte Carlo; 0 for ``quadrature``), the samples it used
+    (bisection evaluations included) and ``status``; against the truth of a ``population``
+    scenario (``concrete`` has none) the error of each coordinate (``x_err_m``, ``y_err_m``)
+    and the distance (``position_err_m``, as ``metrics.track_metrics``). Tables:
+    ``estimates`` (every column: relative errors, correlations, counts) and the sampler's
+    first draws (``samples``) where it keeps them."""
     est = run.estimates
-    frame = est[SHOWN].copy()
+    frame = est[list(SHOWN)].rename(columns=SHOWN)
     if run.truth is not None:
         truth = run.truth.set_index("track_id").loc[est["track_id"]]
-        frame["truth_err_x_m"] = est["x_m"].to_numpy() - truth["x_m"].to_numpy()
-        frame["truth_err_y_m"] = est["y_m"].to_numpy() - truth["y_m"].to_numpy()
-        frame["truth_err_m"] = np.hypot(frame["truth_err_x_m"], frame["truth_err_y_m"])
+        frame["x_err_m"] = est["x_m"].to_numpy() - truth["x_m"].to_numpy()
+        frame["y_err_m"] = est["y_m"].to_numpy() - truth["y_m"].to_numpy()
+        frame["position_err_m"] = np.hypot(frame["x_err_m"], frame["y_err_m"])
     return frame, {"estimates": est, **run.side_tables}

@@ -1,4 +1,5 @@
-"""Shared pieces of the ``bearing_doppler3d`` estimators.
+"""Shared pieces of the ``bearing_doppler3d`` estimators: the contract between the base and an
+estimator (the family's model and the ``Readings`` in, a ``Solution`` out of ``solve``).
 
 Every estimator receives the family's model (``AuvModel``, built from the log's model
 record) and never simulates itself: the maths of the model lives in ``model.py`` alone.
@@ -24,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.config import param
-from tma.estimator import Estimator, EstimatorConfig
+from tma.estimator import Estimates, Estimator, EstimatorConfig
 from tma.families.bearing_doppler3d.log import HydrophoneLog
 from tma.families.bearing_doppler3d.model import STATE_NAMES, AuvModel, model_record
 
@@ -46,26 +47,52 @@ class AuvConfig(EstimatorConfig):
                                   "(for the NEES)", "[1, inf)")
 
 
+@dataclass(frozen=True)
+class Readings:
+    """One shard's readings as every estimator takes them: the epochs ``t_s`` (K,, s) and the
+    hydrophones' readings ``obs`` (n, K, m: per sensor elevation sine, bearing cosine and,
+    with Doppler, the frequency (Hz), in the model's order; NaN where missing)."""
+
+    t_s: np.ndarray
+    obs: np.ndarray
+
+
+@dataclass(frozen=True)
+class Solution:
+    """What ``solve`` returns: each path's estimated state ``mean`` (n, K, 6, in the order of
+    ``model.STATE_NAMES``) and its own error ``covariance`` (n, K, 6, 6) at every epoch, and
+    ``filter_ok`` (n,): False where the estimator knows the path went wrong (non-finite)."""
+
+    mean: np.ndarray
+    covariance: np.ndarray
+    filter_ok: np.ndarray
+
+
 class AuvEstimator(Estimator):
+    """Base of the ``bearing_doppler3d`` estimators; subclasses implement ``solve``. Every
+    output carries per path and epoch the state, its own standard deviations and the path's
+    ``filter_ok``, and the side table ``covariance``."""
+
     side_tables = ("covariance",)  # full covariances every covariance_every epochs
     family = "bearing_doppler3d"
     conformance_scenario = {"duration_s": 10.0, "seed": 3}
     training_size = None  # the config field holding the paths it was trained on, if any
 
-    def estimate(self, log: HydrophoneLog) -> dict:
+    def estimate(self, log: HydrophoneLog) -> Estimates:
+        """The ``Estimates`` of every path of ``log``: its model and ``Readings``, ``solve``,
+        the columns (``output_columns``)."""
         model = AuvModel.from_record(log.model)
         if log.obs.shape[2] != model.n_obs:
             raise ValueError(f"the log holds {log.obs.shape[2]} readings per epoch, the model "
                              f"{model.n_obs}")
         # a wrecked path overflows on its own (paths never mix); it is flagged, not raised
         with np.errstate(all="ignore"):
-            est, cov, ok = self.solve(model, log.t_s, log.obs)  # (n,K,6), (n,K,6,6), (n,)
-            return output_columns(est, cov, ok, log.t_s, self.config.covariance_every,
+            solution = self.solve(model, Readings(log.t_s, log.obs))
+            return output_columns(solution, log.t_s, self.config.covariance_every,
                                   log.track_id)
 
-    def solve(self, model: AuvModel, t, obs):
-        """Estimates (n, K, 6), covariances (n, K, 6, 6) and a flag per path (n,) from the
-        readings obs (n, K, m) at times t (K,)."""
+    def solve(self, model: AuvModel, readings: Readings) -> Solution:
+        """The estimator's own step: its ``Solution`` from the ``readings`` under ``model``."""
         raise NotImplementedError
 
 
@@ -76,7 +103,8 @@ class KalmanFilterBase(AuvEstimator):
     over the paths). Subclasses hold the covariance their way and give the compiled loops:
     ``initial_factor``, ``predict`` and ``update`` (in place), ``covariance``."""
 
-    def solve(self, model, t, obs):
+    def solve(self, model: AuvModel, readings: Readings) -> Solution:
+        t, obs = readings.t_s, readings.obs
         n, K, _ = obs.shape
         dt = model.filter_step_s
         mean0, cov0 = model.initial.moments()
@@ -94,12 +122,14 @@ class KalmanFilterBase(AuvEstimator):
             xs[k], Ps[k] = x, self.covariance(factor)
         est, cov = to_paths_first(xs, Ps)
         ok = np.isfinite(cov).all(axis=(1, 2, 3)) & np.isfinite(est).all(axis=(1, 2))
-        return est, cov, ok
+        return Solution(est, cov, ok)
 
 
-def output_columns(est, cov, ok, t, covariance_every, track_id):
-    """Per-epoch estimates and standard deviations, plus ``extras['covariance']``: the upper
-    triangle of the covariance every ``covariance_every`` epochs and at the last (for NEES)."""
+def output_columns(solution: Solution, t, covariance_every, track_id) -> Estimates:
+    """Per-epoch estimates and standard deviations, and the side table ``covariance``: the
+    upper triangle of the covariance every ``covariance_every`` epochs and at the last (for
+    NEES)."""
+    est, cov, ok = solution.mean, solution.covariance, solution.filter_ok
     n, K, _ = est.shape
     variance = np.einsum("nkii->nki", cov)
     # a negative variance (a covariance that lost definiteness) has no std: flagged too
@@ -116,8 +146,7 @@ def output_columns(est, cov, ok, t, covariance_every, track_id):
                   "step": np.tile(steps, n)}
     for i, j in zip(*IU, strict=True):
         covariance[f"P_{i}{j}"] = cov[:, steps, i, j].ravel()
-    out["extras"] = {"covariance": covariance}
-    return out
+    return Estimates(out, {"covariance": covariance})
 
 
 def to_paths_first(x_hist, P_hist):

@@ -20,10 +20,12 @@ from tma.config import param, require
 from tma.families.bearing_doppler3d.estimators.base import (
     AuvConfig,
     AuvEstimator,
+    Readings,
+    Solution,
     dataset_model_record,
 )
-from tma.families.bearing_doppler3d.estimators.bundle import MAX_PATHS, training_bundle
 from tma.families.bearing_doppler3d.model import AuvModel
+from tma.families.bearing_doppler3d.training_bundle import MAX_PATHS, training_bundle
 from tma.io.artefacts import is_record, load_arrays, load_or_build
 
 
@@ -143,9 +145,9 @@ class CMNF(AuvEstimator):
 
         return {**config, "artefact": load_or_build(data_dir, cls.name, spec, build)}
 
-    def solve(self, model, t, obs):
+    def solve(self, model: AuvModel, readings: Readings) -> Solution:
         gains = load_arrays(self.config.artefact, self.data_dir)
-        est = apply(gains, obs, *model_functions(model, t))
-        n, K, _ = obs.shape
+        est = apply(gains, readings.obs, *model_functions(model, readings.t_s))
+        n, K, _ = readings.obs.shape
         cov = np.broadcast_to(gains["K_hat"][None], (n, K, 6, 6))
-        return est, cov, np.isfinite(est).all(axis=(1, 2))
+        return Solution(est, cov, np.isfinite(est).all(axis=(1, 2)))

@@ -10,9 +10,11 @@ from tma.config import param, require
 from tma.families.bearing_doppler3d.estimators.base import (
     AuvConfig,
     AuvEstimator,
+    Readings,
+    Solution,
     dataset_model_record,
 )
-from tma.families.bearing_doppler3d.estimators.bundle import MAX_PATHS, training_bundle
+from tma.families.bearing_doppler3d.training_bundle import MAX_PATHS, training_bundle
 from tma.io.artefacts import is_record, load_arrays
 
 
@@ -43,13 +45,13 @@ class PriorMean(AuvEstimator):
                                  engine, progress)
         return {**config, "artefact": bundle}
 
-    def solve(self, model, t, obs):
+    def solve(self, model, readings: Readings) -> Solution:
         truth = load_arrays(self.config.artefact, self.data_dir)["truth"]
-        if truth.shape[1] != t.size:
+        if truth.shape[1] != readings.t_s.size:
             raise ValueError("the bundle's epochs differ from the log's")
         mean = truth.mean(axis=0)  # (K, 6)
         centred = truth - mean
         cov = np.einsum("mki,mkj->kij", centred, centred) / (truth.shape[0] - 1)
-        n = obs.shape[0]
-        return (np.broadcast_to(mean, (n, *mean.shape)).copy(),
-                np.broadcast_to(cov, (n, *cov.shape)), np.ones(n, dtype=bool))
+        n = readings.obs.shape[0]
+        return Solution(np.broadcast_to(mean, (n, *mean.shape)).copy(),
+                        np.broadcast_to(cov, (n, *cov.shape)), np.ones(n, dtype=bool))

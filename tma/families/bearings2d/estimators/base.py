@@ -14,7 +14,7 @@ import numpy as np
 
 from tma.config import param, require
 from tma.errors import InputError
-from tma.estimator import Estimator, EstimatorConfig
+from tma.estimator import Estimates, Estimator, EstimatorConfig
 from tma.families.bearings2d import estimated_path, manoeuvres, ncv
 from tma.families.bearings2d.contract import Bearings, JudgedFit, Solution, TargetMotion
 from tma.families.bearings2d.end_bearing import end_bearing
@@ -126,9 +126,8 @@ class BearingsEstimator(Estimator):
     tests_motion = False  # runs the trend test even where the log declares its motion
     conformance_scenario = {"sigma_deg": 0.5, "seed": 3}
 
-    def estimate(self, log: BearingsLog) -> dict:
-        """Output columns by name for every track of ``log``: ``read``, ``solve``,
-        ``judge``."""
+    def estimate(self, log: BearingsLog) -> Estimates:
+        """The ``Estimates`` of every track of ``log``: ``read``, ``solve``, ``judge``."""
         bearings, motion = self.read(log), self.motion(log)
         return self.judge(bearings, motion, self.solve(bearings, motion), log)
 
@@ -181,8 +180,8 @@ class BearingsEstimator(Estimator):
         raise NotImplementedError
 
     def judge(self, bearings: Bearings, motion: TargetMotion, solution: Solution,
-              log: BearingsLog) -> dict:
-        """The output columns of ``solution``, in four steps: ``_noise_fit`` (the fit at the
+              log: BearingsLog) -> Estimates:
+        """The ``Estimates`` of ``solution``, in four steps: ``_noise_fit`` (the fit at the
         solution and the noise test), ``_follow`` (the targets' motion fitted about it,
         ``models_motion``, and the trend test), ``status.assess`` (the status and one-sigma
         errors, with ``end_bearing``'s guard) and ``_columns``."""
@@ -317,8 +316,8 @@ class BearingsEstimator(Estimator):
             fit.jtj = np.where(fit.undetermined[:, None, None], np.nan, fit.jtj)
 
     def _columns(self, b: Bearings, motion: TargetMotion, solution: Solution,
-                 log: BearingsLog, fit: JudgedFit, trust: dict) -> dict:
-        """The output columns by name (and the side table ``path`` under ``extras``)."""
+                 log: BearingsLog, fit: JudgedFit, trust: dict) -> Estimates:
+        """The output columns by name and the side table ``path`` (``path_points``)."""
         t, ox, oy, last = b.t, b.own_x, b.own_y, b.last
         theta, n = fit.theta, fit.theta.shape[0]
         q, prior = motion.accel_psd_m2_s3, motion.manoeuvres
@@ -343,9 +342,9 @@ class BearingsEstimator(Estimator):
         for i in range(4):
             for j in range(i, 4):
                 columns[f"jtj_{i}{j}"] = fit.jtj[:, i, j]
-        if self.models_motion and self.config.path_points > 0:
-            columns["extras"] = {"path": estimated_path.joined(fit.paths, log.track_id.dtype)}
-        return columns
+        path = self.models_motion and self.config.path_points > 0
+        return Estimates(columns, {"path": estimated_path.joined(fit.paths, log.track_id.dtype)}
+                         if path else {})
 
     @staticmethod
     def _leg_start(t, start, solution: Solution):

@@ -9,9 +9,10 @@ from tma.config import param
 from tma.families.radar2d.estimators.base import (
     RadarConfig,
     RadarEstimator,
+    Scans,
+    Solution,
     alpha_beta_step,
     initial_state,
-    state_columns,
 )
 
 
@@ -24,12 +25,12 @@ class Config(RadarConfig):
 class AlphaBeta(RadarEstimator):
     Config = Config
 
-    def solve(self, log, tau):
-        n, n_scans = log.n_tracks, log.t_s.size
+    def solve(self, scans: Scans) -> Solution:
+        n, n_scans = scans.n_tracks, scans.t_s.size
         pos, vel, k = initial_state(n)
         est_pos, est_vel = np.empty((n, n_scans, 2)), np.empty((n, n_scans, 2))
         for s in range(n_scans):
-            pos, vel, k = alpha_beta_step(pos, vel, k, log.plots_m[:, s], tau,
+            pos, vel, k = alpha_beta_step(pos, vel, k, scans.plots_m[:, s], scans.tau_s,
                                           self.config.memory)
             est_pos[:, s], est_vel[:, s] = pos, vel
-        return state_columns(est_pos, est_vel)
+        return Solution(est_pos, est_vel)

@@ -1,20 +1,25 @@
-"""Shared pieces of the ``radar2d`` trackers: scan-period checks and the alpha-beta recursion.
+"""Shared pieces of the ``radar2d`` trackers: the contract between the base and a tracker
+(``Scans`` in, a ``Solution`` out of ``solve``), scan-period checks and the alpha-beta
+recursion.
 
 State per run: position (x, y) and velocity (vx, vy), m and m/s, x east, y north. Trackers
 return per-scan arrays (n_runs, n_scans); a scan without a plot (NaN) is skipped: the filter
-predicts through it and updates nothing. Each run gets a ``status``: ``ok``, or ``divergent``
-when its estimate is non-finite at any scan from the run's first plot on (a wrecked filter,
-or a tracker that cannot start from the plots it got).
+predicts through it and updates nothing. Each run gets a ``status``, the tracker's own
+verdict: ``ok``, or ``divergent`` when its estimate is non-finite at any scan from the run's
+first plot on (a wrecked filter, or a tracker that cannot start from the plots it got). (Whether
+the track was kept, against the truth, is the metrics' ``track_lost``.)
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from tma.config import param
 from tma.errors import InputError
-from tma.estimator import Estimator, EstimatorConfig
+from tma.estimator import Estimates, Estimator, EstimatorConfig
 from tma.families.radar2d.log import RadarLog
+
+STATUSES = ("ok", "divergent")  # a run's status in its estimates: the tracker's verdict
 
 
 @dataclass
@@ -80,34 +85,70 @@ def alpha_beta_window(plots, tau):
     return pos, vel
 
 
-def run_status(plots, out) -> np.ndarray:
+def run_status(plots, position, velocity) -> np.ndarray:
     """``ok`` or ``divergent`` per run (see the module docstring)."""
     has = np.isfinite(plots).all(axis=2)  # (n, n_scans)
     started = np.cumsum(has, axis=1) > 0
-    finite = np.ones_like(has)
-    for key in ("x_m", "y_m", "vx_m_s", "vy_m_s"):
-        finite &= np.isfinite(out[key])
+    finite = np.isfinite(position).all(axis=2) & np.isfinite(velocity).all(axis=2)
     bad = (started & ~finite).any(axis=1) | ~has.any(axis=1)
     return np.where(bad, "divergent", "ok")
 
 
+@dataclass(frozen=True)
+class Scans:
+    """One shard's radar scans as every tracker takes them: scan times ``t_s`` (K,, s), the
+    uniform scan period ``tau_s`` (s), the plots ``plots_m`` (n, K, 2: x east, y north, m;
+    NaN where a scan has no plot) and the radar's ``sensor`` record (``tma.sensor``, see
+    ``log.py``: its noise, ``cartesian`` with ``sigma_m`` or ``polar``)."""
+
+    t_s: np.ndarray
+    tau_s: float
+    plots_m: np.ndarray
+    sensor: dict
+
+    @property
+    def n_tracks(self) -> int:
+        return self.plots_m.shape[0]
+
+
+@dataclass(frozen=True)
+class Solution:
+    """What ``solve`` returns: each run's estimated ``position_m`` and ``velocity_m_s`` at
+    every scan (n, K, 2: x, y east and north), and its own per-scan output ``columns`` (its
+    ``outputs``, e.g. the selected memory ``m``), each (n, K)."""
+
+    position_m: np.ndarray
+    velocity_m_s: np.ndarray
+    columns: dict = field(default_factory=dict)
+
+
 class RadarEstimator(Estimator):
+    """Base of the ``radar2d`` trackers; subclasses implement ``solve``. Every output carries
+    per run and scan the state (``x_m``, ``y_m``, ``vx_m_s``, ``vy_m_s``), the scan time
+    ``t_s`` and the run's ``status``."""
+
     conformance_scenario = {"seed": 3}
     family = "radar2d"
 
-    def estimate(self, log: RadarLog) -> dict:
-        tau = scan_period(log, self.config.scan_period_s)
+    def estimate(self, log: RadarLog) -> Estimates:
+        """The ``Estimates`` of every run of ``log``: ``read``, ``solve``, the columns."""
+        scans = self.read(log)
         # extreme (valid) noise settings can overflow a run's covariance: flagged, not raised
         with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
-            out = self.solve(log, tau)
-        out["t_s"] = np.broadcast_to(log.t_s, out["x_m"].shape).copy()
-        out["status"] = run_status(log.plots_m, out)
-        return out
+            solution = self.solve(scans)
+        pos, vel = solution.position_m, solution.velocity_m_s
+        return Estimates({
+            "x_m": pos[..., 0], "y_m": pos[..., 1], "vx_m_s": vel[..., 0], "vy_m_s": vel[..., 1],
+            **solution.columns,
+            "t_s": np.broadcast_to(scans.t_s, pos.shape[:2]).copy(),
+            "status": run_status(scans.plots_m, pos, vel)})
 
-    def solve(self, log: RadarLog, tau: float) -> dict:
+    def read(self, log: RadarLog) -> Scans:
+        """The scans of ``log``; refuses scan times that are not uniform or that contradict
+        ``scan_period_s``."""
+        return Scans(log.t_s, scan_period(log, self.config.scan_period_s), log.plots_m,
+                     log.sensor)
+
+    def solve(self, scans: Scans) -> Solution:
+        """The tracker's own step: its ``Solution`` from the ``scans``."""
         raise NotImplementedError
-
-
-def state_columns(pos, vel) -> dict:
-    """Per-scan estimates (n, n_scans, 2) -> named columns."""
-    return {"x_m": pos[..., 0], "y_m": pos[..., 1], "vx_m_s": vel[..., 0], "vy_m_s": vel[..., 1]}

@@ -19,8 +19,9 @@ from tma.config import param, require
 from tma.families.radar2d.estimators.base import (
     RadarConfig,
     RadarEstimator,
+    Scans,
+    Solution,
     alpha_beta_window,
-    state_columns,
 )
 from tma.families.radar2d.fuzzy import memory_length_selector
 
@@ -62,9 +63,9 @@ class FuzzyMultiModel(RadarEstimator):
     outputs = ("m", "sigma_hat_m")  # selected memory length, noise estimate (m)
     Config = Config
 
-    def solve(self, log, tau):
-        cfg, J = self.config, self.config.memory
-        z = log.plots_m
+    def solve(self, scans: Scans) -> Solution:
+        cfg, J, tau = self.config, self.config.memory, scans.tau_s
+        z = scans.plots_m
         n, n_scans, _ = z.shape
         selector = memory_length_selector(J, cfg.bad_slope, cfg.bad_centre)
         bank_pos, bank_vel = bank_estimates(z, tau, J)
@@ -107,4 +108,4 @@ class FuzzyMultiModel(RadarEstimator):
             sum_sq += np.where(counted, selected, 0.0) ** 2
             count += counted
             raw_prev, m_prev = raw, chosen
-        return {**state_columns(est_pos, est_vel), "m": m, "sigma_hat_m": sigma_hat}
+        return Solution(est_pos, est_vel, {"m": m, "sigma_hat_m": sigma_hat})

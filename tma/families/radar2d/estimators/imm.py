@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.config import is_probability_vector, param, require
-from tma.families.radar2d.estimators.base import RadarConfig, RadarEstimator, state_columns
+from tma.families.radar2d.estimators.base import RadarConfig, RadarEstimator, Scans, Solution
 from tma.families.radar2d.turn import constant_velocity, coordinated_turn, white_acceleration_noise
 
 H = np.zeros((2, 5))
@@ -58,9 +58,9 @@ class IMM(RadarEstimator):
     outputs = ("p_cv", "p_turn")  # model probabilities
     Config = Config
 
-    def solve(self, log, tau):
-        cfg = self.config
-        z = log.plots_m
+    def solve(self, scans: Scans) -> Solution:
+        cfg, tau = self.config, scans.tau_s
+        z = scans.plots_m
         n, n_scans, _ = z.shape
         est = np.full((n, n_scans, 5), np.nan)
         probs = np.full((n, n_scans, 2), np.nan)
@@ -69,7 +69,7 @@ class IMM(RadarEstimator):
         est[:, 0, [1, 3]] = 0.0
         est[:, 1, [0, 2]] = z[:, 1]
         est[:, 1, [1, 3]] = (z[:, 1] - z[:, 0]) / tau
-        R = measurement_covariance(log.sensor, np.nan_to_num(z[:, 1]))
+        R = measurement_covariance(scans.sensor, np.nan_to_num(z[:, 1]))
         x = np.zeros((2, n, 5))
         x[:, :, :4] = est[:, 1, :4]
         P = np.zeros((2, n, 5, 5))
@@ -101,7 +101,7 @@ class IMM(RadarEstimator):
             P[1] = Fj @ P0[1] @ Fj.transpose(0, 2, 1) + Q[1]
             # 3. update where there is a plot
             has = np.isfinite(z[:, i]).all(axis=1)
-            R = measurement_covariance(log.sensor, np.where(has[:, None], z[:, i], 0.0))
+            R = measurement_covariance(scans.sensor, np.where(has[:, None], z[:, i], 0.0))
             likelihood, log_lik = np.ones((n, 2)), np.zeros((n, 2))
             for j in range(2):
                 nu = np.where(has[:, None], z[:, i] - x[j] @ H.T, 0.0)
@@ -133,5 +133,5 @@ class IMM(RadarEstimator):
             mu /= total
             probs[:, i] = mu
             est[:, i] = np.einsum("nj,jnk->nk", mu, x)
-        return {**state_columns(est[..., [0, 2]], est[..., [1, 3]]),
-                "p_cv": probs[..., 0], "p_turn": probs[..., 1]}
+        return Solution(est[..., [0, 2]], est[..., [1, 3]],
+                        {"p_cv": probs[..., 0], "p_turn": probs[..., 1]})

@@ -14,11 +14,13 @@ import numpy as np
 from tma.config import param, require
 from tma.families.ranges2d.bisection import BisectionDensity
 from tma.families.ranges2d.estimators.base import (
-    RangesEstimator,
-    no_estimate_columns,
-    sampling_columns,
+    PosteriorMean,
+    SamplingEstimator,
+    TrackRanges,
+    no_estimate,
+    sampled_mean,
 )
-from tma.families.ranges2d.estimators.ratio import SamplerConfig
+from tma.families.ranges2d.importance_sampling import SamplerConfig
 
 MAX_CHECK = 10_000_000  # prior draws held in memory at once by the mass check
 MAX_BISECTIONS = 10_000_000  # cells, tree and heap take ~200 B per bisection
@@ -38,7 +40,8 @@ class Config(SamplerConfig):
                                "the box", f"[1, {MAX_CHECK}]")
     max_mass_outside: float = param(1e-3, "mass outside the box above which a track is "
                                     "box_too_small", "[0, 1]")
-    seed: int = 2
+    seed: int = param(2, "seed of each track's stream (SeedSequence(seed, spawn_key=(track,)))",
+                      "[0, inf)")
 
     def __post_init__(self):
         super().__post_init__()
@@ -57,22 +60,22 @@ def mass_outside(model, box, n, rng) -> float:
     return float(w[out].sum() / w.sum())
 
 
-class AdaptiveIS(RangesEstimator):
-    side_tables = ("samples",)  # its first draws of one track, for the plot
+class AdaptiveIS(SamplingEstimator):
+    outputs = ("mass_outside",)  # posterior mass outside the box
     conformance_config = {"accuracy_m": 2.0}
     Config = Config
 
-    def solve(self, model, rng, keep=0):
-        cfg = self.config
+    def solve(self, track: TrackRanges) -> PosteriorMean:
+        cfg, model = self.config, track.model
+        rng, keep = self.stream(track)
         box = ((cfg.box_m[0], cfg.box_m[1]), (cfg.box_m[2], cfg.box_m[3]))
         outside = mass_outside(model, box, cfg.check_samples, rng)
         if outside > cfg.max_mass_outside:
-            out = no_estimate_columns(
+            return no_estimate(
                 "box_too_small",
                 f"adaptive_is: about {outside:.1%} of the posterior mass lies outside the box "
-                f"{cfg.box_m} m (limit {cfg.max_mass_outside:g}): enlarge estimator.box_m")
-            out["mass_outside"] = outside
-            return out
+                f"{cfg.box_m} m (limit {cfg.max_mass_outside:g}): enlarge estimator.box_m",
+                columns={"mass_outside": outside})
         density = BisectionDensity.build(model, box, cfg.n_bisections, cfg.shift, rng, cfg.split)
 
         def draw(k, rng):
@@ -82,6 +85,4 @@ class AdaptiveIS(RangesEstimator):
             return points, log_w
 
         moments, reached = cfg.budget().run(draw, rng, keep)
-        out = sampling_columns(moments, reached, density.n_evaluations)
-        out["mass_outside"] = outside
-        return out
+        return sampled_mean(moments, reached, density.n_evaluations, {"mass_outside": outside})

@@ -15,7 +15,12 @@ import numpy as np
 from tma.config import param, require
 from tma.errors import InputError
 from tma.estimator import EstimatorConfig
-from tma.families.ranges2d.estimators.base import RangesEstimator, no_estimate_columns
+from tma.families.ranges2d.estimators.base import (
+    PosteriorMean,
+    RangesEstimator,
+    TrackRanges,
+    no_estimate,
+)
 from tma.families.ranges2d.model import RangeModel
 
 MAX_AXIS_POINTS = 4001  # per axis of a 2-D grid: 16e6 values (128 MB) per array
@@ -82,24 +87,22 @@ class Quadrature(RangesEstimator):
     reference = True  # the exact posterior mean the samplers are measured against
     Config = Config
 
-    def __init__(self, config):
-        super().__init__(config)
+    def __init__(self, config, data_dir=None):
+        super().__init__(config, data_dir)
         self._cache = {}  # repeated tracks with identical ranges are integrated once
 
-    def solve(self, model, rng, keep=0):
+    def solve(self, track: TrackRanges) -> PosteriorMean:
+        model = track.model
         key = (model.counts.tobytes(), model.mean_range_m.tobytes(), model.sigma_m,
                model.prior_mean_m.tobytes(), model.prior_sd_m.tobytes())
         if key not in self._cache:
             try:
                 x, y, n_eval, _ = posterior_mean(model, self.config)
             except InputError as exc:  # mass at the edge of the search box
-                self._cache[key] = no_estimate_columns("box_too_small", str(exc),
-                                                       self.config.search_points**2)
+                self._cache[key] = no_estimate("box_too_small", str(exc),
+                                               self.config.search_points**2)
                 return self._cache[key]
-            self._cache[key] = {
-                "x_m": x, "y_m": y, "se_x_m": 0.0, "se_y_m": 0.0, "re_x": np.nan,
-                "re_y": np.nan, "corr_x": np.nan, "corr_y": np.nan, "n_samples": 0,
-                "n_evaluations": n_eval, "samples_used": n_eval,
-                "reached_accuracy": bool(np.isfinite([x, y]).all()),
-                "status": "ok" if np.isfinite([x, y]).all() else "failed"}
+            finite = bool(np.isfinite([x, y]).all())
+            self._cache[key] = PosteriorMean(x, y, 0.0, 0.0, np.nan, np.nan, np.nan, np.nan, 0,
+                                             n_eval, finite, "ok" if finite else "failed")
         return self._cache[key]
