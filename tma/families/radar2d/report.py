@@ -25,6 +25,7 @@ from tma.families.radar2d.metrics import (  # noqa: E402
     table_columns,
 )
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
+from tma.maths.angles import course_from_velocity  # noqa: E402
 from tma.report.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
 
 INTRO = """Tracking a small fast boat that turns sharply{radius} in front of a coastal
@@ -213,7 +214,7 @@ def results(run) -> tuple[pd.DataFrame, dict]:
         "x_now_m": last["x_m"], "y_now_m": last["y_m"],
         "vx_now_m_s": last["vx_m_s"], "vy_now_m_s": last["vy_m_s"],
         "speed_now_m_s": np.hypot(last["vx_m_s"], last["vy_m_s"]),
-        "course_now_deg": np.rad2deg(np.arctan2(last["vx_m_s"], last["vy_m_s"])) % 360.0,
+        "course_now_deg": np.rad2deg(course_from_velocity(last["vx_m_s"], last["vy_m_s"])),
         "status": last["status"]})
     tables = {"estimates": est}
     if run.truth is None:
