@@ -83,21 +83,21 @@ INLINE = sorted({c for doc in DOCS for c in inline_commands(doc)} - {
 
 def small_for(overrides: list[str]) -> list[str]:
     """Small-config overrides for a stage command: the shared ones, and for an experiment
-    its estimators' fast settings (each in its own grid entry: one estimator's setting may
-    be another's invalid value) and their family's small scenario (declared by them)."""
+    its estimators' fast settings (each in its own ``estimators`` entry: one estimator's
+    setting may be another's invalid value) and their family's small scenario (declared by them)."""
     chosen = next((o.split("=", 1)[1] for o in overrides if o.startswith("experiment=")), None)
     if chosen is None:
         return SMALL
     cfg = compose_cfg([f"experiment={chosen}"])
-    grid = OmegaConf.to_container(cfg.grid, resolve=True).get("estimators") or {}
-    entries = [(entry, node["name"]) for entry, node in grid.items()] or [
+    estimators = OmegaConf.to_container(cfg.estimators, resolve=True) or {}
+    entries = [(entry, node["name"]) for entry, node in estimators.items()] or [
         (None, node["name"]) for node in estimator_nodes(cfg)]
     given = {o.split("=", 1)[0] for o in overrides}
     scenario, settings = {}, []
     for entry, name in entries:
         cls = estimator_class(name)
         scenario.update(cls.conformance_scenario)
-        prefix = "estimator" if entry is None else f"grid.estimators.{entry}"
+        prefix = "estimator" if entry is None else f"estimators.{entry}"
         settings += [f"{prefix}.{k}={v}" for k, v in cls.conformance_config.items()
                      if f"estimator.{k}" not in given]
     return SMALL + [f"scenario.{k}={v}" for k, v in scenario.items()

@@ -10,7 +10,7 @@ from tma.errors import ConfigError, InputError
 from tma.families import dataset_name, load_scenario
 from tma.io.dataset import MANIFEST, Dataset, datasets_dir
 from tma.io.owned import plain_name
-from tma.plan.grid import Override
+from tma.plan.points import Override
 from tma.stages.estimate import dataset_config
 
 
@@ -52,14 +52,14 @@ def dataset_jobs(datasets: list[Dataset], estimators: list[dict],
     on its dataset (``tma.stages.estimate.dataset_config``): on a recorded log an estimator's
     ``recorded_defaults`` (``lm``: ``initial_bearing_deg`` null, from the first bearing) replace
     its defaults where the command line sets no value (``estimator.KEY=``,
-    ``grid.estimators.NAME.KEY=``)."""
+    ``estimators.NAME.KEY=``)."""
     given = [o.key.split(".") for o in overrides if o.package is None]
     jobs = []
     for dataset in datasets:
         for node in estimators:
             keep = ({".".join(k[1:]) for k in given if k[0] == "estimator" and len(k) > 1}
-                    | {".".join(k[3:]) for k in given
-                       if k[:2] == ["grid", "estimators"] and k[2:3] == [node.get("name")]})
+                    | {".".join(k[2:]) for k in given
+                       if k[0] == "estimators" and k[1:2] == [node.get("name")]})
             jobs.append((dataset, dataset_config(dataset, node, keep)))
     return jobs
 

@@ -447,7 +447,7 @@ def missing_run_line(data_dir, dataset: Dataset, config: dict) -> str:
     """One line for a run of ``config`` (full, as ``run_path`` hashes it) on ``dataset`` that
     does not exist: the finished runs of ``dataset`` that do, each with the overrides that
     select it (``estimator=NAME`` and the values that differ from NAME's on this dataset)."""
-    from tma.plan.grid import override_text
+    from tma.plan.points import override_text
 
     found, stale = [], 0
     for path in sorted((runs_dir(data_dir) / dataset.name).glob(f"*/{MANIFEST}")):

@@ -24,7 +24,7 @@ from tests.families.bearings2d.recorded_geometry import (
     recorded,
 )
 from tma.errors import ConfigError, InputError
-from tma.families.bearings2d import map_outputs
+from tma.families.bearings2d import contact_plots
 from tma.families.bearings2d.log import write_bearings_log
 from tma.families.bearings2d.scenario import Config, simulate_shard
 from tma.io.atomic import sha256_file
@@ -58,8 +58,8 @@ def test_csv_ingest_estimate_report(tmp_path, monkeypatch):
     root = ingest(tmp_path / "rec.csv", data_dir=tmp_path / "data", name="rec")
     assert (root / "manifest.json").exists() and not (root / "truth.parquet").exists()
     titles = []
-    draw = map_outputs._TrackPlots.draw
-    monkeypatch.setattr(map_outputs._TrackPlots, "draw", lambda self, title, *a: (
+    draw = contact_plots._TrackPlots.draw
+    monkeypatch.setattr(contact_plots._TrackPlots, "draw", lambda self, title, *a: (
         titles.append(title) or draw(self, title, *a)))
     report = _estimate_and_report(tmp_path, "rec")
     assert list(report.track_id) == [0, 1, 2]

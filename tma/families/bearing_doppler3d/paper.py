@@ -1,5 +1,5 @@
 """The published ``bearing_doppler3d`` conclusions and our table held against them
-(``tma.report.paper``).
+(``tma.tables.paper``).
 
 Transcribed from ``../shared/specs/papers.md``, section "`bearing_doppler3d`: EKF, square-root
 EKF and CMNF": a student's summary of Borisov, Bosov, Miller, Miller, "Passive Underwater
@@ -16,7 +16,7 @@ import pandas as pd
 
 from tma.families.bearing_doppler3d.metrics import DIVERGENCE_AFTER_S, DIVERGENCE_M
 from tma.families.bearing_doppler3d.scenario import Config as ScenarioConfig
-from tma.report.paper import by_setting, claim, config_differences, differs_reason, share
+from tma.tables.paper import by_setting, claim, config_differences, differs_reason, share
 
 FAMILY = "bearing_doppler3d"
 FILTERS = ("ekf", "srekf", "cmnf")
@@ -192,7 +192,7 @@ def _conclusions(by: dict, obs: str) -> list[dict]:
 
 
 def against_paper(runs: list[Run]) -> list[dict]:
-    """Rows for ``tma.report.paper``: every conclusion on the Doppler runs (the paper's
+    """Rows for ``tma.tables.paper``: every conclusion on the Doppler runs (the paper's
     observations), then on the bearings-only runs, not comparable where a filter is missing
     or the scenario is not the paper's; and the journal's curves."""
     rows = []

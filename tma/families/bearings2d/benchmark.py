@@ -38,7 +38,7 @@ from tma.families.bearings2d.metrics import (  # noqa: E402
     track_metrics,
 )
 from tma.maths.stats import wilson_interval  # noqa: E402
-from tma.report.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
+from tma.tables.write import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
 
 log = logging.getLogger(__name__)
 

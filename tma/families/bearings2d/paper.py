@@ -1,4 +1,4 @@
-"""The published ``bearings2d`` study and our table held against it (``tma.report.paper``).
+"""The published ``bearings2d`` study and our table held against it (``tma.tables.paper``).
 
 Transcribed from ``../shared/specs/papers.md``, section "`bearings2d`: maximum likelihood
 (Levenberg-Marquardt) vs "N bearings"": a 2021 student research report (St Petersburg State
@@ -15,7 +15,7 @@ import pandas as pd
 from tma.families.bearings2d.estimators.lm import Config as LMConfig
 from tma.families.bearings2d.metrics import REGIONS
 from tma.families.bearings2d.scenario import Config as ScenarioConfig
-from tma.report.paper import (
+from tma.tables.paper import (
     Measured,
     Published,
     by_setting,
@@ -241,7 +241,7 @@ def _above_claim(lm: dict, nb: dict, other: str) -> dict:
 
 
 def against_paper(runs: list[Run]) -> list[dict]:
-    """Rows for ``tma.report.paper``: every published number, then the claims."""
+    """Rows for ``tma.tables.paper``: every published number, then the claims."""
     by = by_setting(runs, lambda r: (r.estimator, float(r.sigma_deg)), lambda r: r.mismatch)
     rows = []
     for paper in published():

@@ -1,4 +1,4 @@
-"""The published ``radar2d`` study and our table held against it (``tma.report.paper``).
+"""The published ``radar2d`` study and our table held against it (``tma.tables.paper``).
 
 Transcribed from ``../shared/specs/papers.md``, section "`radar2d`: fuzzy multi-model
 alpha-beta tracker": Grinyak and Devyatisilny (Vestnik MGTU, 2012). No table: the text's
@@ -14,7 +14,7 @@ import pandas as pd
 from tma.families.radar2d.estimators.fuzzy_mm import Config as FuzzyConfig
 from tma.families.radar2d.metrics import EPS_S, Segments, scan_matrix
 from tma.families.radar2d.scenario import Config as ScenarioConfig
-from tma.report.paper import (
+from tma.tables.paper import (
     by_setting,
     claim,
     config_differences,
@@ -177,7 +177,7 @@ def _mismatch(run: Run) -> str:
 
 
 def against_paper(runs: list[Run]) -> list[dict]:
-    """Rows for ``tma.report.paper``: every claim at both speeds (not comparable where the speed
+    """Rows for ``tma.tables.paper``: every claim at both speeds (not comparable where the speed
     is not in the table or the settings are not the paper's)."""
     by = by_setting(runs, lambda r: float(r.speed_m_s), _mismatch)
     rows = []

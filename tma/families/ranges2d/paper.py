@@ -1,4 +1,4 @@
-"""The published ``ranges2d`` study and our table held against it (``tma.report.paper``).
+"""The published ``ranges2d`` study and our table held against it (``tma.tables.paper``).
 
 Transcribed from ``../shared/specs/papers.md``, section "`ranges2d`: Bayesian mean by prior
 importance sampling vs adaptive importance sampling": Arsenyev, Ivanov, Berkovsky, the
@@ -14,7 +14,7 @@ import pandas as pd
 from tma.families.ranges2d.estimators.adaptive_is import Config as AdaptiveConfig
 from tma.families.ranges2d.estimators.prior_is import Config as PriorConfig
 from tma.families.ranges2d.scenario import Config as ScenarioConfig
-from tma.report.paper import (
+from tma.tables.paper import (
     Published,
     by_setting,
     claim,
@@ -156,7 +156,7 @@ def _claim(prior: Run | None, adaptive: Run | None) -> dict:
 
 
 def against_paper(runs: list[Run], reference: pd.DataFrame | None = None) -> list[dict]:
-    """Rows for ``tma.report.paper``: every published number, then the claim. ``reference``: the
+    """Rows for ``tma.tables.paper``: every published number, then the claim. ``reference``: the
     quadrature estimates (the exact posterior mean, quoted in the notes)."""
     by = by_setting(runs, lambda r: r.estimator, _mismatch)
     exact = ({} if reference is None or reference.empty else

@@ -26,7 +26,7 @@ from tma.families.bearing_doppler3d.metrics import (  # noqa: E402
 from tma.families.bearing_doppler3d.model import STATE_NAMES  # noqa: E402
 from tma.io import arrow  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
-from tma.report.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
+from tma.tables.write import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
 
 SHORT = {"X_m": "X", "Y_m": "Y", "Z_m": "Z", "v_m_s": "v", "phi_rad": "phi", "a_m_s2": "a"}
 MID_S = 50.0
@@ -41,7 +41,8 @@ def _columns():
                    "us_per_path_obs"]
 
 
-def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) -> list[Path]:
+def aggregate_runs(entries, tables_dir, table_name, progress=None, table_kind=None
+                   ) -> list[Path]:
     rows, curves, runs = [], [], []
     for e in entries:
         err, est, t, ok = errors(e.estimates, e.dataset.read_truth())

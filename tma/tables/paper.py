@@ -35,7 +35,7 @@ import pandas as pd
 from scipy.special import ndtri
 
 from tma.maths.stats import wilson_interval
-from tma.report.markdown import markdown_table
+from tma.tables.markdown import markdown_table
 
 COLUMNS = ["family", "quantity", "setting", "paper", "ours", "ours_lo", "ours_hi", "z",
            "verdict", "note"]

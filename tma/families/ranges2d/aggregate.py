@@ -21,10 +21,11 @@ from tma.families.ranges2d.metrics import COLUMNS, summary_row, track_metrics  #
 from tma.families.ranges2d.model import RangeModel  # noqa: E402
 from tma.io import arrow  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
-from tma.report.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
+from tma.tables.write import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
 
 
-def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) -> list[Path]:
+def aggregate_runs(entries, tables_dir, table_name, progress=None, table_kind=None
+                   ) -> list[Path]:
     reference = next((e for e in entries if estimator_class(e.estimator).reference), None)
     if reference is None:
         raise ConfigError("the ranges2d table measures errors against 'quadrature': "
