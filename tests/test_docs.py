@@ -397,6 +397,24 @@ def test_the_documented_layouts_are_what_the_stages_write(tmp_path):
     assert listed and set(listed) <= written, set(listed) - written
 
 
+def test_the_documented_kinds_are_the_registered_readers():
+    """Where the docs list the kinds of log (``format=auto|csv|...``) and what says each
+    (README: the extensions, kind by kind), they list the readers' registry
+    (``tma.sources.READERS``), in its order: a new reader is named in the docs or fails
+    here."""
+    from tma.sources import readers
+
+    lists = [(doc, m.group(1)) for doc in DOCS
+             for m in re.finditer(r"`format=([a-z0-9_]+(?:\|[a-z0-9_]+)+)`", doc.read_text())]
+    assert {doc.name for doc, _ in lists} >= {"README.md", "formats.md"}
+    for doc, listed in lists:
+        assert listed.removeprefix("auto|").split("|") == [r.kind for r in readers()], doc.name
+    readme = (REPO / "README.md").read_text()
+    (said,) = re.findall(r"else the extension \(([^)]*)\)", " ".join(readme.split()))
+    assert [re.findall(r"`(\.\w+)`", part) for part in said.split(";")] == [
+        list(r.extensions) for r in readers()]
+
+
 # -- what the docs cite ------------------------------------------------------------------------
 
 def cited_paths(doc: Path) -> list[str]:
