@@ -99,7 +99,7 @@ def aggregate_runs(entries, tables_dir, table_name, progress=None, table_kind=No
         "us / path / obs": table["us_per_path_obs"].map("{:.2f}".format),
     })
     intro = f"""Passive tracking of a manoeuvring AUV by 8 fixed hydrophones
-(`../shared/specs/bearing_doppler3d.md`): elevation sine, bearing cosine and Doppler frequency
+(`docs/families.md`): elevation sine, bearing cosine and Doppler frequency
 every second, with and without the Doppler readings. RMSE over the non-divergent test paths at
 t = 50 s and t = T (units: m, m, m, m/s, rad, m/s^2); a path diverges (status `divergent` in
 the run's `path_metrics.parquet`) when its horizontal error exceeds {DIVERGENCE_M:g} m, or is

@@ -16,7 +16,7 @@ from tma.families.bearings2d.status import STATUSES  # noqa: E402
 from tma.tables.write import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
 
 INTRO = """Bearings-only TMA of a constant-velocity target from a manoeuvring observer
-(`../shared/specs/bearings2d.md`). Each row: one estimator at one bearing noise sigma over
+(`docs/families.md`). Each row: one estimator at one bearing noise sigma over
 N simulated targets. Ref1..Ref4: share of targets whose estimate lies inside the success
 region (bearing and distance at the end of the observation, course, speed; Ref1 is the
 strictest), with the 95 % Wilson interval. sqrt(Ka) = sqrt(F(theta_hat)/n) in degrees: a

@@ -29,7 +29,7 @@ from tma.maths.angles import course_from_velocity  # noqa: E402
 from tma.tables.write import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
 
 INTRO = """Tracking a small fast boat that turns sharply{radius} in front of a coastal
-radar (`../shared/specs/radar2d.md`); one row per tracker and boat speed over the Monte Carlo
+radar (`docs/families.md`); one row per tracker and boat speed over the Monte Carlo
 runs. Segment columns: mean position error over runs and scans, and the median and 95th
 percentile of each run's maximum error ({segments}). Track loss: share of runs
 whose error exceeds {gate:g} m, or that have no estimate, at any scan from {loss} on (status

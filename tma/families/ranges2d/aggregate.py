@@ -71,7 +71,7 @@ def aggregate_runs(entries, tables_dir, table_name, progress=None, table_kind=No
     })
     ds = entries[0].dataset
     intro = (f"Posterior mean of a ship's position from ranges to landmarks "
-             f"(`../shared/specs/ranges2d.md`), dataset `{ds.name}`. Each Monte Carlo "
+             f"(`docs/families.md`), dataset `{ds.name}`. Each Monte Carlo "
              "estimator runs until both coordinates are within its accuracy target at its "
              "confidence by the delta-method error of a ratio (or a fixed count); errors are "
              "against `quadrature` (tensor Gauss-Legendre). RE is per single draw; samples "

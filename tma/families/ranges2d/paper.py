@@ -1,9 +1,8 @@
 """The published ``ranges2d`` study and our table held against it (``tma.tables.paper``).
 
-Transcribed from ``../shared/specs/papers.md``, section "`ranges2d`: Bayesian mean by prior
-importance sampling vs adaptive importance sampling": Arsenyev, Ivanov, Berkovsky, the
-concrete case of ``ranges2d.md`` (accuracy 0.1 m per coordinate at 95 %). x1, x2 are our x
-(east) and y (north). Its numbers are data only: no estimator reads them.
+Transcribed from ``docs/families.md``, section "``ranges2d``", what it published: Arsenyev,
+Ivanov, Berkovsky, the concrete case described there (accuracy 0.1 m per coordinate at 95 %).
+x1, x2 are our x (east) and y (north). Its numbers are data only: no estimator reads them.
 """
 
 from dataclasses import asdict, dataclass
@@ -48,7 +47,7 @@ CLAIM = "the adaptive method needs about 10 times fewer samples"
 ABOUT_10 = (9.5, 15.0)  # the ratios that are 10 at one significant figure
 
 INTRO = """Published: the article's concrete case, accuracy 0.1 m per coordinate at 95 %
-(`../shared/specs/papers.md`; transcribed in `tma/families/ranges2d/paper.py`); x1, x2 are our
+(`docs/families.md`; transcribed in `tma/families/ranges2d/paper.py`); x1, x2 are our
 x (east) and y (north). Ours: the mean over our runs with the normal interval (runs with an
 estimate). The paper's sampling error is taken as our per-run standard deviation (same method,
 same stopping rule) divided by the square root of its number of runs: 300 for the adaptive
