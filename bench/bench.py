@@ -7,7 +7,7 @@
     the median counters.
 (b) Every default table (``make table``: ``python -m pipeline.table experiment=NAME``, 2
     workers, fresh data) and a sweep of 24 small jobs (sigma x estimator, 1,000 tracks each,
-    the joblib launcher), then the same 24 points as one command's grid, each beside its
+    the joblib launcher), then the same 24 points in one command, each beside its
     floor (``bench/floors.py``): the in-memory simulation and estimation at perfect 2-core
     scaling plus the bytes written and read at this disk's speed; each stage, and for a
     family that trains (``bearing_doppler3d``) each artefact it builds, beside its own floor.

@@ -44,9 +44,9 @@ SWEEP_ESTIMATORS = ("lm", "nbearings", "mpekf", "iv")
 SWEEP = ["-m", "hydra/launcher=parallel", "scenario.n_tracks=1000",
          f"scenario.sigma_deg={','.join(map(str, SWEEP_SIGMAS))}",
          f"estimator={','.join(SWEEP_ESTIMATORS)}"]
-# the same points as one command's grid (docs/architecture.md, "Two sweeps")
-GRID = ["scenario.n_tracks=1000", f"scenario.sigma_deg=[{','.join(map(str, SWEEP_SIGMAS))}]",
-        *(f"+estimator@grid.estimators.{e}={e}" for e in SWEEP_ESTIMATORS)]
+# the same points in one command (docs/architecture.md, "Two sweeps")
+ONE_COMMAND = ["scenario.n_tracks=1000", f"scenario.sigma_deg=[{','.join(map(str, SWEEP_SIGMAS))}]",
+        *(f"+estimator@estimators.{e}={e}" for e in SWEEP_ESTIMATORS)]
 
 
 @dataclass
@@ -83,7 +83,7 @@ def run_table(arguments, workdir: Path) -> Command:
 
 def compose(overrides):
     """The config a job of ``pipeline.table`` gets from these overrides, with Hydra's record
-    of them (the grid language reads it)."""
+    of them (tma.plan.points reads it)."""
     from hydra import compose as hydra_compose
     from hydra import initialize_config_dir
 
@@ -377,7 +377,7 @@ def bench_tables(repeat: int = 3, sweep: bool = True, experiments=None):
         if sweep:
             for label, arguments, jobs in (
                     (f"sweep of {len(sweep_jobs())} jobs", SWEEP, sweep_jobs()),
-                    ("the same points as one command's grid", GRID, [GRID])):
+                    ("the same points in one command", ONE_COMMAND, [ONE_COMMAND])):
                 floor = measure(label.split()[0], arguments, jobs, repeat, Path(tmp))
                 print(f"    {label} (python -m pipeline.table {' '.join(arguments)}; "
                       f"bearings2d): {_with_start_up(floor.best.wall, floor.total, start_up)}  "

@@ -14,18 +14,24 @@ from tma.io.owned import plain_name
 
 def check_stage_options(cfg: dict, known: set[str]):
     """Options every stage shares (``cfg``: the config without Hydra's node): no top-level
-    key outside ``known``, ``paths.*`` are directory paths, ``grid`` is null or
-    ``{estimators: {name: config}}``, booleans are booleans, names are plain names."""
+    key outside ``known``, ``paths.*`` are directory paths, ``estimators`` is null or
+    ``{name: config}`` (and the deprecated ``grid`` null or ``{estimators: {name: config}}``),
+    booleans are booleans, names are plain names."""
     unknown = sorted(set(cfg) - known)
     if unknown:
         raise ConfigError(f"unknown option(s) {', '.join(unknown)} (known: "
                           f"{', '.join(sorted(set(cfg) & known))})")
     check_paths(cfg)
+    estimators = cfg.get("estimators")
+    if estimators is not None and not (isinstance(estimators, dict) and all(
+            isinstance(v, dict) for v in estimators.values())):
+        raise ConfigError(f"estimators must be null or {{name: estimator config}}, "
+                          f"got '{estimators}'")
     grid = cfg.get("grid")
     if grid is not None and not (isinstance(grid, dict) and all(
             isinstance(v, dict) for v in (grid.get("estimators") or {}).values())):
-        raise ConfigError(f"grid must be null or {{estimators: {{name: estimator config}}}}, "
-                          f"got '{grid}'")
+        raise ConfigError(f"grid must be null or {{estimators: {{name: estimator config}}}} "
+                          f"(deprecated: now estimators), got '{grid}'")
     for key in ("force", "progress", "job_tables"):
         if key in cfg and not isinstance(cfg[key], bool):
             raise ConfigError(f"{key} must be true or false, got '{cfg[key]}'")

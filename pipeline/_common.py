@@ -27,7 +27,8 @@ from pipeline._messages import bare_as, override_of, unknown_choice_line, unknow
 from tma.errors import Interrupted, TmaError
 from tma.families import NAMES, ingest_defaults, reads_logs
 from tma.plan.command import Command, SweepRecord
-from tma.plan.grid import Override, override_text
+from tma.plan.points import Override, override_text
+from tma.plan.renamed import renamed_arguments
 from tma.runtime.forkserver import keep_freed_memory, quick_exit
 from tma.runtime.parallel import Engine, engine_from
 
@@ -57,8 +58,8 @@ def stage_main(task, config_name="config", bare=None, check=None):
         main_thread = threading.current_thread() is threading.main_thread()
         saved = {sig: signal.signal(sig, _stop) for sig in STOP_SIGNALS} if main_thread else {}
         try:
-            sys.argv[1:] = guarded(bare_as, bare, _readable(sys.argv[1:]),
-                                   _overrides(sys.argv[1:]))
+            sys.argv[1:] = renamed_arguments(guarded(bare_as, bare, _readable(sys.argv[1:]),
+                                                     _overrides(sys.argv[1:])))
             if check is not None:
                 check(sys.argv[1:])
             name = config_name(sys.argv[1:]) if callable(config_name) else config_name
@@ -116,7 +117,7 @@ def _readable(arguments: list[str]) -> list[str]:
     """The arguments with each ``key=value`` whose value is one text Hydra cannot read
     unquoted (``columns.lon=Länge``, ``input=über/journal_é.csv``, ``name=a~b``: its grammar
     takes ASCII letters, digits and a few signs only) quoted as Hydra reads text
-    (``tma.plan.grid.override_text``); a value with Hydra's own syntax (a list, a sweep,
+    (``tma.plan.points.override_text``); a value with Hydra's own syntax (a list, a sweep,
     quotes, an interpolation) is left as written, for Hydra to read or refuse."""
     parser = OverridesParser.create()
     out = []
@@ -274,7 +275,7 @@ class CheckOutputDir(Callback):
                 print(line)
 
 
-_prefetch = []  # SweepTable's thread importing the report while the jobs run
+_prefetch = []  # SweepTable's thread importing the family's aggregate while the jobs run
 
 
 class SweepTable(Callback):
@@ -293,11 +294,11 @@ class SweepTable(Callback):
         self.sweep_id = os.environ.get(SWEEP_ENV) or uuid.uuid4().hex
         os.environ[SWEEP_ENV] = self.sweep_id
         if config.hydra.job.name in ("aggregate", "table"):  # while this process waits
-            from tma.stages.aggregate import prefetch_report
+            from tma.stages.aggregate import prefetch_aggregate
 
             # not an attribute: Hydra sends its callbacks to the jobs, and a thread does not
             # pickle
-            _prefetch.append(prefetch_report(str(config.get("scenario", {}).get("family"))))
+            _prefetch.append(prefetch_aggregate(str(config.get("scenario", {}).get("family"))))
 
     def on_multirun_end(self, config, **kwargs):
         os.environ.pop(SWEEP_ENV, None)
@@ -377,7 +378,7 @@ def command(cfg: DictConfig) -> Command:
 def overrides(cfg: DictConfig) -> list[Override]:
     """The command line's overrides of the app config, as Hydra records them
     (``hydra.overrides.task``; from ``cfg.hydra`` when composed with it, else from the
-    running stage's Hydra config; none for a bare ``compose``), for the grid language."""
+    running stage's Hydra config; none for a bare ``compose``), for ``tma.plan.points``."""
     hydra_cfg = stage_hydra(cfg)
     task = [] if hydra_cfg is None else list(hydra_cfg.overrides.task)
     parsed = OverridesParser.create().parse_overrides(task) if task else []

@@ -8,7 +8,7 @@ import difflib
 from pathlib import Path
 
 from tma.errors import ConfigError
-from tma.plan.grid import has_key, override_text
+from tma.plan.points import has_key, override_text
 
 
 def bare_as(key: str | None, arguments: list[str], overrides: list[str]) -> list[str]:

@@ -16,7 +16,7 @@ from pipeline.estimate import estimate_stage
 from pipeline.ingest import check_option_keys, with_truth_shorthand
 from pipeline.simulate import simulate_stage
 from tma.plan.command import run_log_dataset
-from tma.stages.aggregate import prefetch_report
+from tma.stages.aggregate import prefetch_aggregate
 
 STAGES = (("simulate", simulate_stage), ("estimate", estimate_stage),
           ("aggregate", aggregate_stage))
@@ -97,7 +97,7 @@ def table_stage(cfg):
         if name == "estimate" and (sweep_job(cfg) is None or job_tables(cfg)):
             # not during simulate: it would delay the worker pool's start; a job of a sweep
             # writes no table unless asked (job_tables)
-            prefetch = prefetch_report(str(cfg.get("scenario", {}).get("family",
+            prefetch = prefetch_aggregate(str(cfg.get("scenario", {}).get("family",
                                                                        cfg.get("family"))))
         if name == "aggregate" and prefetch is not None:
             prefetch.join()  # its imports complete before the stage that uses them

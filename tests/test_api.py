@@ -205,7 +205,7 @@ def test_results_show_no_number_that_is_not_an_answer(tmp_path):
     of 1e4-1e15 m and their x0_m.. as numbers, tracks drawn and mapped)."""
     from tests.families.bearings2d.test_bearings2d_answers import line_data, straight_log
     from tma.families import build_estimator
-    from tma.families.bearings2d.report import ESTIMATE_COLUMNS
+    from tma.families.bearings2d.track_report import ESTIMATE_COLUMNS
 
     rec = tma.read_log(straight_log(tmp_path / "straight.csv"))
     found = tma.estimate(rec)

@@ -59,7 +59,7 @@ def test_every_parallel_option_composes(name):
 
 
 @pytest.mark.parametrize("name", _options("experiment"))
-def test_every_experiment_composes_to_a_grid(name):
+def test_every_experiment_composes_to_its_points(name):
     cfg = compose_cfg([f"experiment={name}"])
     assert cfg.table
     nodes = scenario_nodes(cfg)
@@ -70,7 +70,7 @@ def test_every_experiment_composes_to_a_grid(name):
         build_estimator(node)
 
 
-def test_table_experiment_is_the_spec_grid():
+def test_table_experiment_is_the_spec_table():
     cfg = compose_cfg(["experiment=bearings2d_table"])
     assert [n["sigma_deg"] for n in scenario_nodes(cfg)] == [0.0, 0.1, 0.2, 0.3, 0.5, 1.0]
     assert {n["n_tracks"] for n in scenario_nodes(cfg)} == {10000}

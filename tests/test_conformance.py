@@ -212,8 +212,8 @@ def test_it_runs_through_estimate_and_aggregate(name, tmp_path):
                   and estimator_class(other).family == cls.family
                   and estimator_class(other).reference]
     if references:
-        estimators = [f"+estimator@grid.estimators.{e}={e}" for e in (name, *references)]
-        estimators += [f"grid.estimators.{name}.{k}={v}"
+        estimators = [f"+estimator@estimators.{e}={e}" for e in (name, *references)]
+        estimators += [f"estimators.{name}.{k}={v}"
                        for k, v in cls.conformance_config.items()]
     else:
         estimators = [f"estimator={name}", *[f"estimator.{k}={v}"

@@ -84,21 +84,21 @@ INLINE = sorted({c for doc in DOCS for c in inline_commands(doc)} - {
 
 def small_for(overrides: list[str]) -> list[str]:
     """Small-config overrides for a stage command: the shared ones, and for an experiment
-    its estimators' fast settings (each in its own grid entry: one estimator's setting may
-    be another's invalid value) and their family's small scenario (declared by them)."""
+    its estimators' fast settings (each in its own ``estimators`` entry: one estimator's
+    setting may be another's invalid value) and their family's small scenario (declared by them)."""
     chosen = next((o.split("=", 1)[1] for o in overrides if o.startswith("experiment=")), None)
     if chosen is None:
         return SMALL
     cfg = compose_cfg([f"experiment={chosen}"])
-    grid = OmegaConf.to_container(cfg.grid, resolve=True).get("estimators") or {}
-    entries = [(entry, node["name"]) for entry, node in grid.items()] or [
+    estimators = OmegaConf.to_container(cfg.estimators, resolve=True) or {}
+    entries = [(entry, node["name"]) for entry, node in estimators.items()] or [
         (None, node["name"]) for node in estimator_nodes(cfg)]
     given = {o.split("=", 1)[0] for o in overrides}
     scenario, settings = {}, []
     for entry, name in entries:
         cls = estimator_class(name)
         scenario.update(cls.conformance_scenario)
-        prefix = "estimator" if entry is None else f"grid.estimators.{entry}"
+        prefix = "estimator" if entry is None else f"estimators.{entry}"
         settings += [f"{prefix}.{k}={v}" for k, v in cls.conformance_config.items()
                      if f"estimator.{k}" not in given]
     return SMALL + [f"scenario.{k}={v}" for k, v in scenario.items()
@@ -401,6 +401,24 @@ def test_the_documented_layouts_are_what_the_stages_write(tmp_path):
     listed = [name for _, lang, text in fenced(formats) if not lang for line in text.splitlines()
               for name in re.findall(r"^([\w./-]+\.\w+)", line.split("|")[0].strip())]
     assert listed and set(listed) <= written, set(listed) - written
+
+
+def test_the_documented_kinds_are_the_registered_readers():
+    """Where the docs list the kinds of log (``format=auto|csv|...``) and what says each
+    (README: the extensions, kind by kind), they list the readers' registry
+    (``tma.sources.READERS``), in its order: a new reader is named in the docs or fails
+    here."""
+    from tma.sources import readers
+
+    lists = [(doc, m.group(1)) for doc in DOCS
+             for m in re.finditer(r"`format=([a-z0-9_]+(?:\|[a-z0-9_]+)+)`", doc.read_text())]
+    assert {doc.name for doc, _ in lists} >= {"README.md", "formats.md"}
+    for doc, listed in lists:
+        assert listed.removeprefix("auto|").split("|") == [r.kind for r in readers()], doc.name
+    readme = (REPO / "README.md").read_text()
+    (said,) = re.findall(r"else the extension \(([^)]*)\)", " ".join(readme.split()))
+    assert [re.findall(r"`(\.\w+)`", part) for part in said.split(";")] == [
+        list(r.extensions) for r in readers()]
 
 
 # -- what the docs cite ------------------------------------------------------------------------

@@ -1,4 +1,4 @@
-"""What a command covers (``tma.plan``: the grid language, dataset resolution) and the
+"""What a command covers (``tma.plan``: its points, dataset resolution) and the
 checks the entry points make before a stage (``pipeline._checks``), on plain configs: no Hydra
 is composed or started here (the command line's behaviour is ``tests/test_sweeps.py``)."""
 
@@ -11,7 +11,7 @@ from tma.config import defaults
 from tma.errors import ConfigError, IntegrityError
 from tma.families import dataset_name, estimator_class, load_scenario, scenario_module
 from tma.plan.datasets import dataset_roots, open_datasets
-from tma.plan.grid import Override, estimator_configs, scenario_points
+from tma.plan.points import Override, estimator_configs, scenario_points
 from tma.stages.simulate import simulate_datasets
 
 
@@ -45,38 +45,36 @@ def test_a_list_valued_field_is_one_value_not_an_axis():
     assert [p["radar_xy_m"] for p in points] == [[1.0, 2.0]]
 
 
-def test_empty_axes_and_scenario_grids_are_refused():
+def test_empty_axes_are_refused():
     with pytest.raises(ConfigError, match=r"scenario.sigma_deg: an empty list"):
         scenario_points(_scenario(sigma_deg=[]))
-    with pytest.raises(ConfigError, match=r"grid.scenario: grids take only 'estimators'"):
-        scenario_points(_scenario(), {"scenario": {"sigma_deg": [0.1]}})
 
 
 def test_an_unknown_family_is_left_to_validation():
     assert scenario_points({"family": "nope", "x": [1, 2]}) == [{"family": "nope", "x": [1, 2]}]
 
 
-GRID = {"estimators": {"lm": _estimator("lm"), "nbearings": _estimator("nbearings")}}
+ESTIMATORS = {"lm": _estimator("lm"), "nbearings": _estimator("nbearings")}
 KEYS = {**_estimator("lm"), **_estimator("nbearings")}  # the estimator_keys group, merged
 
 
-def test_without_a_grid_the_estimator_is_run_as_it_is():
+def test_without_an_experiment_the_estimator_is_run_as_it_is():
     lm = _estimator("lm")
     assert estimator_configs(lm, None, []) == [lm]
 
 
 def test_estimator_key_reaches_each_estimator_that_has_it():
-    est = {n["name"]: n for n in estimator_configs({**KEYS, "lambda0": 1.0}, GRID,
+    est = {n["name"]: n for n in estimator_configs({**KEYS, "lambda0": 1.0}, ESTIMATORS,
                                                    [_set("estimator.lambda0=1")])}
     assert est["lm"]["lambda0"] == 1.0 and "lambda0" not in est["nbearings"]
-    both = estimator_configs({**KEYS, "max_range_rel_sd": 0.3}, GRID,
+    both = estimator_configs({**KEYS, "max_range_rel_sd": 0.3}, ESTIMATORS,
                              [_set("estimator.max_range_rel_sd=0.3")])
     assert [n["max_range_rel_sd"] for n in both] == [0.3, 0.3]
-    assert GRID["estimators"]["lm"]["lambda0"] != 1.0  # the experiment itself is not edited
+    assert ESTIMATORS["lm"]["lambda0"] != 1.0  # the experiment itself is not edited
 
 
 def test_estimator_name_runs_one_of_the_experiment():
-    assert [n["name"] for n in estimator_configs(KEYS, GRID, [_set("estimator=nbearings")])
+    assert [n["name"] for n in estimator_configs(KEYS, ESTIMATORS, [_set("estimator=nbearings")])
             ] == ["nbearings"]
 
 
@@ -86,14 +84,14 @@ def test_estimator_name_runs_one_of_the_experiment():
     (["estimator.p_stay=0.9"], r"no estimator of this run has 'p_stay'"),
     (["estimator=lm", "estimator.rcond=1"], r"no estimator of this run has 'rcond' "
                                             r"\(estimators: lm\)"),
-    (["grid.estimators.iv.max_iter=3"], r"'iv' is not run"),
-    (["estimator.lambda0=2", "grid.estimators.lm.lambda0=3"], r"both set 'lambda0' of lm"),
+    (["estimators.iv.max_iter=3"], r"'iv' is not run"),
+    (["estimator.lambda0=2", "estimators.lm.lambda0=3"], r"both set 'lambda0' of lm"),
     (["~estimator.lambda0=1"], r"choose estimators with estimator=NAME"),
     (["estimator.name=iv"], r"choose estimators with estimator=NAME"),
 ])
 def test_an_override_that_changes_nothing_fails_naming_it(texts, match):
     with pytest.raises(ConfigError, match=match):
-        estimator_configs(KEYS, GRID, [_set(t) for t in texts])
+        estimator_configs(KEYS, ESTIMATORS, [_set(t) for t in texts])
 
 
 def test_dataset_roots_by_name_or_by_scenario(tmp_path):
@@ -121,12 +119,14 @@ def test_open_datasets_says_how_to_create_a_missing_one_and_checks_its_origin(tm
 
 
 OK = {"paths": {"data_dir": "data", "tables_dir": "tables"}, "force": False, "progress": True,
-      "grid": None, "dataset": None, "table": None}
+      "estimators": None, "grid": None, "dataset": None, "table": None}
 
 
 @pytest.mark.parametrize("change, match", [
     ({"colour": 1}, r"unknown option\(s\) colour"),
     ({"paths": {"data_dir": None, "tables_dir": "t"}}, r"paths.data_dir must be a directory"),
+    ({"estimators": 5}, r"estimators must be null or \{name: estimator config"),
+    ({"estimators": {"lm": 1}}, r"estimators must be null or"),
     ({"grid": 5}, r"grid must be null or \{estimators"),
     ({"grid": {"estimators": {"lm": 1}}}, r"grid must be null or"),
     ({"force": "yes"}, r"force must be true or false, got 'yes'"),

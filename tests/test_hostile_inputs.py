@@ -287,7 +287,7 @@ def test_any_text_survives_the_command_line(value):
     from hydra.errors import HydraException
 
     from pipeline._common import _SYNTAX, _readable
-    from tma.plan.grid import override_text
+    from tma.plan.points import override_text
 
     assert PARSER.parse_override(override_text("name", value)).value() == value
     arguments = _readable([f"name={value}"])
@@ -355,9 +355,9 @@ def test_options_a_log_table_would_ignore_are_refused(logs, tmp_path):
     line = refused(cli("table", f"input={logs / 'nav_export.csv'}", "dataset=other",
                        root=tmp_path))
     assert "give input=FILE [name=NAME] or dataset=NAME, not both" in line
-    line = refused(cli("table", f"input={logs / 'nav_export.csv'}", "report=benchmark",
+    line = refused(cli("table", f"input={logs / 'nav_export.csv'}", "table_kind=benchmark",
                        root=tmp_path))
-    assert "nav_export is a recorded log (no truth)" in line and "drop report=" in line
+    assert "nav_export is a recorded log (no truth)" in line and "drop table_kind=" in line
 
 
 def test_config_errors_keep_one_prefix():

@@ -122,7 +122,7 @@ def test_a_value_written_as_an_override_reads_back_as_itself(value):
     from hydra.core.override_parser.overrides_parser import OverridesParser
     from omegaconf import OmegaConf
 
-    from tma.plan.grid import override_text
+    from tma.plan.points import override_text
 
     parsed = OverridesParser.create().parse_override(override_text("input", value))
     assert OmegaConf.create({"v": parsed.value()}).v == value

@@ -157,7 +157,7 @@ def test_a_diverged_estimate_is_blank_in_the_table_its_csv_plots_and_map(tmp_pat
     `± ?`, and tracks on the map)."""
     from tests.conftest import plain_messages
     from tests.families.bearings2d.test_bearings2d_answers import straight_log
-    from tma.families.bearings2d.report import ESTIMATE_COLUMNS
+    from tma.families.bearings2d.track_report import ESTIMATE_COLUMNS
 
     log = straight_log(tmp_path / "straight.csv")
     proc = run_stage_here("table", f"input={log}", *data_paths(tmp_path), *QUIET)

@@ -1,4 +1,4 @@
-"""Our tables beside the published studies (``tma.report.paper`` and each family's ``paper.py``):
+"""Our tables beside the published studies (``tma.tables.paper`` and each family's ``paper.py``):
 the verdict logic, the intervals' coverage, the CSV and the section, every published number
 transcribed, each family's claims on known inputs, and the section after small pipelines."""
 
@@ -19,8 +19,8 @@ from tma.families.bearings2d import paper as b2d_paper
 from tma.families.radar2d import paper as radar_paper
 from tma.families.radar2d.metrics import Segments
 from tma.families.ranges2d import paper as ranges_paper
-from tma.report import paper
-from tma.report.tables import write_table
+from tma.tables import paper
+from tma.tables.write import write_table
 
 PAPERS = REPO.parent / "shared" / "specs" / "papers.md"
 
@@ -411,8 +411,8 @@ def test_radar2d_pipeline_section(tmp_path):
 def test_bearing_doppler3d_pipeline_section_not_the_papers_scenario(tmp_path):
     tables = _pipeline(tmp_path, ["experiment=bearing_doppler3d_table", "scenario.n_tracks=20",
                                   "scenario.shard_size=20", "scenario.duration_s=20",
-                                  "grid.estimators.cmnf.training_paths=200",
-                                  "grid.estimators.prior_mean.bundle_paths=200"])
+                                  "estimators.cmnf.training_paths=200",
+                                  "estimators.prior_mean.bundle_paths=200"])
     csv = _check_outputs(tables, "bearing_doppler3d")
     assert (csv.verdict == "not comparable").all()
     assert csv.note.iloc[:-1].str.contains(r"duration_s = 20\.0 \(paper: 100\.0\)").all()

@@ -1,6 +1,7 @@
 """simulate -> estimate -> aggregate: end to end, determinism, resume, integrity, sweeps."""
 
 import json
+import logging
 import os
 from pathlib import Path
 
@@ -11,7 +12,10 @@ from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
 from pipeline.simulate import simulate_stage
 from tests.conftest import SMALL, compose_cfg, run_cli, run_stage_here
-from tma.errors import IntegrityError
+from tma.errors import ConfigError, IntegrityError
+from tma.plan import renamed
+from tma.plan.command import Command
+from tma.plan.renamed import deprecation_note, renamed_arguments
 
 EXPECTED_COLUMNS = (
     "estimator,sigma_deg,n_tracks,ref1,ref1_lo,ref1_hi,ref2,ref2_lo,ref2_hi,ref3,ref3_lo,"
@@ -64,16 +68,54 @@ def test_end_to_end_table(paths, tmp_path):
     assert manifest["files"]["truth.parquet"]["rows"] == 60
 
 
-def test_the_kind_of_table_is_declared_not_read_off_its_name(paths, tmp_path):
-    """``report=benchmark`` writes the benchmark table under any name; a kind the family
-    does not have is one line naming those it has."""
+def test_the_kind_of_table_is_declared_not_read_off_its_name(paths, tmp_path, monkeypatch,
+                                                              caplog):
+    """``table_kind=benchmark`` writes the benchmark table under any name; a kind the family
+    does not have is one line naming those it has. The spellings of 0.6.0 (``report=``,
+    ``grid.estimators.``) still work for one release, each with one line saying so."""
     _all_stages([*GRID, *paths])
-    run_stage_here("aggregate", *GRID, *paths, "table=mine", "report=benchmark")
+    run_stage_here("aggregate", *GRID, *paths, "table=mine", "table_kind=benchmark")
+    mine = (tmp_path / "tables" / "mine.md").read_text()
     assert "efficiency" in (tmp_path / "tables" / "mine.csv").read_text().splitlines()[0]
-    proc = run_stage_here("aggregate", *GRID, *paths, "report=bogus", check=False)
+    proc = run_stage_here("aggregate", *GRID, *paths, "table_kind=bogus", check=False)
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1
-    assert "report=bogus: bearings2d has no such table; its kinds: benchmark, manoeuvre" \
+    assert "table_kind=bogus: bearings2d has no such table; its kinds: benchmark, manoeuvre" \
         in proc.stderr
+
+    monkeypatch.setattr(renamed, "_noted", set())
+    with caplog.at_level(logging.WARNING, logger="tma"):
+        run_stage_here("aggregate", *GRID, *paths, "table=old", "report=benchmark",
+                       "grid.estimators.lm.max_iter=200")  # lm's default: the same runs
+    notes = [r.getMessage() for r in caplog.records if "deprecated" in r.getMessage()]
+    assert notes == [deprecation_note("report", "table_kind"),
+                     deprecation_note("grid.estimators", "estimators")]
+    assert all("\n" not in note for note in notes)
+    old = (tmp_path / "tables" / "old.md").read_text()
+    assert old.replace("old", "mine") == mine.replace("old", "mine")  # the same table
+
+
+def test_an_experiment_written_in_the_old_spelling_runs_as_the_new_one(monkeypatch, caplog):
+    """An experiment's file of 0.6.0 (``grid: {estimators: ...}``, ``report:``) is read as
+    ``estimators`` and ``table_kind``, with one line each; ``grid`` holds nothing else."""
+    lm, iv = {"name": "lm", "max_iter": 5}, {"name": "iv"}
+    monkeypatch.setattr(renamed, "_noted", set())
+    with caplog.at_level(logging.WARNING, logger="tma"):
+        cmd = Command({"estimator": lm, "grid": {"estimators": {"lm": lm, "iv": iv}},
+                       "report": "benchmark", "estimators": {"lm": {"name": "lm"}}})
+        cmd.get("estimators")  # read when the stage first asks
+    assert cmd.get("estimators") == {"lm": lm, "iv": iv} and "grid" not in cmd.settings
+    assert cmd.get("table_kind") == "benchmark" and "report" not in cmd.settings
+    assert [r.getMessage() for r in caplog.records] == [
+        deprecation_note("grid.estimators", "estimators"),
+        deprecation_note("report", "table_kind")]
+    with pytest.raises(ConfigError, match=r"report=manoeuvre and table_kind=benchmark: give "):
+        Command({"report": "manoeuvre", "table_kind": "benchmark"}).get("table_kind")
+    with pytest.raises(ConfigError, match=r"grid.scenario: grid took only 'estimators'"):
+        Command({"grid": {"scenario": {"sigma_deg": [0.1]}}}).get("scenario")
+    assert renamed_arguments(["+estimator@grid.estimators.iv=iv", "report=manoeuvre,benchmark",
+                              "~report", "-m", "grid.x=1", "estimator.report=1"]) == [
+        "+estimator@estimators.iv=iv", "table_kind=manoeuvre,benchmark", "~table_kind", "-m",
+        "grid.x=1", "estimator.report=1"]
 
 
 def test_outputs_do_not_depend_on_n_jobs(tmp_path):
@@ -198,15 +240,15 @@ def test_each_stage_checks_the_sha256_of_what_it_reads(paths, tmp_path):
         estimate_stage(compose_cfg([*SMALL, *paths, "parallel=serial", "force=true"]))
 
 
-def test_the_table_command_loads_the_report_while_the_workers_estimate():
+def test_the_table_command_loads_the_family_aggregate_while_the_workers_estimate():
     import sys
 
-    from tma.stages.aggregate import prefetch_report
+    from tma.stages.aggregate import prefetch_aggregate
 
-    thread = prefetch_report("ranges2d")
+    thread = prefetch_aggregate("ranges2d")
     thread.join()
-    assert "tma.families.ranges2d.report" in sys.modules
-    assert prefetch_report("nosuch") is None
+    assert "tma.families.ranges2d.aggregate" in sys.modules
+    assert prefetch_aggregate("nosuch") is None
 
 
 def test_a_runs_estimates_are_its_shard_files_read_as_one_dataset(paths, tmp_path):

@@ -5,11 +5,13 @@ registry, reads a file of a made-up format end to end (ingest, estimate, aggrega
 and as a command), with its own option checked, listed and refused where it does not apply."""
 
 import csv
+import importlib
 import json
+import re
 import subprocess
 import sys
 import textwrap
-from dataclasses import fields
+from dataclasses import fields, is_dataclass, replace
 
 import numpy as np
 import pytest
@@ -18,11 +20,17 @@ import tma.sources
 from tests.conftest import REPO
 from tests.families.bearings2d.recorded_geometry import recorded
 from tma.config import describe
-from tma.errors import ConfigError
+from tma.errors import ConfigError, InputError
 from tma.families.bearings2d.ingest import OBSERVATION
 from tma.families.bearings2d.log import read_bearings_log
 from tma.io.dataset import Dataset
-from tma.sources import extensions, kinds, reader, readers, source_kind
+from tma.sources import extensions, kinds, read_source, reader, readers, source_kind
+from tma.sources.base import (
+    SNIFF_BYTES,
+    ReaderContractError,
+    Recording,
+    read_signature_fault,
+)
 from tma.sources.options import groups, inapplicable, options_schema, source_options
 from tma.stages.ingest import ingest
 
@@ -73,22 +81,103 @@ def brg(tmp_path, monkeypatch):
     yield path, b
 
 
+def kinds_text(join: str = "or") -> str:
+    """The registered kinds as messages list them (``csv, nmea or mcap``)."""
+    *rest, last = kinds()
+    return f"{', '.join(rest)} {join} {last}" if rest else last
+
+
+def reader_faults(r) -> list[str]:
+    """What of reader ``r``'s declaration breaks the contract (``tma.sources.base.Reader``,
+    ``ReadLog``): empty for a conforming one. Applied to every registered reader, the
+    made-up one of ``brg`` included, without naming any."""
+    faults = []
+    if not re.fullmatch(r"[a-z][a-z0-9_]*", r.kind):
+        faults.append(f"kind {r.kind!r} is not a plain lower-case name")
+    if not r.name.startswith(("a ", "an ")):
+        faults.append(f"name {r.name!r} does not read 'a ...' / 'an ...' in messages")
+    if not r.extensions or any(not re.fullmatch(r"\.[a-z0-9]+", e) for e in r.extensions):
+        faults.append(f"extensions {r.extensions} are not lower-case '.ext'")
+    if fault := read_signature_fault(r.read):
+        faults.append(fault)
+    if r.sniff is not None and not all(isinstance(r.sniff(h), bool | np.bool_)
+                                       for h in (b"", b"\x00" * SNIFF_BYTES, b"time,x\n")):
+        faults.append("sniff(head) is not True or False")
+    for group, part in r.options(OBSERVATION).items():
+        if not is_dataclass(part) or any("doc" not in f.metadata for f in fields(part)):
+            faults.append(f"options group {group} is not a dataclass of tma.config.param")
+    for what in (r.selects_contacts, r.selects_navigation):
+        if what is not None and not (isinstance(what, str) and what.strip()):
+            faults.append(f"selects_* {what!r}: None (the kind holds none) or the options")
+    return faults
+
+
+@pytest.mark.parametrize("declared", readers(), ids=lambda r: r.kind)
+def test_every_registered_reader_keeps_the_contract(declared):
+    assert reader_faults(declared) == []
+
+
 def test_every_kind_extension_and_option_scope_is_read_off_the_declarations():
     declared = readers()
-    assert kinds() == tuple(r.kind for r in declared) == ("csv", "nmea", "mcap")
+    assert kinds() == tuple(r.kind for r in declared) and len(set(kinds())) == len(declared)
     assert extensions() == {e: r.kind for r in declared for e in r.extensions}
     schema = options_schema(OBSERVATION)
     scoped = {key for r in declared for group, part in r.options(OBSERVATION).items()
               for key in (f"{group}.{f.name}" for f in fields(part))}
     assert set(schema.kinds) == scoped  # each reader's options are its own, and only those
     assert schema.kinds["bearing.topic"] == ("mcap",) and "bearing.units" not in schema.kinds
-    with pytest.raises(ConfigError, match="format must be auto, csv, nmea or mcap, got 'x'"):
+    with pytest.raises(ConfigError, match=f"format must be auto, {kinds_text()}, got 'x'"):
         source_kind("log.csv", "x")
+
+
+def test_what_a_reader_returns_is_held_to_the_declared_type(brg, tmp_path, monkeypatch):
+    """``read_source`` checks every reader's answer (``checked_recordings``): a reader that
+    returns fixes out of time order, or arrays of different lengths, or no list, fails in
+    one line naming it and the fault, not somewhere in the alignment."""
+    path, _ = brg
+    (good,) = read_source(path, "brg", source_options({}, OBSERVATION), navigation=True,
+                          contacts=True)
+    (tmp_path / "bad_reader.py").write_text(
+        "from tma.sources.base import Reader\n"
+        "ANSWER = None\n"
+        "def read(path, options, *, navigation, contacts, date_hint_ns=None):\n"
+        "    return ANSWER\n"
+        "READER = Reader(kind='bad', name='a bad file', extensions=('.bad',), read=read)\n")
+    monkeypatch.setattr(tma.sources, "READERS", (*tma.sources.READERS, "bad_reader"))
+    module = importlib.import_module("bad_reader")
+    nav, con = good.navigation, good.contacts
+    broken = {
+        "not sorted by time": [Recording(replace(nav, t_s=nav.t_s[::-1].copy()), con)],
+        "contacts.values is not an array of": [Recording(nav, replace(con,
+                                                                      values=con.values[1:]))],
+        "not exactly one of (x_m, y_m) and (lat_deg, lon_deg)": [
+            Recording(replace(nav, lat_deg=nav.x_m, lon_deg=nav.y_m), con)],
+        "read returned dict": {"navigation": nav},
+        "read returned an empty list": [],
+    }
+    for fault, answer in broken.items():
+        monkeypatch.setattr(module, "ANSWER", answer)
+        with pytest.raises(ReaderContractError, match=re.escape(fault)) as raised:
+            read_source(path, "bad", source_options({}, OBSERVATION), navigation=True,
+                        contacts=True)
+        assert str(raised.value).startswith("the bad reader does not keep its contract")
+    assert read_signature_fault(lambda path, options: []).startswith("read(path, options) is "
+                                                                     "not read(path: ")
+    # a kind that declares no option selecting the own-ship (selects_navigation None) and
+    # finds none says what to do, no empty option name ("name them with , or give ...")
+    monkeypatch.setattr(module, "ANSWER", [Recording(None, con)])
+    with pytest.raises(InputError) as raised:
+        ingest(path, data_dir=tmp_path / "data", family="bearings2d", fmt="bad")
+    assert str(raised.value) == (f"{path}: no own-ship fixes found (bad); give them in a "
+                                 "separate file with navigation=FILE")
 
 
 def test_a_new_format_is_one_file_and_one_line(brg, tmp_path):
     path, b = brg
     assert "brg" in kinds() and extensions()[".brg"] == "brg"
+    assert [reader_faults(r) for r in readers()] == [[] for _ in readers()]  # brg among them
+    with pytest.raises(ConfigError, match=f"format must be auto, {kinds_text()}, got 'x'"):
+        source_kind(path, "x")  # the messages list it: ..., mcap or brg
     assert source_kind(path) == "brg"  # its sniffing rule, whatever the name says
     assert "brg" in groups(OBSERVATION)
     assert ("brg.units_per_deg", "1", "(0, 1e6)", "bearing units per degree") in describe(

@@ -84,7 +84,7 @@ assert [r["rows"] for r in estimate_shard_group(tasks)] == [20, 20]
 
 
 def test_aggregate_imports_neither_scipy_stats_nor_the_compiler():
-    assert _loaded("import pipeline.aggregate\nimport tma.families.bearings2d.report") <= {
+    assert _loaded("import pipeline.aggregate\nimport tma.families.bearings2d.aggregate") <= {
         "pandas", "matplotlib", "scipy.special"}
 
 
@@ -138,7 +138,7 @@ def test_every_estimator_and_report_module_imports_without_scipy_stats_or_numba(
 from tma.families import NAMES, family
 for name in NAMES:
     fam = family(name)
-    fam.scenario, fam.report
+    fam.scenario, fam.aggregate
     for estimator in fam.estimators:
         fam.estimator_class(estimator)
 """

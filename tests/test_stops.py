@@ -197,7 +197,7 @@ def test_a_deleted_working_directory_is_one_line(tmp_path):
 
 # -- the environment ---------------------------------------------------------------------------
 
-DRAW = ("import sys; from tma.report.tables import plots_to_files; plots_to_files(); "
+DRAW = ("import sys; from tma.tables.write import plots_to_files; plots_to_files(); "
         "import matplotlib; matplotlib.use('Agg'); import matplotlib.pyplot as plt; "
         "plt.figure().savefig(sys.argv[1])")
 ENV_TEXT = st.text(st.characters(blacklist_characters="\x00", blacklist_categories=("Cs",)),

@@ -61,9 +61,9 @@ def test_experiment_scenario_values_take_command_line_values():
     (["experiment=radar2d_table", "estimator.lambda0=1"], "estimator.lambda0=1: no estimator"),
     (["experiment=radar2d_table", "estimator=lm"], "estimator=lm: not an estimator of"),
     (["experiment=radar2d_table", "estimator=imm", "estimator.memory=3"], "'memory'"),
-    (["experiment=bearings2d_table", "estimator=lm", "grid.estimators.nbearings.rcond=1"],
+    (["experiment=bearings2d_table", "estimator=lm", "estimators.nbearings.rcond=1"],
      "'nbearings' is not run"),
-    (["experiment=bearings2d_table", "estimator.lambda0=1", "grid.estimators.lm.lambda0=2"],
+    (["experiment=bearings2d_table", "estimator.lambda0=1", "estimators.lm.lambda0=2"],
      "both set 'lambda0'"),
     (["experiment=bearings2d_table", "~estimator.lambda0"], "~estimator.lambda0"),
 ])

@@ -1,7 +1,7 @@
 """Local workers of a command fork from a server that imported what they need
 (``tma.runtime.forkserver.preload_workers``): no thread runs in it when it forks, Python
 sessions keep loky's own start, and a sweep's jobs (the joblib Hydra launcher's workers) see the
-sweep and write what the same points give as one command's grid, byte for byte."""
+sweep and write what the same points give in one command, byte for byte."""
 
 import hashlib
 import json
@@ -97,10 +97,10 @@ def _estimates(data: Path) -> dict:
             for p in sorted(data.glob("runs/*/*/estimates/*.parquet"))}
 
 
-def test_a_sweep_on_the_joblib_launcher_gives_the_grid_of_one_command(tmp_path):
+def test_a_sweep_on_the_joblib_launcher_gives_the_points_of_one_command(tmp_path):
     """``-m hydra/launcher=parallel``: four jobs in forked workers, each one point; their
-    sweep table has the four rows (the jobs saw the sweep's id), and the same points as one
-    command's grid give the same runs byte for byte."""
+    sweep table has the four rows (the jobs saw the sweep's id), and the same points in one
+    command give the same runs byte for byte."""
     small = ["scenario.n_tracks=30", "scenario.shard_size=15", "progress=false"]
     sweep = tmp_path / "sweep"
     proc = run_cli("table", "-m", "hydra/launcher=parallel", *small,
@@ -115,9 +115,9 @@ def test_a_sweep_on_the_joblib_launcher_gives_the_grid_of_one_command(tmp_path):
         "bearings2d-sweep.csv", "bearings2d-sweep.md", "bearings2d-sweep.png",
         "bearings2d-sweep_paper.csv"]
     assert len(list((sweep / "data").glob("runs/*/*/metrics.parquet"))) == 4
-    grid = tmp_path / "grid"
+    one = tmp_path / "one"
     run_cli("table", *small, "scenario.sigma_deg=[0.1,0.5]",
-            "+estimator@grid.estimators.lm=lm", "+estimator@grid.estimators.nbearings=nbearings",
-            f"paths.data_dir={grid}/data", f"paths.tables_dir={grid}/tables")
+            "+estimator@estimators.lm=lm", "+estimator@estimators.nbearings=nbearings",
+            f"paths.data_dir={one}/data", f"paths.tables_dir={one}/tables")
     runs = _estimates(sweep / "data")
-    assert len({Path(k).parents[1] for k in runs}) == 4 and runs == _estimates(grid / "data")
+    assert len({Path(k).parents[1] for k in runs}) == 4 and runs == _estimates(one / "data")

@@ -25,6 +25,7 @@ import numpy as np
 
 from tma.ais.options import FIT_SIGMAS, MIN_FIT_DEG, TruthError, TruthOptions
 from tma.ais.tracks import PlaneTrack
+from tma.maths.angles import wrap_to_180
 from tma.utc import format_utc
 
 MAD_TO_SD = 1.4826  # a normal sample's median absolute deviation to its standard deviation
@@ -87,10 +88,6 @@ def _finite(x):
     return float(x) if np.isfinite(x) else None
 
 
-def wrap_deg(a):
-    return (np.asarray(a, float) + 180.0) % 360.0 - 180.0
-
-
 def bearings_from(contact: Contact, x_m, y_m) -> np.ndarray:
     """Bearings (deg clockwise from north) from own-ship to positions ``x_m``, ``y_m``."""
     return np.rad2deg(np.arctan2(x_m - contact.own_x_m, y_m - contact.own_y_m)) % 360.0
@@ -101,8 +98,8 @@ def estimated_sigma(bearing_deg: np.ndarray) -> float:
     / sqrt(6); a smooth true bearing hardly moves them). NaN for fewer than 5 bearings."""
     if bearing_deg.size < 5:
         return float("nan")
-    d2 = wrap_deg(wrap_deg(bearing_deg[2:] - bearing_deg[1:-1])
-                  - wrap_deg(bearing_deg[1:-1] - bearing_deg[:-2]))
+    d2 = wrap_to_180(wrap_to_180(bearing_deg[2:] - bearing_deg[1:-1])
+                     - wrap_to_180(bearing_deg[1:-1] - bearing_deg[:-2]))
     return float(MAD_TO_SD * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
 
 
@@ -125,7 +122,7 @@ def fit(contact: Contact, ship: PlaneTrack) -> Fit | None:
         return None
     gaps = ship.gap(contact.t_s)
     k = int(np.argmax(gaps))
-    diff = wrap_deg(contact.bearing_deg - bearings_from(contact, x, y))
+    diff = wrap_to_180(contact.bearing_deg - bearings_from(contact, x, y))
     return Fit(ship.mmsi, float(np.sqrt(np.mean(diff ** 2))), float(gaps[k]),
                float(np.min(np.hypot(x - contact.own_x_m, y - contact.own_y_m))),
                float(contact.t_s[k]))

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.ais.tracks import PlaneTrack
+from tma.maths.angles import course_from_velocity, wrap_to_180, wrap_to_pi
 
 VELOCITY_SPAN_S = 120.0
 SAMPLE_S = 10.0
@@ -63,7 +64,7 @@ class Motion:
             total += float(u.max() - u.min())
             if i:
                 step = self.course_deg[run[0]] - self.course_deg[runs[i - 1][-1]]
-                total += abs((step + 180.0) % 360.0 - 180.0)
+                total += abs(wrap_to_180(step))
         return total
 
     @property
@@ -72,7 +73,7 @@ class Motion:
         if len(c) == 0:
             return float("nan")
         mean = np.arctan2(np.sin(c).mean(), np.cos(c).mean())
-        return float(np.degrees(np.max(np.abs(np.angle(np.exp(1j * (c - mean)))))))
+        return float(np.degrees(np.max(np.abs(wrap_to_pi(c - mean)))))
 
     @property
     def speed_dev_frac(self) -> float:
@@ -95,7 +96,7 @@ def motion(track: PlaneTrack, t0: float, t1: float) -> Motion:
     t = np.arange(t0 + half, t1 - half + 1e-6, SAMPLE_S)
     ve, vn = track.mean_velocity(t - half, t + half)
     speed = np.hypot(ve, vn)
-    course = np.where(speed >= MIN_SPEED_M_S, np.degrees(np.arctan2(ve, vn)) % 360.0, np.nan)
+    course = np.where(speed >= MIN_SPEED_M_S, np.degrees(course_from_velocity(ve, vn)), np.nan)
     return Motion(t, course, speed)
 
 
@@ -103,7 +104,7 @@ def settle_time(m: Motion) -> float:
     """The first sample of the final run of samples settled on the last one's course and
     speed."""
     ref_c, ref_v = m.course_deg[-1], m.speed_m_s[-1]
-    dc = np.abs((m.course_deg - ref_c + 180.0) % 360.0 - 180.0)
+    dc = np.abs(wrap_to_180(m.course_deg - ref_c))
     settled = (dc <= SETTLE_COURSE_DEG) & (np.abs(m.speed_m_s - ref_v) <= SETTLE_SPEED_FRAC * ref_v)
     bad = np.flatnonzero(~settled)  # the last sample has a course (``classify``): settled
     return float(m.t[bad[-1] + 1]) if len(bad) else float(m.t[0])

@@ -23,6 +23,7 @@ if TYPE_CHECKING:  # the pairs' search (and the AIS readers it needs) loads wher
 from tma.config import param
 from tma.errors import ConfigError
 from tma.io.atomic import sha256_file
+from tma.maths.angles import course_from_velocity
 
 MINUTE_NS = 60 * 10**9
 SMOOTH_S = 30.0  # windows: speed and course from the mean velocity over this span (s)
@@ -187,7 +188,7 @@ def _windows(path, sha256, window_s, lat, lon, max_range_m, max_gap_s, min_speed
             vx, vy = ship.mean_velocity(mid - SMOOTH_S / 2, mid + SMOOTH_S / 2)
             if not mid.size or np.hypot(vx, vy).min() < min_speed:
                 continue
-            course = np.unwrap(np.arctan2(vx, vy))
+            course = np.unwrap(course_from_velocity(vx, vy))
             found.append(Window(ship.mmsi, float(t0), float(window_s),
                                 float(np.degrees(course.max() - course.min()))))
     found.sort(key=lambda w: (w.t0_s, w.mmsi))

@@ -38,6 +38,7 @@ from tma.ais.options import TruthError, TruthOptions
 from tma.ais.reports import cached_reports
 from tma.ais.tracks import vessel_tracks
 from tma.io.atomic import sha256_file
+from tma.maths.angles import course_from_velocity
 from tma.maths.geo import local_to_geodetic
 from tma.utc import format_utc
 
@@ -193,7 +194,7 @@ def _truth_row(contact: Contact, ship, m: Match, options: TruthOptions, epoch_ns
         "truth_cov_x0_v_m2_s": cov_pv - t * var_v, "truth_var_v_m2_s2": var_v,
         "track_id": contact.track_id, "label": contact.label, "mmsi": m.mmsi, "match": m.how,
         "rms_deg": m.rms_deg, "x0_m": x - vx * t, "y0_m": y - vy * t, "vx_m_s": vx,
-        "vy_m_s": vy, "course_deg": float(np.rad2deg(np.arctan2(vx, vy)) % 360.0),
+        "vy_m_s": vy, "course_deg": float(np.rad2deg(course_from_velocity(vx, vy))),
         "speed_m_s": float(np.hypot(vx, vy)), "t_now_s": t, "x_now_m": x, "y_now_m": y,
         "range_now_m": float(np.hypot(x - contact.own_x_m[-1], y - contact.own_y_m[-1])),
         "bearing_now_deg": float(bearings_from(contact, np.array([x]), np.array([y]))[-1]),

@@ -7,12 +7,12 @@ code the commands run (``docs/api.md``).
 - ``estimate(data, estimator=None, sigma_deg=None, **options)`` runs an estimator over a
   recording or a simulated or stored dataset of any family as ``pipeline.estimate`` does
   (``Estimator.estimate`` on each log) and returns one row per track: the family's per-track
-  results (its report module's ``results`` hook), while the estimator's own columns, which
+  results (its aggregate module's ``results`` hook), while the estimator's own columns, which
   ``plot_contact`` and ``write_map`` draw from, stay in ``results.tma`` (``Results``).
 - ``campaign(input, truth=None, **options)`` scores every log of a folder or a glob against
   its AIS and pools the verdicts (``tma.ais.campaign``) as ``pipeline.table input=DIR`` does.
 - ``plot_contact`` and ``write_map`` draw and write what aggregate draws and writes, for the
-  families whose report module has those hooks.
+  families whose aggregate module has those hooks.
 - ``open_dataset``, ``runs``, ``runs_dataset`` and ``simulate`` read stored datasets and
   runs, and simulate in memory what ``pipeline.simulate`` would store.
 

@@ -13,7 +13,7 @@ from tma.errors import ConfigError
 
 @dataclass(frozen=True)
 class Estimated:
-    """An estimate in memory, what a family's ``report.results`` hook turns into the results
+    """An estimate in memory, what a family's ``aggregate.results`` hook turns into the results
     of ``tma.estimate``: ``estimator`` (built, with its ``config``), ``estimates`` (its
     table over every log: a row per track, or per track and step), ``side_tables`` (name ->
     DataFrame, those it declares), the ``logs``, ``recorded`` (a recording, not a
@@ -74,7 +74,7 @@ def estimate(data, estimator: str | None = None, sigma_deg: float | None = None,
     <estimator>``); ``sigma_deg``: the bearings' nominal noise, for logs that have one
     (default: the log's, else estimated).
 
-    Returns one row per track, the family's results (its report module's ``results``):
+    Returns one row per track, the family's results (its aggregate module's ``results``):
     ``bearings2d`` the per-contact report ``pipeline.aggregate`` writes (label, time_now_utc,
     range/bearing/course/speed now with their one-sigma errors, x/y and lat/lon now, status
     and note, sqrt_ka_deg, fit and trend-test p-values, leg_start_s/_utc...), with a
@@ -101,7 +101,7 @@ def estimate(data, estimator: str | None = None, sigma_deg: float | None = None,
             sides.setdefault(name, []).append(pd.DataFrame(side))
     estimates = pd.concat(tables, ignore_index=True)
     truth, truth_track, scenario = _sources(data)
-    report, held = fam.report.results(Estimated(
+    report, held = fam.aggregate.results(Estimated(
         fam.name, est, estimates, {k: pd.concat(v, ignore_index=True) for k, v in sides.items()},
         logs, data.recorded, truth, truth_track, scenario))
     report.attrs["tma"] = Results(fam.name, est.name, report.copy(), held)

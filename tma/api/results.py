@@ -126,9 +126,9 @@ def _drawn(results, recording, what: str, hook: str):
     from tma.families import NAMES, family
 
     held = _held(results, what)
-    report_module = family(held.family).report
-    if not hasattr(report_module, hook):
-        able = " and ".join(n for n in NAMES if hasattr(family(n).report, hook))
+    aggregate_module = family(held.family).aggregate
+    if not hasattr(aggregate_module, hook):
+        able = " and ".join(n for n in NAMES if hasattr(family(n).aggregate, hook))
         does = {"plot_contact": f"draws the contacts of {able} estimates (own-ship, bearings, "
                 "track)", "write_map": f"maps the contacts of {able} estimates (in latitude/"
                 "longitude, at UTC times)"}[hook]
@@ -142,7 +142,7 @@ def _drawn(results, recording, what: str, hook: str):
     report = held.report.iloc[rows].reset_index(drop=True)
     sides = {name: held.table(name, results, what) for name in held.tables
              if name != "estimates"}
-    return (getattr(report_module, hook), report, held.table("estimates", results, what),
+    return (getattr(aggregate_module, hook), report, held.table("estimates", results, what),
             list(data.logs), data, sides)
 
 
@@ -153,7 +153,7 @@ def plot_contact(results: pd.DataFrame, recording, label):
     track where the results show no estimate), as aggregate draws ``<table>-<label>.png``:
     ``results`` from ``estimate`` (or rows of them), ``recording`` what it was estimated
     from, ``label`` the contact's (ValueError naming the contacts when there is no such
-    one). For the families whose report module draws contacts (``plot_contact``:
+    one). For the families whose aggregate module draws contacts (``plot_contact``:
     ``bearings2d``)."""
     hook, report, estimates, logs, _, sides = _drawn(results, recording, "plot_contact",
                                                      "plot_contact")
@@ -166,7 +166,7 @@ def plot_contact(results: pd.DataFrame, recording, label):
 def write_map(results: pd.DataFrame, recording, path) -> Path:
     """Write the estimated tracks and own-ship as Foxglove ``LocationFix`` messages (the map
     MCAP aggregate writes) to ``path``, a file in an existing directory (written whole or not
-    at all); needs a log with a geographic origin and UTC times (the families whose report
+    at all); needs a log with a geographic origin and UTC times (the families whose aggregate
     module writes a map, ``write_map``: ``bearings2d``). Contacts whose results show no
     estimate are left out (a warning names them). A path that cannot be written raises the
     OSError the system gave (PermissionError, FileNotFoundError...), naming ``path``."""

@@ -1,13 +1,13 @@
 """Scenario families, one package each: ``tma/families/<name>/`` holds a family's scenario,
-model, log format, metrics, report and ``estimators/`` (one file each), and exports one
-``FAMILY`` object. The core finds families only here: a new family is one package plus one
-entry in ``NAMES``.
+model, log format, metrics, aggregate (its tables) and ``estimators/`` (one file each), and
+exports one ``FAMILY`` object. The core finds families only here: a new family is one package
+plus one entry in ``NAMES``.
 
 A family's scenario module provides ``Config`` (with ``n_tracks``, ``shard_size``, ``seed``),
 ``label(cfg)`` (a short tag in dataset names), ``simulate_shard(cfg, index) -> (log, truth
 table or None)``, ``write_log(path, log, metadata) -> n_messages`` and ``read_log(path)``;
 optionally ``simulation_key``/``simulate_raw``/``from_raw`` when datasets of different
-configs share their random draws. Its report module provides ``aggregate_runs(entries,
+configs share their random draws. Its aggregate module provides ``aggregate_runs(entries,
 tables_dir, table_name)``; an ``ingest`` module, when the family reads recorded logs,
 ``OBSERVATION``, ``Settings`` and ``logs`` (``tma.stages.ingest``).
 """
@@ -26,7 +26,7 @@ NAMES = ("bearings2d", "ranges2d", "radar2d", "bearing_doppler3d")
 
 @dataclass(frozen=True)
 class Family:
-    """What the core knows of a family: its name, where its scenario and report live, and
+    """What the core knows of a family: its name, where its scenario and aggregate live, and
     its estimators (``"module:Class"`` each; an estimator's name is its module's file name,
     ``tma.estimator.module_name``); modules are imported when first used."""
 
@@ -43,11 +43,14 @@ class Family:
         return importlib.import_module(f"tma.families.{self.name}.scenario")
 
     @property
-    def report(self):
-        from tma.report.tables import plots_to_files
+    def aggregate(self):
+        """The family's side of the aggregate stage and of the Python API: its ``aggregate``
+        module, with ``aggregate_runs`` (optionally ``TABLE_KINDS``, ``results``,
+        ``plot_contact``, ``write_map``)."""
+        from tma.tables.write import plots_to_files
 
         plots_to_files()  # a bad MPLBACKEND would fail matplotlib's import
-        return importlib.import_module(f"tma.families.{self.name}.report")
+        return importlib.import_module(f"tma.families.{self.name}.aggregate")
 
     @property
     def ingest(self):
@@ -134,7 +137,7 @@ def register_configs():
     Also the group ``estimator_keys``, one option per family: every key of the family's
     estimators (their defaults, ``name`` left out). An experiment merges it into
     ``estimator`` (``- /estimator_keys@estimator: <family>``) so that Hydra lets the command
-    line set any of them with ``estimator.KEY=VALUE``; ``tma.plan.grid.estimator_configs``
+    line set any of them with ``estimator.KEY=VALUE``; ``tma.plan.points.estimator_configs``
     then copies the value into the experiment's estimators that have KEY. These values are
     never run.
 

@@ -1,35 +1,44 @@
 """Each stage as one call from a command's config, so that the way from the command line to a
 row of a table goes down once per stage (CLI -> here -> the stage engine -> the family):
 ``pipeline/`` hands over the composed config as plain values (``Command``), and these
-functions decide what it covers (``tma.plan.grid``, ``tma.plan.datasets``) and run the stage
+functions decide what it covers (``tma.plan.points``, ``tma.plan.datasets``) and run the stage
 engine (``tma.stages``).
 """
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
 from tma.errors import ConfigError
 from tma.io.atomic import write_json_atomic
 from tma.plan.datasets import dataset_jobs, log_dataset, open_datasets
-from tma.plan.grid import checked_estimator_configs, estimator_configs, scenario_points
+from tma.plan.points import checked_estimator_configs, estimator_configs, scenario_points
+from tma.plan.renamed import renamed_config
 from tma.runtime.parallel import Engine, engine_from
 
 
 @dataclass(frozen=True)
 class Command:
     """A command as the stages see it: ``config``, its composed config as plain values
-    (without Hydra's node); ``overrides``, the command line's (``tma.plan.grid.Override``);
+    (without Hydra's node); ``overrides``, the command line's (``tma.plan.points.Override``);
     ``launcher``, the target of the sweep's launcher ('' outside one: a parallel launcher runs
     each job's shards serially); ``simulate``, the command line's overrides as text (for the
-    command that creates a missing dataset)."""
+    command that creates a missing dataset). Keys renamed after 0.6.0 are read in their new
+    spelling (``settings``, ``tma.plan.renamed``: the command line's were before Hydra
+    composed it)."""
 
     config: dict
     overrides: tuple = ()
     launcher: str = ""
     simulate: str = ""
 
+    @functools.cached_property
+    def settings(self) -> dict:
+        """``config`` with the keys renamed after 0.6.0 in their new spelling."""
+        return renamed_config(self.config)
+
     def get(self, key: str, default=None):
-        return self.config.get(key, default)
+        return self.settings.get(key, default)
 
     @property
     def data_dir(self) -> str:
@@ -40,13 +49,13 @@ class Command:
         return engine_from(self.get("parallel"), self.launcher)
 
     def scenarios(self) -> list[dict]:
-        """The scenario points of the command's grid."""
-        return scenario_points(self.get("scenario"), self.get("grid"))
+        """The scenario points of the command (a list value is an axis)."""
+        return scenario_points(self.get("scenario"))
 
     def estimators(self, checked: bool = False) -> list[dict]:
         """The estimator configs; ``checked``: each built once, a bad value failing here."""
         make = checked_estimator_configs if checked else estimator_configs
-        return make(self.get("estimator"), self.get("grid"), list(self.overrides))
+        return make(self.get("estimator"), self.get("estimators"), list(self.overrides))
 
     def datasets(self):
         """The datasets the command reads, verified (``tma.plan.datasets.open_datasets``)."""
@@ -103,13 +112,13 @@ def run_aggregate(command: Command, table: str | None, default_suffix: str = "cu
     if tables:
         yield from aggregate(paths["data_dir"], paths["tables_dir"], jobs, table=table,
                              default_suffix=default_suffix, progress=command.get("progress"),
-                             report=command.get("report"))
+                             table_kind=command.get("table_kind"))
     else:
         check_runs(paths["data_dir"], jobs)
     if record is not None:
         write_json_atomic(record.path, sweep_record(
             record.sweep, record.job, paths["data_dir"], paths["tables_dir"], jobs,
-            command.get("report")))
+            command.get("table_kind")))
 
 
 def ingest_arguments(config: dict) -> dict:

@@ -12,7 +12,7 @@ from tma.families import build_estimator, dataset_name, estimator_class, load_sc
 from tma.io.dataset import MANIFEST, Dataset, datasets_dir, read_sealed_manifest
 from tma.io.owned import plain_name
 from tma.io.runs import RUN_FORMAT, RUN_FORMAT_VERSION, run_path, runs_dir
-from tma.plan.grid import Override, override_text
+from tma.plan.points import Override, override_text
 from tma.version import __version__
 
 
@@ -54,14 +54,14 @@ def dataset_jobs(datasets: list[Dataset], estimators: list[dict],
     on its dataset (``dataset_config``): on a recorded log an estimator's
     ``recorded_defaults`` (``lm``: ``initial_bearing_deg`` null, from the first bearing) replace
     its defaults where the command line sets no value (``estimator.KEY=``,
-    ``grid.estimators.NAME.KEY=``)."""
+    ``estimators.NAME.KEY=``)."""
     given = [o.key.split(".") for o in overrides if o.package is None]
     jobs = []
     for dataset in datasets:
         for node in estimators:
             keep = ({".".join(k[1:]) for k in given if k[0] == "estimator" and len(k) > 1}
-                    | {".".join(k[3:]) for k in given
-                       if k[:2] == ["grid", "estimators"] and k[2:3] == [node.get("name")]})
+                    | {".".join(k[2:]) for k in given
+                       if k[0] == "estimators" and k[1:2] == [node.get("name")]})
             jobs.append((dataset, dataset_config(dataset, node, keep)))
     return jobs
 

@@ -19,7 +19,7 @@ import importlib
 from pathlib import Path
 
 from tma.errors import ConfigError
-from tma.sources.base import SNIFF_BYTES, Reader, Recording, file_head
+from tma.sources.base import SNIFF_BYTES, Reader, Recording, checked_recordings, file_head
 
 READERS = (  # one line per format: its reader file's module
     "tma.sources.csv_table",
@@ -88,6 +88,7 @@ def read_source(path, kind: str, options, *, navigation: bool, contacts: bool,
     from it (the CSV reader then looks only for those columns); ``date_hint_ns``: UTC ns of
     the first contact value, which dates navigation that carries no date (NMEA GGA). One
     Recording per own-ship (several only when a table's tracks report different own-ship
-    positions)."""
-    return reader(kind).read(path, options, navigation=navigation, contacts=contacts,
-                             date_hint_ns=date_hint_ns)
+    positions), held to the readers' contract (``tma.sources.base.ReadLog``)."""
+    return checked_recordings(reader(kind).read(path, options, navigation=navigation,
+                                                contacts=contacts, date_hint_ns=date_hint_ns),
+                              kind)

@@ -21,9 +21,11 @@ convert the others, and direction vectors when the observation takes them); posi
 local (x east, y north, metres) or geographic (latitude, longitude in degrees, WGS84).
 """
 
+import inspect
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
@@ -212,6 +214,99 @@ class Recording:
 
 
 
+class ReadLog(Protocol):
+    """What a reader's ``read`` is (``Reader.read``), declared: the file at ``path`` read with
+    a family's reading options (``options``, ``tma.sources.options.source_options``);
+    ``navigation`` / ``contacts``: what is wanted from it; ``date_hint_ns``: UTC ns of the first
+    contact value, for navigation that carries no date. Returns one ``Recording`` per own-ship
+    (at least one), each with ``Navigation`` and/or ``Contacts`` as their docstrings say:
+    arrays of one length each, fixes sorted by time, either local or geographic positions.
+    ``read_source`` holds every reader's answer to it (``checked_recordings``), and
+    ``tests/test_readers.py`` every registered reader's declaration."""
+
+    def __call__(self, path: Path, options, *, navigation: bool, contacts: bool,
+                 date_hint_ns: int | None = None) -> list[Recording]: ...
+
+
+class ReaderContractError(TypeError):
+    """A reader that does not do what ``Reader`` and ``ReadLog`` declare: a fault of the
+    reader, not of the file it read."""
+
+
+def read_signature_fault(read: Callable) -> str:
+    """How ``read``'s parameters differ from ``ReadLog``'s ('' when they do not): the same
+    names, in order, of the same kinds (``navigation``, ``contacts`` and ``date_hint_ns``
+    keyword-only, ``date_hint_ns`` with a default)."""
+    declared = list(inspect.signature(ReadLog.__call__).parameters.values())[1:]
+    try:
+        given = list(inspect.signature(read).parameters.values())
+    except (TypeError, ValueError):
+        return "read is not a function"
+    shape = [(p.name, p.kind, p.default is inspect.Parameter.empty) for p in declared]
+    if [(p.name, p.kind, p.default is inspect.Parameter.empty) for p in given] != shape:
+        return (f"read{inspect.signature(read)} is not "
+                f"read{inspect.signature(ReadLog.__call__).replace(parameters=declared)}")
+    return ""
+
+
+def _array_fault(what: str, arrays: dict, n: int) -> str:
+    for name, a in arrays.items():
+        if not isinstance(a, np.ndarray) or a.ndim < 1 or a.shape[0] != n:
+            return f"{what}.{name} is not an array of {n} (one per time)"
+    return ""
+
+
+def _navigation_fault(nav) -> str:
+    if not isinstance(nav, Navigation):
+        return f"navigation is a {type(nav).__name__}, not a Navigation or None"
+    if not isinstance(nav.t_s, np.ndarray) or nav.t_s.ndim != 1:
+        return "navigation.t_s is not a 1-D array"
+    local, geographic = nav.x_m is not None, nav.lat_deg is not None
+    if local == geographic or (nav.y_m is not None) != local or (
+            nav.lon_deg is not None) != geographic:
+        return "navigation holds not exactly one of (x_m, y_m) and (lat_deg, lon_deg)"
+    fault = _array_fault("navigation", {"x_m": nav.x_m, "y_m": nav.y_m} if local else
+                         {"lat_deg": nav.lat_deg, "lon_deg": nav.lon_deg}, nav.t_s.size)
+    if not fault and nav.lines is not None:
+        fault = _array_fault("navigation", {"lines": nav.lines}, nav.t_s.size)
+    if not fault and (np.diff(nav.t_s) < 0).any():
+        fault = "navigation.t_s is not sorted by time"
+    return fault
+
+
+def _contacts_fault(c) -> str:
+    if not isinstance(c, Contacts):
+        return f"contacts is a {type(c).__name__}, not a Contacts or None"
+    if not isinstance(c.t_s, np.ndarray) or c.t_s.ndim != 1:
+        return "contacts.t_s is not a 1-D array"
+    return _array_fault("contacts", {"track": c.track, "values": c.values}, c.t_s.size)
+
+
+def checked_recordings(recordings, kind: str) -> list:
+    """``recordings`` as reader ``kind`` returned them, if they are what ``ReadLog`` declares;
+    else a ReaderContractError naming the reader and the first fault."""
+    fault = ""
+    if not isinstance(recordings, list) or not recordings:
+        what = "an empty list" if isinstance(recordings, list) else type(recordings).__name__
+        fault = f"read returned {what}, not a list of at least one Recording"
+    for k, rec in enumerate(recordings if not fault else []):
+        if not isinstance(rec, Recording):
+            fault = f"recording {k} is a {type(rec).__name__}, not a Recording"
+        elif rec.navigation is not None and (f := _navigation_fault(rec.navigation)):
+            fault = f"recording {k}: {f}"
+        elif rec.contacts is not None and (f := _contacts_fault(rec.contacts)):
+            fault = f"recording {k}: {f}"
+        elif not isinstance(rec.metadata, dict) or not isinstance(rec.notes, list) or \
+                not isinstance(rec.dropped, Dropped):
+            fault = f"recording {k}: metadata, notes or dropped of another type"
+        if fault:
+            break
+    if fault:
+        raise ReaderContractError(f"the {kind} reader does not keep its contract "
+                                  f"(tma.sources.base.ReadLog): {fault}")
+    return recordings
+
+
 def _no_options(observation: Observation) -> dict:
     return {}
 
@@ -234,23 +329,22 @@ class Reader:
       declared by several readers are one group (``bearing.topic`` by MCAP,
       ``bearing.units`` by every kind, ``tma.sources.options``); a group's
       ``rules(self)``, if it has one, checks what relates its options;
-    - ``read(path, options, *, navigation, contacts, date_hint_ns) -> list[Recording]``: the
-      file read with a family's reading options (``navigation`` / ``contacts``: what is
-      wanted from it; ``date_hint_ns``: UTC ns of the first contact value, for navigation
-      that carries no date), one Recording per own-ship; heavy libraries imported inside it,
-      since every command imports the declarations (``tests/test_startup.py``);
+    - ``read``: a ``ReadLog``, ``read(path, options, *, navigation, contacts, date_hint_ns)
+      -> list[Recording]``; heavy libraries imported inside it, since every command imports
+      the declarations (``tests/test_startup.py``);
     - ``selects_contacts`` / ``selects_navigation``: the options that name where the values
       and the own-ship are, for the message when none is found (``{role}``: the
-      observation's role)."""
+      observation's role); None: a file of this kind holds none that tma reads (NMEA: no
+      contacts)."""
 
     kind: str
     name: str
     extensions: tuple[str, ...]
-    read: Callable
+    read: ReadLog
     sniff: Callable[[bytes], bool] | None = None
     options: Callable[[Observation], dict] = _no_options
-    selects_contacts: str = ""
-    selects_navigation: str = ""
+    selects_contacts: str | None = None
+    selects_navigation: str | None = None
 
 
 SNIFF_BYTES = 4096  # the head of a file a reader's sniff sees

@@ -1,7 +1,7 @@
 """The aggregate stage: finished runs -> per-track metrics (Parquet) -> tables and plots.
 
-Each family's report module (``tma.families.<name>.report``) provides
-``aggregate_runs(entries, tables_dir, table_name, progress, report)`` where ``entries`` are
+Each family's aggregate module (``tma.families.<name>.aggregate``) provides
+``aggregate_runs(entries, tables_dir, table_name, progress, table_kind)`` where ``entries`` are
 ``RunEntry`` items (``progress``: progress bars, None: on a terminal); it writes per-track
 metrics into each run directory and returns the table files it wrote. ``metrics_dataset``
 reads the metrics of every run back as one Parquet dataset.
@@ -46,13 +46,13 @@ class RunEntry:
 
 
 def aggregate(data_dir, tables_dir, jobs, table=None, default_suffix="custom",
-              progress=None, report=None) -> list[Path]:
+              progress=None, table_kind=None) -> list[Path]:
     """Aggregate the runs of ``jobs`` (``(Dataset, estimator config)`` pairs) into one table
     per family: ``table`` (``<table>-<family>`` when several families), else
     ``<dataset>-<estimator>`` for a single run, else ``<family>-<default_suffix>``.
     ``progress``: progress bars where a report draws per-contact outputs (None: on a
-    terminal only; the stage passes its ``progress`` option); ``report``: the kind of table,
-    one the family's report module offers (None: its own)."""
+    terminal only; the stage passes its ``progress`` option); ``table_kind``: the kind of
+    table, one the family's aggregate module offers (``TABLE_KINDS``; None: its own)."""
     runs = check_runs(data_dir, jobs)
     opened = in_threads(open_run, [root for _, _, root in runs])  # verified and read
     by_family: dict[str, list[RunEntry]] = {}
@@ -63,18 +63,19 @@ def aggregate(data_dir, tables_dir, jobs, table=None, default_suffix="custom",
                      seconds_per_track(root)))
     written = []
     for family in by_family:
-        kinds = getattr(family_of(family).report, "REPORTS", {})
-        if report is not None and report not in kinds:
-            raise ConfigError(f"report={report}: {family} has no such table; its kinds: "
-                              + (", ".join(kinds) or "none but its own (report=null)"))
+        kinds = getattr(family_of(family).aggregate, "TABLE_KINDS", {})
+        if table_kind is not None and table_kind not in kinds:
+            raise ConfigError(f"table_kind={table_kind}: {family} has no such table; its kinds: "
+                              + (", ".join(kinds) or "none but its own (table_kind=null)"))
         recorded = [e.dataset.name for e in by_family[family]
                     if e.dataset.manifest["source"] != "simulate"]
-        if report is not None and len(recorded) == len(by_family[family]):
-            raise ConfigError(f"report={report}: a table of simulated runs against their "
-                              f"truth; {', '.join(sorted(set(recorded)))} is a recorded log (no "
-                              "truth), whose table is the per-contact report: drop report=")
+        if table_kind is not None and len(recorded) == len(by_family[family]):
+            raise ConfigError(f"table_kind={table_kind}: a table of simulated runs against "
+                              f"their truth; {', '.join(sorted(set(recorded)))} is a recorded "
+                              "log (no truth), whose table is the per-contact report: drop "
+                              "table_kind=")
     for family, entries in by_family.items():
-        module = family_of(family).report
+        module = family_of(family).aggregate
         if table is not None:
             name = table if len(by_family) == 1 else f"{table}-{family}"
         elif len(entries) == 1:
@@ -82,7 +83,7 @@ def aggregate(data_dir, tables_dir, jobs, table=None, default_suffix="custom",
         else:
             name = f"{family}-{default_suffix}"
         written += module.aggregate_runs(entries, Path(tables_dir), name, progress=progress,
-                                         report=report)
+                                         table_kind=table_kind)
     for path in written:  # what a killed aggregate left of these files, and nothing else
         remove_stale_temporaries(path.parent, only_dead=True, names=[path.name])
     return written
@@ -101,15 +102,15 @@ def check_runs(data_dir, jobs) -> list[tuple[Dataset, str, Path]]:
     return runs
 
 
-def _import_report(name: str):
+def _import_aggregate(name: str):
     try:
-        family_of(name).report  # noqa: B018 (imported for its side effect: the module loaded)
+        family_of(name).aggregate  # noqa: B018 (imported for its side effect: the module loaded)
     except Exception:  # left for the aggregate stage, which imports it again and says why
         pass
 
 
-def prefetch_report(name: str) -> threading.Thread | None:
-    """Import family ``name``'s report module (matplotlib, about 0.5 s) in a thread, e.g.
+def prefetch_aggregate(name: str) -> threading.Thread | None:
+    """Import family ``name``'s aggregate module (matplotlib, about 0.5 s) in a thread, e.g.
     while the workers estimate and the caller mostly waits for them, so that aggregate
     starts with it loaded; join the thread before aggregating. None when ``name`` is no
     family (the stages say what is wrong)."""
@@ -117,7 +118,7 @@ def prefetch_report(name: str) -> threading.Thread | None:
 
     if name not in NAMES:
         return None
-    thread = threading.Thread(target=_import_report, args=(name,), daemon=True)
+    thread = threading.Thread(target=_import_aggregate, args=(name,), daemon=True)
     thread.start()
     return thread
 
@@ -127,11 +128,12 @@ def prefetch_report(name: str) -> threading.Thread | None:
 KEY_COLUMNS = ("family", "dataset", "estimator", "run")
 
 
-def sweep_record(sweep: str | None, job: int, data_dir, tables_dir, jobs, report=None) -> dict:
+def sweep_record(sweep: str | None, job: int, data_dir, tables_dir, jobs,
+                 table_kind=None) -> dict:
     """What one aggregate job of a sweep read (its runs, the kind of table), for
     ``aggregate_sweep``."""
     return {"sweep": sweep, "job": job, "data_dir": str(Path(data_dir).resolve()),
-            "report": report,
+            "table_kind": table_kind,
             "tables_dir": str(Path(tables_dir).resolve()),
             "runs": [{"dataset": str(Path(ds.root).resolve()), "estimator": est}
                      for ds, est in jobs]}
@@ -159,9 +161,9 @@ def aggregate_sweep(records: list[dict], table: str | None = None) -> list[Path]
     written = []
     for (data_dir, tables_dir), runs in groups.items():
         jobs = [(Dataset.open(r["dataset"]), r["estimator"]) for r in runs.values()]
-        report = next((r.get("report") for r in records), None)
+        kind = next((r.get("table_kind") for r in records), None)
         written += aggregate(data_dir, tables_dir, jobs, table=table, default_suffix="sweep",
-                             report=report)
+                             table_kind=kind)
     return written
 
 

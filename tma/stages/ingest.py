@@ -143,13 +143,18 @@ def _require(rec, path, kind, options):
     """The recording holds contacts and own-ship, else a message naming the options of its
     kind that select them (``Reader.selects_contacts``, ``selects_navigation``)."""
     role, declared = options.observation.role, reader(kind)
+    plural = options.observation.plural
     if rec.contacts is None:
-        raise InputError(f"{path}: no {options.observation.plural} found ({kind}); name them "
-                         f"with {declared.selects_contacts.format(role=role)}")
+        raise InputError(f"{path}: no {plural} found ({kind}); " + (
+            f"name them with {declared.selects_contacts.format(role=role)}"
+            if declared.selects_contacts else
+            f"{declared.name} holds none that tma reads: give the {plural} in a log of "
+            "another kind, and this file as navigation=FILE"))
     if rec.navigation is None:
-        raise InputError(f"{path}: no own-ship fixes found ({kind}); name them with "
-                         f"{declared.selects_navigation.format(role=role)}, or give them in a "
-                         "separate file with navigation=FILE")
+        raise InputError(f"{path}: no own-ship fixes found ({kind}); " + (
+            f"name them with {declared.selects_navigation.format(role=role)}, or give them "
+            if declared.selects_navigation else "give them ") +
+            "in a separate file with navigation=FILE")
 
 
 @dataclass

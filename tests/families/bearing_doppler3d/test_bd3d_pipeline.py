@@ -29,8 +29,8 @@ def test_wrong_family_and_pipeline(tmp_path):
                                     "estimator=ekf", *common]))
     cfg = compose_cfg(["experiment=bearing_doppler3d_table", "scenario.n_tracks=40",
                        "scenario.shard_size=20", "scenario.duration_s=20",
-                       "grid.estimators.cmnf.training_paths=400",
-                       "grid.estimators.prior_mean.bundle_paths=400", *common])
+                       "estimators.cmnf.training_paths=400",
+                       "estimators.prior_mean.bundle_paths=400", *common])
     simulate_stage(cfg)
     estimate_stage(cfg)
     artefacts = list((tmp_path / "data" / "artefacts").glob("cmnf-*/arrays.npz"))

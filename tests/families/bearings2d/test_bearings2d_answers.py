@@ -13,14 +13,14 @@ import pytest
 
 import tma
 from tests.families.bearings2d.real_motion import _cases_module
-from tma.families.bearings2d import map_outputs
-from tma.families.bearings2d.report import ESTIMATE_COLUMNS, track_report
+from tma.families.bearings2d import contact_plots, map_mcap
 from tma.families.bearings2d.status import (
     MAX_RANGE_M,
     MAX_SPEED_M_S,
     MIN_RANGE_M,
     not_an_answer,
 )
+from tma.families.bearings2d.track_report import ESTIMATE_COLUMNS, track_report
 from tma.maths.geo import local_to_geodetic
 from tma.utc import format_utc
 
@@ -63,7 +63,7 @@ def late_leg_log(path, n=6):
 
 
 def line_data(figure, label):
-    """(x, y) in km of the plot's line labelled ``label`` (``map_outputs._TrackPlots``)."""
+    """(x, y) in km of the plot's line labelled ``label`` (``contact_plots._TrackPlots``)."""
     (line,) = [ln for ln in figure.axes[0].lines if ln.get_label().startswith(label)]
     return np.asarray(line.get_xdata(), float), np.asarray(line.get_ydata(), float)
 
@@ -177,8 +177,8 @@ def test_plots_draw_no_estimate_where_the_table_shows_none(diverged, tmp_path, m
         drawn[path.name] = (figure.axes[0].get_title(), line_data(figure, "estimated track"),
                             line_data(figure, "95 %"), line_data(figure, "own-ship"))
 
-    monkeypatch.setattr(map_outputs, "save_figure", keep)
-    map_outputs.write_track_plots(report, raw, rec.logs, tmp_path, "s", progress=False)
+    monkeypatch.setattr(contact_plots, "save_figure", keep)
+    contact_plots.write_track_plots(report, raw, rec.logs, tmp_path, "s", progress=False)
     assert sorted(drawn) == ["s-S0.png", "s-S1.png", "s-S2.png"]
     for title, track, ring, own in drawn.values():
         assert "no estimate shown (the table's note says why)" in title and " km" not in title
@@ -192,8 +192,8 @@ def test_the_map_leaves_out_estimates_the_table_does_not_show(diverged, tmp_path
     rec, raw, report = diverged
     (log,) = rec.logs
     with caplog.at_level(logging.WARNING):
-        path = map_outputs.write_map_mcap(tmp_path / "m.mcap", report, raw, rec.logs,
-                                          log.epoch_utc_ns, log.origin_deg, {})
+        path = map_mcap.write_map_mcap(tmp_path / "m.mcap", report, raw, rec.logs,
+                                       log.epoch_utc_ns, log.origin_deg, {})
     assert {ch.topic for ch, _, _ in plain_messages(path)} == {"/ownship/location_fix"}
     assert "no estimate shown (the table's note says why)" in caplog.text
     assert "for S0, S1, S2: not in the map" in caplog.text

@@ -107,7 +107,7 @@ def test_only_truth_datasets_and_names():
 
 def test_experiments_compose():
     cfg = compose_cfg(["experiment=bearings2d_benchmark"])
-    assert cfg.report == "benchmark"  # the kind of table, declared (not read off its name)
+    assert cfg.table_kind == "benchmark"  # the kind of table, declared (not read off its name)
     assert [n["sigma_deg"] for n in scenario_nodes(cfg)] == [0.0, 0.1, 0.2, 0.3, 0.5, 1.0]
     assert [n["name"] for n in estimator_nodes(cfg)] == ["lm", "nbearings", "iv", "mpekf", "lm"]
     assert cfg.table == "bearings2d_benchmark"

@@ -12,10 +12,10 @@ import pytest
 
 from tma.families import build_estimator, estimator_class, estimator_names
 from tma.families.bearings2d.end_bearing import end_bearing
-from tma.families.bearings2d.report import ESTIMATE_COLUMNS, track_report
 from tma.families.bearings2d.scenario import Config, OutlierConfig, simulate_shard
 from tma.families.bearings2d.status import END_SIGMAS, kinematics_now, not_an_answer
 from tma.families.bearings2d.target_motion import ManoeuvreConfig, TargetConfig
+from tma.families.bearings2d.track_report import ESTIMATE_COLUMNS, track_report
 
 THETA = ["x0_m", "y0_m", "vx_m_s", "vy_m_s"]
 ESTIMATORS = [n for n in estimator_names() if estimator_class(n).family == "bearings2d"]

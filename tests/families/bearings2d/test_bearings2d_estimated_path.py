@@ -18,15 +18,15 @@ from tests.families.bearings2d.test_bearings2d_answers import (
     navigation_export,
 )
 from tma.families.bearings2d import ncv
-from tma.families.bearings2d.estimated_path import COLUMNS, decimate
-from tma.families.bearings2d.estimators.lm import Config, LevenbergMarquardt
-from tma.families.bearings2d.log import BearingsLog
-from tma.families.bearings2d.manoeuvre_components import component
-from tma.families.bearings2d.map_outputs import (
+from tma.families.bearings2d.drawn_tracks import (
     CHI2_2_P95,
     position_covariance,
     theta_covariance,
 )
+from tma.families.bearings2d.estimated_path import COLUMNS, decimate
+from tma.families.bearings2d.estimators.lm import Config, LevenbergMarquardt
+from tma.families.bearings2d.log import BearingsLog
+from tma.families.bearings2d.manoeuvre_components import component
 
 SIGMA_DEG = 0.5
 FIRST = 10  # the first bearings (from when the answer holds) checked against the drawing

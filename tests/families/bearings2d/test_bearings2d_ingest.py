@@ -24,10 +24,11 @@ from tests.families.bearings2d.recorded_geometry import (
     recorded,
 )
 from tma.errors import ConfigError, InputError
-from tma.families.bearings2d import map_outputs
+from tma.families.bearings2d import contact_plots
 from tma.families.bearings2d.log import write_bearings_log
 from tma.families.bearings2d.scenario import Config, simulate_shard
 from tma.io.atomic import sha256_file
+from tma.sources import kinds
 
 T_OFFSET = 1.7e9  # e.g. unix time stamps
 
@@ -58,8 +59,8 @@ def test_csv_ingest_estimate_report(tmp_path, monkeypatch):
     root = ingest(tmp_path / "rec.csv", data_dir=tmp_path / "data", name="rec")
     assert (root / "manifest.json").exists() and not (root / "truth.parquet").exists()
     titles = []
-    draw = map_outputs._TrackPlots.draw
-    monkeypatch.setattr(map_outputs._TrackPlots, "draw", lambda self, title, *a: (
+    draw = contact_plots._TrackPlots.draw
+    monkeypatch.setattr(contact_plots._TrackPlots, "draw", lambda self, title, *a: (
         titles.append(title) or draw(self, title, *a)))
     report = _estimate_and_report(tmp_path, "rec")
     assert list(report.track_id) == [0, 1, 2]
@@ -142,7 +143,9 @@ def test_bad_ingest_arguments(tmp_path):
     with pytest.raises(ConfigError, match="needs input="):
         ingest(None, data_dir=tmp_path)
     (tmp_path / "x.dat").write_text("1")
-    with pytest.raises(ConfigError, match="set format=csv, format=nmea or format=mcap"):
+    *others, last = kinds()
+    with pytest.raises(ConfigError, match=f"set {', '.join(f'format={k}' for k in others)} or "
+                                          f"format={last}"):
         ingest(tmp_path / "x.dat", data_dir=tmp_path)
     with pytest.raises(InputError, match="the first line holds numbers, not column names"):
         ingest(tmp_path / "x.dat", data_dir=tmp_path, fmt="csv")
@@ -195,7 +198,7 @@ def test_a_log_in_radians_is_refused_unless_its_units_are_stated(tmp_path):
     ({"options": {"nav": {"max_gap_s": -1}}}, "nav.max_gap_s must be"),
     ({"options": {"origin": {"lat": 59.9}}}, "origin.lat and origin.lon go together"),
     ({"options": {"csv": {"delimiter": "::"}}}, "csv.delimiter must be one character"),
-    ({"fmt": "xls"}, "format must be auto, csv, nmea or mcap"),
+    ({"fmt": "xls"}, f"format must be auto, {', '.join(kinds()[:-1])} or {kinds()[-1]}"),
 ])
 def test_bad_ingest_options_are_refused(tmp_path, options, message):
     _, _, df = _recording()

@@ -9,7 +9,6 @@ import pytest
 
 from tma.families import build_estimator
 from tma.families.bearings2d.metrics import NEES_95, track_metrics
-from tma.families.bearings2d.report import track_report
 from tma.families.bearings2d.scenario import (
     Config,
     LegConfig,
@@ -18,6 +17,7 @@ from tma.families.bearings2d.scenario import (
     simulate_shard,
 )
 from tma.families.bearings2d.target_motion import ManoeuvreConfig, TargetConfig
+from tma.families.bearings2d.track_report import track_report
 
 # close targets (5-12 km) turning 60-120 deg in the first half, own-ship zig-zagging
 # throughout: the manoeuvres show in the bearings and the last legs are observable

@@ -17,11 +17,12 @@ from omegaconf import OmegaConf
 from pipeline.aggregate import aggregate_stage
 from pipeline.estimate import estimate_stage
 from tests.conftest import compose_cfg
-from tma.families.bearings2d import map_outputs
+from tma.families.bearings2d import contact_plots
+from tma.families.bearings2d.drawn_tracks import CHI2_2_P95, ellipse_points
 from tma.families.bearings2d.log import read_bearings_log, write_bearings_log
-from tma.families.bearings2d.map_outputs import CHI2_2_P95, ellipse_points, write_map_mcap
-from tma.families.bearings2d.report import track_report
+from tma.families.bearings2d.map_mcap import write_map_mcap
 from tma.families.bearings2d.scenario import Config, simulate_shard
+from tma.families.bearings2d.track_report import track_report
 from tma.io.dataset import Dataset, datasets_dir, file_record, shard_relpath, write_manifest
 from tma.maths.geo import local_to_geodetic
 from tma.stages.aggregate import aggregate
@@ -188,7 +189,7 @@ def test_a_position_only_contact_is_drawn_and_mapped_at_its_position_now(mapped,
     blank as the report leaves them): the map holds one fix, its position now with its
     covariance, at its last bearing; the plot draws that point alone and says so, where the
     others keep their track."""
-    from tma.families.bearings2d.report import blank_headings
+    from tma.families.bearings2d.track_report import blank_headings
 
     _, log, _, report, estimates = mapped
     report = report.copy()
@@ -208,7 +209,7 @@ def test_a_position_only_contact_is_drawn_and_mapped_at_its_position_now(mapped,
                                _covariance_now(estimates.iloc[[1]], np.array([t]))[0],
                                rtol=1e-6)
     assert len(messages[f"/tma/estimate/{SHOWN[0]}"]) == np.isfinite(log.bearing_deg[0]).sum()
-    figure = map_outputs.contact_figure(report, estimates, [log], LABELS[1])
+    figure = contact_plots.contact_figure(report, estimates, [log], LABELS[1])
     lines = {ln.get_label(): ln for ln in figure.axes[0].lines}
     assert "estimated track" not in lines
     x, y = lines["estimated position now (heading not determined)"].get_data()
@@ -216,7 +217,7 @@ def test_a_position_only_contact_is_drawn_and_mapped_at_its_position_now(mapped,
                                report.loc[[1], ["x_now_m", "y_now_m"]].to_numpy(float),
                                rtol=1e-9)
     assert "course and speed not determined" in figure.axes[0].get_title()
-    figure = map_outputs.contact_figure(report, estimates, [log], LABELS[0])
+    figure = contact_plots.contact_figure(report, estimates, [log], LABELS[0])
     assert {ln.get_label() for ln in figure.axes[0].lines} >= {"estimated track"}
 
 
@@ -237,7 +238,7 @@ def test_one_png_per_contact(mapped):
 def test_without_origin_no_map_mcap_and_a_line_saying_why(tmp_path, caplog, monkeypatch):
     log, _ = _simulated(origin=None, labels=None)
     _ingested_dataset(tmp_path / "data", "local", log)
-    monkeypatch.setattr(map_outputs, "MAX_PLOTS", 2)
+    monkeypatch.setattr(contact_plots, "MAX_PLOTS", 2)
     with caplog.at_level(logging.INFO):
         report, _ = _estimate_and_aggregate(tmp_path, "local")
     assert not (tmp_path / "tables" / "local-lm.mcap").exists()

@@ -10,18 +10,18 @@ from scipy.stats import chi2
 from tma.families import build_estimator
 from tma.families.bearings2d.log import BearingsLog
 from tma.families.bearings2d.metrics import NEES_95, summary_row, track_metrics
-from tma.families.bearings2d.report import (
+from tma.families.bearings2d.scenario import Config, LegConfig, ObserverConfig, PopulationConfig
+from tma.families.bearings2d.scenario import simulate_shard as simulate
+from tma.families.bearings2d.status import STATUSES, kinematics_now, runs_test_p
+from tma.families.bearings2d.success_table import write_success_table
+from tma.families.bearings2d.target_motion import ManoeuvreConfig, TargetConfig
+from tma.families.bearings2d.track_report import (
     HEADING_COLUMNS,
     NOT_DETERMINED,
     status_note,
     track_report,
-    write_success_table,
     write_track_report,
 )
-from tma.families.bearings2d.scenario import Config, LegConfig, ObserverConfig, PopulationConfig
-from tma.families.bearings2d.scenario import simulate_shard as simulate
-from tma.families.bearings2d.status import STATUSES, kinematics_now, runs_test_p
-from tma.families.bearings2d.target_motion import ManoeuvreConfig, TargetConfig
 
 
 def _run(cfg: Config, estimator="lm", sigma_known=True, edit=None, **params):

@@ -11,13 +11,13 @@ from pipeline.estimate import estimate_stage
 from pipeline.simulate import simulate_stage
 from tests.conftest import compose_cfg
 from tma.config import to_plain
+from tma.families.radar2d.aggregate import aggregate_runs
 from tma.families.radar2d.metrics import (
     per_scan_errors,
     segments,
     summary_row,
     table_columns,
 )
-from tma.families.radar2d.report import aggregate_runs
 from tma.families.radar2d.scenario import Config, simulate_shard
 from tma.stages.aggregate import RunEntry
 

@@ -30,9 +30,9 @@ def test_status_in_metrics_and_counted_in_the_table():
 
 def test_pipeline_table(tmp_path):
     overrides = ["experiment=ranges2d_table", "scenario.n_tracks=6", "scenario.shard_size=3",
-                 "grid.estimators.prior_is.accuracy_m=1.0",
-                 "grid.estimators.adaptive_is.accuracy_m=1.0",
-                 "grid.estimators.adaptive_is.n_bisections=1000", "parallel=serial",
+                 "estimators.prior_is.accuracy_m=1.0",
+                 "estimators.adaptive_is.accuracy_m=1.0",
+                 "estimators.adaptive_is.n_bisections=1000", "parallel=serial",
                  "progress=false", f"paths.data_dir={tmp_path}/data",
                  f"paths.tables_dir={tmp_path}/tables"]
     cfg = compose_cfg(overrides)

@@ -1,5 +1,5 @@
 """``bearing_doppler3d``: underwater bearing-Doppler tracking of a manoeuvring AUV
-(``../shared/specs/bearing_doppler3d.md``)."""
+(``docs/families.md``)."""
 
 from tma.families import Family
 

@@ -1,12 +1,12 @@
 """The published ``bearing_doppler3d`` conclusions and our table held against them
-(``tma.report.paper``).
+(``tma.tables.paper``).
 
-Transcribed from ``../shared/specs/papers.md``, section "`bearing_doppler3d`: EKF, square-root
-EKF and CMNF": a student's summary of Borisov, Bosov, Miller, Miller, "Passive Underwater
-Target Tracking: Conditionally Minimax Nonlinear Filtering with Bearing-Doppler Observations"
-(Sensors, 2020). The summary publishes no numbers, only three conclusions, each held here
-against named statistics of ours on the bearing-Doppler runs (the paper's observations) and on
-the bearings-only runs. Data only: no filter reads them.
+Transcribed from ``docs/families.md``, section "``bearing_doppler3d``", what it published: a
+student's summary of Borisov, Bosov, Miller, Miller, "Passive Underwater Target Tracking:
+Conditionally Minimax Nonlinear Filtering with Bearing-Doppler Observations" (Sensors, 2020).
+The summary publishes no numbers, only three conclusions, each held here against named
+statistics of ours on the bearing-Doppler runs (the paper's observations) and on the
+bearings-only runs. Data only: no filter reads them.
 """
 
 from dataclasses import asdict, dataclass
@@ -16,7 +16,7 @@ import pandas as pd
 
 from tma.families.bearing_doppler3d.metrics import DIVERGENCE_AFTER_S, DIVERGENCE_M
 from tma.families.bearing_doppler3d.scenario import Config as ScenarioConfig
-from tma.report.paper import by_setting, claim, config_differences, differs_reason, share
+from tma.tables.paper import by_setting, claim, config_differences, differs_reason, share
 
 FAMILY = "bearing_doppler3d"
 FILTERS = ("ekf", "srekf", "cmnf")
@@ -42,7 +42,7 @@ JOURNAL = ("CMNF's own standard deviations (sqrt of diag K-hat) plotted in the j
            "for a 17-state model with a random turn plane")
 
 INTRO = f"""Published: three conclusions of a summary of Borisov et al. (Sensors, 2020), no
-numbers (`../shared/specs/papers.md`; transcribed in
+numbers (`docs/families.md`; transcribed in
 `tma/families/bearing_doppler3d/paper.py`). Each is held against statistics of ours named in
 the table, first on the runs with Doppler readings (the paper's bearing-Doppler observations),
 then on the bearings-only runs (whether a conclusion depends on the Doppler readings). RMSE is
@@ -192,7 +192,7 @@ def _conclusions(by: dict, obs: str) -> list[dict]:
 
 
 def against_paper(runs: list[Run]) -> list[dict]:
-    """Rows for ``tma.report.paper``: every conclusion on the Doppler runs (the paper's
+    """Rows for ``tma.tables.paper``: every conclusion on the Doppler runs (the paper's
     observations), then on the bearings-only runs, not comparable where a filter is missing
     or the scenario is not the paper's; and the journal's curves."""
     rows = []

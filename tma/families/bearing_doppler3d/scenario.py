@@ -1,6 +1,6 @@
 """Scenario ``bearing_doppler3d``: an AUV tracked by 8 fixed hydrophones (bearing + Doppler).
 
-See ``../shared/specs/bearing_doppler3d.md``. This module holds the config (defaults and
+See ``docs/families.md``. This module holds the config (defaults and
 validation), the shards and the logs; the model it simulates (``AuvModel.simulate``: truth by
 Euler-Maruyama at ``truth_step_s``, readings every ``obs_period_s`` from t = 0 to
 ``duration_s``) is ``tma.families.bearing_doppler3d.model``. ``no_doppler`` drops the

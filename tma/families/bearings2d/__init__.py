@@ -1,5 +1,5 @@
 """``bearings2d``: bearings-only TMA of a constant-velocity target
-(``../shared/specs/bearings2d.md``)."""
+(``docs/families.md``)."""
 
 from tma.families import Family
 

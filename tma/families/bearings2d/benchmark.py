@@ -38,7 +38,7 @@ from tma.families.bearings2d.metrics import (  # noqa: E402
     track_metrics,
 )
 from tma.maths.stats import wilson_interval  # noqa: E402
-from tma.report.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
+from tma.tables.write import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
 
 log = logging.getLogger(__name__)
 
@@ -52,7 +52,7 @@ COLUMNS = [
     "starts_changed", "starts_changed_lo", "starts_changed_hi", "ms_per_track",
 ]
 
-INTRO = """Bearings-only TMA (`../shared/specs/bearings2d.md`): each estimator against the
+INTRO = """Bearings-only TMA (`docs/families.md`): each estimator against the
 Cramer-Rao lower bound (CRLB). One row per estimator, bearing noise sigma and outlier share
 (bearings replaced by draws uniform on the circle) over N simulated targets. Ref1..Ref4:
 share of targets inside each success region, 95 % Wilson interval. RMSE of range (m), course

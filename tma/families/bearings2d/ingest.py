@@ -18,7 +18,7 @@ import numpy as np
 from tma.config import Params, param
 from tma.errors import InputError
 from tma.families.bearings2d.log import BEARINGS_TOPIC, SCHEMAS, BearingsLog, nominal_sigma
-from tma.io.grid import epochs, scatter
+from tma.io.track_epochs import epochs, scatter
 from tma.maths.geo import check_mapped
 from tma.sources.base import Observation, Unit
 from tma.utc import MAX_SPAN_S

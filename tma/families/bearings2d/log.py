@@ -29,7 +29,6 @@ import numpy as np
 
 from tma.errors import InputError
 from tma.families.bearings2d.manoeuvre_prior import ManoeuvrePrior
-from tma.io.grid import epochs, scatter
 from tma.io.mcap_log import (
     COMPRESSION,
     GEO,
@@ -50,6 +49,7 @@ from tma.io.mcap_values import (
     schema_errors,
 )
 from tma.io.mcap_writer import Encoded, Ragged
+from tma.io.track_epochs import epochs, scatter
 from tma.maths.geo import LocationFix, check_mapped, local_to_geodetic, location_fix
 from tma.utc import MAX_EPOCH_NS
 

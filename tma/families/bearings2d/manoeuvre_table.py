@@ -43,7 +43,7 @@ from tma.families.bearings2d.metrics import (  # noqa: E402
     track_metrics,
 )
 from tma.maths.stats import wilson_interval  # noqa: E402
-from tma.report.tables import (  # noqa: E402
+from tma.tables.write import (  # noqa: E402
     fixed_layout,
     markdown_table,
     save_figure,

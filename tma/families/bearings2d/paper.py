@@ -1,9 +1,8 @@
-"""The published ``bearings2d`` study and our table held against it (``tma.report.paper``).
+"""The published ``bearings2d`` study and our table held against it (``tma.tables.paper``).
 
-Transcribed from ``../shared/specs/papers.md``, section "`bearings2d`: maximum likelihood
-(Levenberg-Marquardt) vs "N bearings"": a 2021 student research report (St Petersburg State
-University), 10,000 Monte Carlo targets per row, the scenario of ``bearings2d.md``. Its
-numbers are data only: no estimator reads them.
+Transcribed from ``docs/families.md``, section "``bearings2d``", what it published: a 2021
+student research report (St Petersburg State University), 10,000 Monte Carlo targets per row,
+the scenario described there. Its numbers are data only: no estimator reads them.
 """
 
 import functools
@@ -15,7 +14,7 @@ import pandas as pd
 from tma.families.bearings2d.estimators.lm import Config as LMConfig
 from tma.families.bearings2d.metrics import REGIONS
 from tma.families.bearings2d.scenario import Config as ScenarioConfig
-from tma.report.paper import (
+from tma.tables.paper import (
     Measured,
     Published,
     by_setting,
@@ -84,7 +83,7 @@ WHY_COUNTS = ("the paper says neither how it counted (ours: every evaluation of 
               "and rejected trials included; accepted steps) nor whether mean or median")
 
 INTRO = f"""Published: {PAPER_N:,} Monte Carlo targets per row, the scenario of
-`../shared/specs/bearings2d.md` (`../shared/specs/papers.md`; transcribed in
+`docs/families.md` (transcribed in
 `tma/families/bearings2d/paper.py`). Shares: ours with the Wilson interval, z from the pooled
 two-proportion test (both samples of targets) plus the paper's rounding. sqrt(Ka): the paper
 does not say whether it printed the mean, the median or the RMS, so all three are held against
@@ -241,7 +240,7 @@ def _above_claim(lm: dict, nb: dict, other: str) -> dict:
 
 
 def against_paper(runs: list[Run]) -> list[dict]:
-    """Rows for ``tma.report.paper``: every published number, then the claims."""
+    """Rows for ``tma.tables.paper``: every published number, then the claims."""
     by = by_setting(runs, lambda r: (r.estimator, float(r.sigma_deg)), lambda r: r.mismatch)
     rows = []
     for paper in published():

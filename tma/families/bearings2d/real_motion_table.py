@@ -17,7 +17,7 @@ import pandas as pd
 from tma.families.bearings2d.benchmark import estimator_label
 from tma.families.bearings2d.manoeuvre_table import COLUMNS, manoeuvre_row, shown_table
 from tma.families.bearings2d.metrics import NEES_95, track_metrics
-from tma.report.tables import markdown_table, write_csv, write_table
+from tma.tables.write import markdown_table, write_csv, write_table
 
 INTRO = """Bearings-only TMA on real ship motion: own-ship and target from the AIS recording
 `{file}` ({pairs} pairs found by `tma.ais.pairs`: own-ship turning {turn:g} deg or more over

@@ -1,7 +1,7 @@
 """Scenario ``bearings2d``: a constant-velocity target observed by a manoeuvring own-ship;
 with ``target.*``, targets that manoeuvre or wander like ships (``target_motion.py``).
 
-See ``../shared/specs/bearings2d.md``. x east, y north (m); bearings clockwise from north,
+See ``docs/families.md``. x east, y north (m); bearings clockwise from north,
 degrees in config and log. Each shard draws its targets and its noise from
 ``SeedSequence(seed, spawn_key=(shard,))``, so a shard's content depends neither on the number
 of workers nor on sigma: datasets at different sigma share targets and standardised noise

@@ -1,5 +1,5 @@
 """``radar2d``: vessel tracking by a coastal radar, fuzzy multi-model alpha-beta vs IMM
-(``../shared/specs/radar2d.md``)."""
+(``docs/families.md``)."""
 
 from tma.families import Family
 

@@ -52,7 +52,7 @@ def segments(scenario: dict, memory: int = DEFAULT_MEMORY) -> Segments:
     """The segments of a ``radar2d`` scenario config (a dataset manifest's ``config``) for
     trackers of memory ``memory`` (J scans).
 
-    Rule (``../shared/specs/radar2d.md``): the turn is the first turn leg [a, b], scans
+    Rule (``docs/families.md``): the turn is the first turn leg [a, b], scans
     a <= t <= b. The first straight runs from the scan where the J-scan window is first full,
     t = (J - 1) tau (before it the growing-memory fit is still settling), to the last scan
     before a; the second straight from the first scan after b to the last scan before the

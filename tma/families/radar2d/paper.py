@@ -1,9 +1,9 @@
-"""The published ``radar2d`` study and our table held against it (``tma.report.paper``).
+"""The published ``radar2d`` study and our table held against it (``tma.tables.paper``).
 
-Transcribed from ``../shared/specs/papers.md``, section "`radar2d`: fuzzy multi-model
-alpha-beta tracker": Grinyak and Devyatisilny (Vestnik MGTU, 2012). No table: the text's
-claims for the fuzzy tracker, read from plots of single runs, each held here against one
-named statistic of ours over the Monte Carlo runs. Data only: no tracker reads them.
+Transcribed from ``docs/families.md``, section "``radar2d``", what it published: Grinyak and
+Devyatisilny (Vestnik MGTU, 2012). No table: the text's claims for the fuzzy tracker, read from
+plots of single runs, each held here against one named statistic of ours over the Monte Carlo
+runs. Data only: no tracker reads them.
 """
 
 from dataclasses import asdict, dataclass
@@ -14,7 +14,7 @@ import pandas as pd
 from tma.families.radar2d.estimators.fuzzy_mm import Config as FuzzyConfig
 from tma.families.radar2d.metrics import EPS_S, Segments, scan_matrix
 from tma.families.radar2d.scenario import Config as ScenarioConfig
-from tma.report.paper import (
+from tma.tables.paper import (
     by_setting,
     claim,
     config_differences,
@@ -47,7 +47,7 @@ SIGMA_TIMES_S = (60.0, 90.0, 120.0)
 ABOUT_SIGMA_M = (9.0, 11.0)  # "about 10 m": within 10 %
 
 INTRO = """Published: no table, only claims read from plots of single runs of the fuzzy
-tracker (`../shared/specs/papers.md`; transcribed in `tma/families/radar2d/paper.py`). Each is
+tracker (`docs/families.md`; transcribed in `tma/families/radar2d/paper.py`). Each is
 held against one statistic of ours over the Monte Carlo runs of `fuzzy_mm`, named in the
 table: a typical run (the median over runs of a per-run figure, with the order-statistic
 interval) where the paper read a single run's curve, the mean over runs and scans where it read
@@ -177,7 +177,7 @@ def _mismatch(run: Run) -> str:
 
 
 def against_paper(runs: list[Run]) -> list[dict]:
-    """Rows for ``tma.report.paper``: every claim at both speeds (not comparable where the speed
+    """Rows for ``tma.tables.paper``: every claim at both speeds (not comparable where the speed
     is not in the table or the settings are not the paper's)."""
     by = by_setting(runs, lambda r: float(r.speed_m_s), _mismatch)
     rows = []

@@ -22,7 +22,7 @@ import pyarrow as pa
 from tma.families.radar2d.metrics import DEFAULT_MEMORY, GATE_M, Segments, per_scan_errors
 from tma.io.atomic import write_parquet_atomic
 from tma.maths.stats import wilson_interval
-from tma.report.tables import write_table
+from tma.tables.write import write_table
 
 COLUMNS = ["estimator", "windows", "n_runs", "n_windows", "error_mean_m", "error_max_median_m",
            "error_max_p95_m", "track_loss", "track_loss_lo", "track_loss_hi", "m_median"]

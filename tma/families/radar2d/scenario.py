@@ -1,6 +1,6 @@
 """Scenario ``radar2d``: a small fast boat turning sharply in front of a coastal radar.
 
-See ``../shared/specs/radar2d.md``. The vessel starts at the origin heading +x (east) at
+See ``docs/families.md``. The vessel starts at the origin heading +x (east) at
 ``speed_m_s`` and follows ``legs`` (straight, then a left turn of radius 300 m, then
 straight). Scans every ``scan_period_s``; each Monte Carlo run is one track with its own
 measurement noise: isotropic Cartesian (``sigma_m`` per axis) or ``polar`` (range and

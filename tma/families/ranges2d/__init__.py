@@ -1,5 +1,5 @@
 """``ranges2d``: range-only navigation, the Bayesian mean by importance sampling
-(``../shared/specs/ranges2d.md``)."""
+(``docs/families.md``)."""
 
 from tma.families import Family
 

@@ -11,7 +11,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.errors import InputError
-from tma.io.grid import scatter
 from tma.io.mcap_log import COMPRESSION, Channel, LogWriter, read_epoch
 from tma.io.mcap_read import read_log
 from tma.io.mcap_values import (
@@ -24,6 +23,7 @@ from tma.io.mcap_values import (
     read_json_record,
     schema_errors,
 )
+from tma.io.track_epochs import scatter
 
 RANGES_TOPIC = "/ranging/ranges"
 SCHEMAS = {RANGES_TOPIC: "tma.RangeBatch"}

@@ -1,9 +1,8 @@
-"""The published ``ranges2d`` study and our table held against it (``tma.report.paper``).
+"""The published ``ranges2d`` study and our table held against it (``tma.tables.paper``).
 
-Transcribed from ``../shared/specs/papers.md``, section "`ranges2d`: Bayesian mean by prior
-importance sampling vs adaptive importance sampling": Arsenyev, Ivanov, Berkovsky, the
-concrete case of ``ranges2d.md`` (accuracy 0.1 m per coordinate at 95 %). x1, x2 are our x
-(east) and y (north). Its numbers are data only: no estimator reads them.
+Transcribed from ``docs/families.md``, section "``ranges2d``", what it published: Arsenyev,
+Ivanov, Berkovsky, the concrete case described there (accuracy 0.1 m per coordinate at 95 %).
+x1, x2 are our x (east) and y (north). Its numbers are data only: no estimator reads them.
 """
 
 from dataclasses import asdict, dataclass
@@ -14,7 +13,7 @@ import pandas as pd
 from tma.families.ranges2d.estimators.adaptive_is import Config as AdaptiveConfig
 from tma.families.ranges2d.estimators.prior_is import Config as PriorConfig
 from tma.families.ranges2d.scenario import Config as ScenarioConfig
-from tma.report.paper import (
+from tma.tables.paper import (
     Published,
     by_setting,
     claim,
@@ -48,7 +47,7 @@ CLAIM = "the adaptive method needs about 10 times fewer samples"
 ABOUT_10 = (9.5, 15.0)  # the ratios that are 10 at one significant figure
 
 INTRO = """Published: the article's concrete case, accuracy 0.1 m per coordinate at 95 %
-(`../shared/specs/papers.md`; transcribed in `tma/families/ranges2d/paper.py`); x1, x2 are our
+(`docs/families.md`; transcribed in `tma/families/ranges2d/paper.py`); x1, x2 are our
 x (east) and y (north). Ours: the mean over our runs with the normal interval (runs with an
 estimate). The paper's sampling error is taken as our per-run standard deviation (same method,
 same stopping rule) divided by the square root of its number of runs: 300 for the adaptive
@@ -156,7 +155,7 @@ def _claim(prior: Run | None, adaptive: Run | None) -> dict:
 
 
 def against_paper(runs: list[Run], reference: pd.DataFrame | None = None) -> list[dict]:
-    """Rows for ``tma.report.paper``: every published number, then the claim. ``reference``: the
+    """Rows for ``tma.tables.paper``: every published number, then the claim. ``reference``: the
     quadrature estimates (the exact posterior mean, quoted in the notes)."""
     by = by_setting(runs, lambda r: r.estimator, _mismatch)
     exact = ({} if reference is None or reference.empty else

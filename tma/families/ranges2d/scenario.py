@@ -1,6 +1,6 @@
 """Scenario ``ranges2d``: a static ship locating itself from ranges to point landmarks.
 
-See ``../shared/specs/ranges2d.md``. Two modes:
+See ``docs/families.md``. Two modes:
 
 - ``concrete`` (default): the article's case, its ten ranges to two lighthouses, repeated as
   ``n_tracks`` identical tracks: the repeated runs of each Monte Carlo estimator (every track

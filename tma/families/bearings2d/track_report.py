@@ -1,153 +1,41 @@
-"""``bearings2d`` outputs: the comparison table (md, csv, png) and, for datasets without
-truth (ingested logs), a per-track report of the estimated state and kinematics now (local
-metres, latitude/longitude, UTC) with 1-sigma uncertainties from the Gauss-Newton covariance
-(J^T J)^-1 sigma^2 and each track's status (computed by the estimators,
-``tma.families.bearings2d.status``), with its maps (``map_outputs``): a PNG per contact and,
-when the dataset has a geographic origin, the estimated tracks as an MCAP for Foxglove."""
+"""``bearings2d``'s report of a dataset without truth (an ingested log): per track the
+estimated state and kinematics now (local metres, latitude/longitude, UTC) with one-sigma
+errors from the Gauss-Newton covariance (J^T J)^-1 sigma^2 and each track's status (computed
+by the estimators, ``tma.families.bearings2d.status``) with a note that says why a track is
+not ok (``<name>.csv``, ``<name>.md``, ``report.parquet`` in the run), with its drawings: a
+PNG per contact (``contact_plots``) and, when the dataset has a geographic origin, the
+estimated tracks as an MCAP for Foxglove (``map_mcap``)."""
 
 import logging
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+import pandas as pd
+import pyarrow as pa
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-import pyarrow as pa  # noqa: E402
-
-from tma.families.bearings2d import (  # noqa: E402
-    benchmark,
-    manoeuvre_table,
-    paper,
-    real_motion_table,
-)
-from tma.families.bearings2d.map_outputs import (  # noqa: E402
-    MAX_PLOTS,
-    contact_figure,
+from tma.families.bearings2d.contact_plots import MAX_PLOTS, write_track_plots
+from tma.families.bearings2d.drawn_tracks import (
     position_covariance,
     read_logs,
     reference,
     theta_covariance,
-    write_map_mcap,
-    write_track_plots,
 )
-from tma.families.bearings2d.metrics import (  # noqa: E402
-    REGIONS,
-    TABLE_COLUMNS,
-    THETA,
-    summary_row,
-    track_metrics,
-)
-from tma.families.bearings2d.status import (  # noqa: E402
-    HEADING_UNDETERMINED,
-    STATUSES,
-    not_an_answer,
-)
-from tma.families.bearings2d.truth_report import (  # noqa: E402
+from tma.families.bearings2d.map_mcap import write_map_mcap
+from tma.families.bearings2d.status import HEADING_UNDETERMINED, STATUSES, not_an_answer
+from tma.families.bearings2d.truth_report import (
     coverage_text,
     dataset_truth,
     shown_columns,
     with_truth,
 )
-from tma.io import arrow  # noqa: E402
-from tma.io.atomic import write_parquet_atomic  # noqa: E402
-from tma.maths.geo import local_to_geodetic  # noqa: E402
-from tma.report.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
-from tma.sources.labels import shown_labels  # noqa: E402
-from tma.utc import format_utc  # noqa: E402
-
-INTRO = """Bearings-only TMA of a constant-velocity target from a manoeuvring observer
-(`../shared/specs/bearings2d.md`). Each row: one estimator at one bearing noise sigma over
-N simulated targets. Ref1..Ref4: share of targets whose estimate lies inside the success
-region (bearing and distance at the end of the observation, course, speed; Ref1 is the
-strictest), with the 95 % Wilson interval. sqrt(Ka) = sqrt(F(theta_hat)/n) in degrees: a
-good maximum-likelihood fit gives sqrt(Ka) close to sigma. Nf: evaluations of F, Iter:
-accepted LM steps (medians; direct estimators have none). Status: tracks per verdict
-({statuses}, see the README).
-Consistent: share of the ok tracks whose normalised error (theta_hat - theta)^T Sigma^-1
-(theta_hat - theta), Sigma = (J^T J)^-1 sigma^2, lies below the chi-square(4) 95 % point;
-about 95 % for honest one-sigma errors. Every number is read from the run files under
-`data/runs/`."""
+from tma.io import arrow
+from tma.io.atomic import write_parquet_atomic
+from tma.maths.geo import local_to_geodetic
+from tma.sources.labels import shown_labels
+from tma.tables.write import write_table
+from tma.utc import format_utc
 
 log = logging.getLogger(__name__)
-
-REGION_NOTE = "\n".join(
-    f"- {r.capitalize()}: bearing <= {b} deg, distance <= {d:.0%}, course <= {c} deg, "
-    f"speed <= {s:.0%}" for r, (b, d, c, s) in REGIONS.items()
-)
-
-
-def _pct(rate, lo, hi):
-    return f"{100 * rate:.1f} % ({100 * lo:.1f}-{100 * hi:.1f})"
-
-
-def _num(x, fmt="{:.3g}"):
-    return "-" if pd.isna(x) else fmt.format(x)
-
-
-# the statuses' names in the table's status column
-STATUS_ABBREVIATIONS = {"ok": "ok", "not_converged": "not_conv", "poor_fit": "poor_fit",
-                        "unobservable": "unobs", "manoeuvring": "manoeuv",
-                        "approximate": "approx", "position_only": "pos_only"}
-# counted (a column of the CSV, a count in the status column) only where some row has one: a
-# status only targets that may manoeuvre get, which a constant-velocity table never shows
-COUNTED_WHERE_SEEN = ("position_only",)
-
-
-def write_success_table(rows: list[dict], tables_dir, name="bearings2d",
-                        paper_section=None) -> list[Path]:
-    """Write ``<name>.csv``, ``<name>.md`` (with ``paper_section``, ``tables.write_table``)
-    and ``<name>.png``; returns their paths. A status of ``COUNTED_WHERE_SEEN`` is counted
-    only where some row has one."""
-    tables_dir = Path(tables_dir)
-    table = pd.DataFrame(rows, columns=TABLE_COLUMNS).sort_values(
-        ["estimator", "sigma_deg"], kind="stable").reset_index(drop=True)
-    statuses = [s for s in STATUSES
-                if s not in COUNTED_WHERE_SEEN or table[f"n_{s}"].fillna(0).any()]
-    table = table.drop(columns=[f"n_{s}" for s in STATUSES if s not in statuses])
-
-    shown = pd.DataFrame({
-        "estimator": table["estimator"],
-        "sigma (deg)": table["sigma_deg"].map("{:g}".format),
-        "N": table["n_tracks"],
-        **{r.capitalize(): [_pct(*v) for v in table[[r, f"{r}_lo", f"{r}_hi"]].to_numpy()]
-           for r in REGIONS},
-        "sqrt(Ka) mean (deg)": table["sqrt_ka_mean"].map(_num),
-        "sqrt(Ka) median (deg)": table["sqrt_ka_median"].map(_num),
-        "Nf median": table["nf_median"].map(lambda x: _num(x, "{:g}")),
-        "Iter median": table["iter_median"].map(lambda x: _num(x, "{:g}")),
-        "status " + " / ".join(STATUS_ABBREVIATIONS[s] for s in statuses): [
-            " / ".join(str(v) for v in r) for r in table[[f"n_{s}" for s in statuses]].to_numpy()],
-        "consistent (ok)": [_pct(*v) if pd.notna(v[0]) else "-" for v in
-                            table[["consistent", "consistent_lo", "consistent_hi"]].to_numpy()],
-    })
-    paths = write_table(tables_dir, name, "Bearings-only TMA: success rates by estimator and "
-                        "noise", INTRO.format(statuses=" / ".join(statuses)), table, shown,
-                        float_format="%.6g",
-                        notes="Success regions:\n" + REGION_NOTE, paper=paper_section)
-    paths.append(tables_dir / f"{name}.png")
-
-    fig, axes = table_subplots(2, 2, figsize=(10, 7), sharex=True, sharey=True)
-    for ax, region in zip(axes.flat, REGIONS, strict=True):
-        for estimator, rows_e in table.groupby("estimator", sort=True):
-            x = rows_e["sigma_deg"].to_numpy()
-            ax.plot(x, 100 * rows_e[region], marker="o", label=estimator)
-            ax.fill_between(x, 100 * rows_e[f"{region}_lo"], 100 * rows_e[f"{region}_hi"],
-                            alpha=0.2)
-        ax.set_title(region.capitalize())
-        ax.grid(True, alpha=0.3)
-        ax.set_ylim(-2, 102)
-    for ax in axes[1]:
-        ax.set_xlabel("bearing noise sigma (deg)")
-    for ax in axes[:, 0]:
-        ax.set_ylabel("success rate (%)")
-    axes[0, 0].legend()
-    fig.suptitle("Bearings-only TMA: success rate vs noise (95 % Wilson bands)")
-    fixed_layout(fig)
-    save_figure(fig, paths[-1])
-    plt.close(fig)
-    return paths
 
 
 REPORT_COLUMNS = ["range_now_m", "range_sd_m", "bearing_now_deg", "bearing_sd_deg",
@@ -426,7 +314,7 @@ def contact_report(estimates: pd.DataFrame, logs, where: str, max_range_rel_sd=N
                         max_range_rel_sd=max_range_rel_sd, recorded=recorded)
 
 
-def _report_without_truth(entry, tables_dir, name: str, progress=None) -> list[Path]:
+def write_report_without_truth(entry, tables_dir, name: str, progress=None) -> list[Path]:
     """The per-track report of a dataset without truth: ``<name>.{csv,md}``, a PNG per
     contact and, with a geographic origin, the map MCAP ``<name>.mcap``."""
     m, dataset = entry.dataset.manifest, entry.dataset
@@ -476,139 +364,3 @@ def run_path(run_root) -> pd.DataFrame | None:
     assumes constant velocity, a simulation, a run from before it)."""
     path = Path(run_root) / "path.parquet"
     return arrow.read_table(path).to_pandas() if path.exists() else None
-
-
-# the other kinds of table of simulated runs an experiment may ask for (``report=``): each
-# estimator against the Cramer-Rao bound, and targets that manoeuvre
-REPORTS = {"benchmark": benchmark.write_benchmark,
-           "manoeuvre": manoeuvre_table.write_manoeuvre_table,
-           "real_motion": real_motion_table.write_real_motion_table}  # AIS own-ship, targets
-
-
-def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) -> list[Path]:
-    """Metrics per track into each run dir; for simulated datasets the comparison table with
-    its section against the paper, or the kind of table ``report`` names (``REPORTS``), and
-    a per-track report for each dataset without truth (``progress``: a progress bar over its
-    per-contact plots; None: on a terminal only)."""
-    rows, written, runs, truths = [], [], [], {}
-    for entry in entries:
-        if id(entry.dataset) not in truths:  # read (and checked) once per dataset
-            truths[id(entry.dataset)] = entry.dataset.read_truth()
-        truth = truths[id(entry.dataset)]
-        if truth is None or entry.dataset.manifest["source"] != "simulate":  # a recorded log
-            name = table_name if len(entries) == 1 else f"{entry.dataset.name}-{entry.estimator}"
-            written += _report_without_truth(entry, tables_dir, name, progress)
-            continue
-        metrics = track_metrics(entry.estimates, truth)
-        write_parquet_atomic(entry.run_root / "metrics.parquet",
-                             pa.Table.from_pandas(metrics, preserve_index=False))
-        sigma = entry.dataset.manifest["config"]["sigma_deg"]
-        rows.append(summary_row(metrics, entry.estimator, sigma))
-        runs.append(paper.Run(entry.estimator, sigma, metrics,
-                              entry.estimates["n_bearings"].to_numpy(),
-                              entry.dataset.manifest["config"], entry.manifest["config"]))
-    if rows and report is not None:  # another kind of table, declared by the experiment
-        written += REPORTS[report](entries, tables_dir, table_name)
-    elif rows:
-        written += write_success_table(rows, tables_dir, table_name,
-                                       (paper.against_paper(runs), paper.INTRO))
-    return written
-
-
-# -- the Python API's hooks (tma.api): what tma.estimate returns, tma.plot_contact draws and
-# tma.write_map writes of bearings2d estimates
-
-# the metrics of a simulated track that are numbers of its estimate: blank where it is blank
-SIMULATED_ERRORS = ["bearing_err_deg", "distance_rel_err", "course_err_deg", "speed_rel_err",
-                    "nees"]
-HEADING_ERRORS = ["course_err_deg", "speed_rel_err"]  # blank where the heading is
-
-
-def results(run) -> tuple[pd.DataFrame, dict]:
-    """``tma.estimate``'s results of ``run`` (``tma.api.Estimated``): the per-contact report
-    aggregate writes (``contact_report``), then against the AIS of a recording its truth
-    columns (``truth_report.with_truth``), against a simulation's truth its metrics
-    (``metrics.track_metrics``, as ``tma.runs`` gives them; the errors and ``nees`` blank
-    where the estimate is, the course and speed errors where its heading is). Tables:
-    ``estimates``, the estimator's own columns (``x0_m``.., ``jtj_ij``, ``t_last_s``: what the
-    plot and the map draw from), ``x0_m``.. blank where the report's estimate is, and the
-    side table ``path`` where the estimator kept one (``estimated_path``: the trajectory
-    each answer rests on, which the plot and the map draw)."""
-    est = run.estimates
-    report = contact_report(est, run.logs, "estimate",
-                            getattr(run.estimator.config, "max_range_rel_sd", None),
-                            run.recorded)
-    blank = ~np.isfinite(report["range_now_m"].to_numpy(float))
-    if run.truth is not None and run.recorded:  # the AIS of its trial
-        report = with_truth(report, est, run.truth)
-    elif run.truth is not None:  # a simulation
-        metrics = track_metrics(est, run.truth)
-        metrics.loc[blank, SIMULATED_ERRORS] = np.nan
-        metrics.loc[report["status"].isin(HEADING_UNDETERMINED).to_numpy(),
-                    HEADING_ERRORS] = np.nan
-        report = pd.concat([report, metrics.drop(columns=[c for c in metrics
-                                                          if c in report])], axis=1)
-    estimates = est.copy()
-    estimates.loc[blank, list(THETA)] = np.nan
-    return report, {"estimates": estimates, **run.side_tables}
-
-
-SAME_TIME_S = 1e-6  # a contact's last bearing time in the results and in its recording
-SAME_PLACE_M = 1e-3  # own-ship there
-
-
-def check_logs(report: pd.DataFrame, estimates: pd.DataFrame, logs):
-    """ValueError, naming the first contact that differs, unless ``logs`` are those the
-    contacts of ``report`` (and their ``estimates``, row for row) were estimated from: each
-    contact's track id in them, its last bearing at the same time from the same own-ship
-    position, and its UTC the same where both are dated."""
-    where = {int(i): (lg, row) for lg in logs for row, i in enumerate(lg.track_id)}
-    epoch = logs[0].epoch_utc_ns
-    for r, e in zip(report.itertuples(index=False), estimates.itertuples(index=False),
-                    strict=True):
-        place = where.get(int(r.track_id))
-        if place is None:
-            why = f"track id {r.track_id} is not in this recording"
-        else:
-            lg, row = place
-            last = np.flatnonzero(np.isfinite(lg.bearing_deg[row]))[-1]
-            why = ""
-            if not (abs(lg.t_s[last] - e.t_last_s) <= SAME_TIME_S
-                    and abs(lg.own_x_m[last] - e.own_x_last_m) <= SAME_PLACE_M
-                    and abs(lg.own_y_m[last] - e.own_y_last_m) <= SAME_PLACE_M):
-                why = "its last bearing is at another time or own-ship position here"
-            elif isinstance(r.time_now_utc, str) and epoch is not None and (
-                    r.time_now_utc != format_utc(epoch + round(r.t_now_s * 1e9))):
-                why = f"its last bearing is at {r.time_now_utc} there, at another UTC here"
-        if why:
-            raise ValueError(f"these results were not estimated from this recording (contact "
-                             f"{r.label!r}: {why}); pass the recording given to tma.estimate")
-
-
-def plot_contact(report: pd.DataFrame, estimates: pd.DataFrame, logs, label,
-                 side_tables=None):
-    """``tma.plot_contact``: the Figure of contact ``label`` (``map_outputs.contact_figure``)
-    of the contacts of ``report`` and their ``estimates``, drawn over ``logs``, along the
-    trajectory its answer rests on where ``side_tables`` hold it (``path``)."""
-    check_logs(report, estimates, logs)
-    return contact_figure(report, estimates, logs, label,
-                          paths=(side_tables or {}).get("path"))
-
-
-def write_map(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, truth_track=None,
-              side_tables=None) -> Path:
-    """``tma.write_map``: the map MCAP of the contacts of ``report`` (``map_outputs.
-    write_map_mcap``; along the trajectory each answer rests on where ``side_tables`` hold
-    it, ``path``), which needs own-ship in latitude/longitude and UTC times."""
-    check_logs(report, estimates, logs)
-    epoch, origin = logs[0].epoch_utc_ns, logs[0].origin_deg
-    if origin is None:
-        raise ValueError("a map needs own-ship in latitude/longitude; this log's is in local "
-                         "x/y metres (a simulation, or a log read without them): read a log "
-                         "with its origin, origin={'lat': ..., 'lon': ...}")
-    if epoch is None:
-        raise ValueError("a map needs UTC times; this log's are relative: read it with "
-                         "time={'start_utc': ...}")
-    return write_map_mcap(path, report, estimates, logs, epoch, origin,
-                          {"estimator": "tma.estimate"}, truth_track=truth_track,
-                          paths=(side_tables or {}).get("path"))

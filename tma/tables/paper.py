@@ -2,7 +2,7 @@
 Markdown table and ``<table>_paper.csv`` (columns ``COLUMNS``).
 
 Each family transcribes what its paper published (``tma/families/<family>/paper.py``, from
-``../shared/specs/papers.md``) and holds its own table against it with these pieces; nothing
+``docs/families.md``) and holds its own table against it with these pieces; nothing
 here, nor there, feeds back into an estimator.
 
 **Published numbers.** One row each: the paper's value, ours with its 95 % interval, the
@@ -35,7 +35,7 @@ import pandas as pd
 from scipy.special import ndtri
 
 from tma.maths.stats import wilson_interval
-from tma.report.markdown import markdown_table
+from tma.tables.markdown import markdown_table
 
 COLUMNS = ["family", "quantity", "setting", "paper", "ours", "ours_lo", "ours_hi", "z",
            "verdict", "note"]

@@ -21,10 +21,11 @@ from tma.families.ranges2d.metrics import COLUMNS, summary_row, track_metrics  #
 from tma.families.ranges2d.model import RangeModel  # noqa: E402
 from tma.io import arrow  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
-from tma.report.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
+from tma.tables.write import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
 
 
-def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) -> list[Path]:
+def aggregate_runs(entries, tables_dir, table_name, progress=None, table_kind=None
+                   ) -> list[Path]:
     reference = next((e for e in entries if estimator_class(e.estimator).reference), None)
     if reference is None:
         raise ConfigError("the ranges2d table measures errors against 'quadrature': "
@@ -70,7 +71,7 @@ def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) 
     })
     ds = entries[0].dataset
     intro = (f"Posterior mean of a ship's position from ranges to landmarks "
-             f"(`../shared/specs/ranges2d.md`), dataset `{ds.name}`. Each Monte Carlo "
+             f"(`docs/families.md`), dataset `{ds.name}`. Each Monte Carlo "
              "estimator runs until both coordinates are within its accuracy target at its "
              "confidence by the delta-method error of a ratio (or a fixed count); errors are "
              "against `quadrature` (tensor Gauss-Legendre). RE is per single draw; samples "

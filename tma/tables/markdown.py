@@ -1,5 +1,5 @@
 """A table as Markdown: what every table of ``tables/`` and its section "Against the paper"
-print (``tma.report.tables``, ``tma.report.paper``)."""
+print (``tma.tables.write``, ``tma.tables.paper``)."""
 
 import pandas as pd
 

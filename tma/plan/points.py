@@ -1,12 +1,13 @@
-"""The grid language, inside one job (``docs/architecture.md``, "Two sweeps"), from plain
-configs (dicts) and the command line's overrides:
+"""The points one command runs, inside one job (``docs/architecture.md``, "Two sweeps"):
+scenario points times estimators, from plain configs (dicts) and the command line's
+overrides:
 
 - a list given where the scenario expects a single value is an axis
   (``scenario.sigma_deg=[0.1,0.5]``: two datasets); several axes give their cartesian product,
   the last one varying fastest (``scenario_points``);
-- an experiment's estimators (``grid.estimators``) are edited by the command line
+- an experiment's estimators (``estimators``) are edited by the command line
   (``estimator_configs``): ``estimator=NAME`` runs NAME alone, ``estimator.KEY=VALUE`` sets KEY
-  in each of them that has it, ``grid.estimators.NAME.KEY=VALUE`` sets it in NAME only. An
+  in each of them that has it, ``estimators.NAME.KEY=VALUE`` sets it in NAME only. An
   override that would change nothing fails (ConfigError naming it), never is ignored.
 
 And an override as the command line writes it (``override_text``), for messages that say
@@ -28,8 +29,8 @@ from tma.families import build_estimator, scenario_module
 
 @dataclasses.dataclass(frozen=True)
 class Override:
-    """One command-line override as the grid language reads it: its dotted ``key``
-    (``estimator``, ``estimator.lambda0``, ``grid.estimators.lm.max_iter``), its ``text`` as
+    """One command-line override as this module reads it: its dotted ``key``
+    (``estimator``, ``estimator.lambda0``, ``estimators.lm.max_iter``), its ``text`` as
     typed (for messages), the ``value`` of a choice (``estimator=NAME``: NAME), whether it
     deletes (``~key``) and its package (``key@pkg=...``; None when none)."""
 
@@ -40,7 +41,7 @@ class Override:
     package: str | None = None
 
 
-# -- scenarios: a list where the scenario expects one value is an axis of the grid ----------
+# -- scenarios: a list where the scenario expects one value is an axis of the points --------
 
 def _holds_a_list(annotation) -> bool:
     """True if a field of this type may hold a list (then a list is its value, not an axis)."""
@@ -70,15 +71,9 @@ def _axes(node: dict, schema, prefix: str = "") -> list[tuple[str, list]]:
     return axes
 
 
-def scenario_points(scenario: dict, grid: dict | None = None) -> list[dict]:
-    """The scenario config expanded into one config per point of its grid (module
-    docstring). ``grid``: the config's ``grid`` (an experiment's), which takes only
-    ``estimators``."""
-    extra = sorted(set(grid or {}) - {"estimators"})
-    if extra:
-        raise ConfigError(
-            f"grid.{extra[0]}: grids take only 'estimators'; sweep a scenario value by "
-            "giving the scenario key a list, e.g. scenario.sigma_deg=[0.1,0.5]")
+def scenario_points(scenario: dict) -> list[dict]:
+    """The scenario config expanded into one config per point of its axes (module
+    docstring)."""
     try:
         schema = scenario_module(scenario.get("family")).Config
     except ConfigError:
@@ -116,20 +111,20 @@ def _set_key(node: dict, dotted: str, value):
     node[last] = value
 
 
-def estimator_configs(estimator: dict, grid: dict | None,
+def estimator_configs(estimator: dict, estimators: dict | None,
                       overrides: list[Override]) -> list[dict]:
-    """Estimator configs: the single ``estimator``, or an experiment's ``grid.estimators``
-    as the command line's ``overrides`` edit them (module docstring). ``estimator`` holds,
-    under an experiment, every key of the family's estimators (the ``estimator_keys`` group,
-    ``tma.families.register_configs``), so ``estimator.KEY=VALUE`` reaches it: its value is
+    """Estimator configs: the single ``estimator``, or an experiment's ``estimators``
+    (name -> config) as the command line's ``overrides`` edit them (module docstring).
+    ``estimator`` holds, under an experiment, every key of the family's estimators (the
+    ``estimator_keys`` group, ``tma.families.register_configs``), so ``estimator.KEY=VALUE``
+    reaches it: its value is
     read there."""
-    grid = (grid or {}).get("estimators")
-    if not grid:
+    if not estimators:
         named = [o for o in overrides if o.key == "estimator.name" and o.package is None]
         if named:  # as tma.estimate's name=
             raise name_set_error(named[-1].text, named[-1].text.partition("=")[2] or "NAME")
         return [estimator]
-    nodes = copy.deepcopy(grid)
+    nodes = copy.deepcopy(estimators)
     chosen = [o.value for o in overrides if o.key == "estimator"
               and o.package is None and not o.delete]
     if chosen:
@@ -137,14 +132,14 @@ def estimator_configs(estimator: dict, grid: dict | None,
             raise ConfigError(f"estimator={chosen[-1]}: not an estimator of this experiment "
                               f"(estimators: {', '.join(nodes)})")
         nodes = {chosen[-1]: nodes[chosen[-1]]}
-    in_grid = {}  # (estimator, key) -> override, for grid.estimators.NAME.KEY=...
+    by_name = {}  # (estimator, key) -> override, for estimators.NAME.KEY=...
     for o in overrides:
         parts = o.key.split(".")
-        if parts[:2] == ["grid", "estimators"] and len(parts) > 2 and o.package is None:
-            if parts[2] not in nodes:
-                raise ConfigError(f"{o.text}: '{parts[2]}' is not run "
+        if parts[0] == "estimators" and len(parts) > 1 and o.package is None:
+            if parts[1] not in nodes:
+                raise ConfigError(f"{o.text}: '{parts[1]}' is not run "
                                   f"(estimators: {', '.join(nodes)})")
-            in_grid[parts[2], ".".join(parts[3:])] = o.text
+            by_name[parts[1], ".".join(parts[2:])] = o.text
     for o in overrides:
         if not o.key.startswith("estimator.") or o.package is not None:
             continue
@@ -157,7 +152,7 @@ def estimator_configs(estimator: dict, grid: dict | None,
             raise ConfigError(f"{o.text}: no estimator of this run has '{key}' "
                               f"(estimators: {', '.join(nodes)})")
         for name in takers:
-            clash = in_grid.get((name, key))
+            clash = by_name.get((name, key))
             if clash:
                 raise ConfigError(f"{o.text} and {clash} both set '{key}' of {name}: "
                                   "give one")
@@ -165,10 +160,10 @@ def estimator_configs(estimator: dict, grid: dict | None,
     return list(nodes.values())
 
 
-def checked_estimator_configs(estimator: dict, grid: dict | None,
+def checked_estimator_configs(estimator: dict, estimators: dict | None,
                               overrides: list[Override]) -> list[dict]:
     """``estimator_configs`` after building each once, so a bad value fails naming its key."""
-    nodes = estimator_configs(estimator, grid, overrides)
+    nodes = estimator_configs(estimator, estimators, overrides)
     for node in nodes:
         build_estimator(node)
     return nodes

@@ -27,7 +27,7 @@ from tma.families.bearing_doppler3d.model import STATE_NAMES  # noqa: E402
 from tma.io import arrow  # noqa: E402
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
 from tma.maths.angles import wrap_to_180  # noqa: E402
-from tma.report.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
+from tma.tables.write import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
 
 SHORT = {"X_m": "X", "Y_m": "Y", "Z_m": "Z", "v_m_s": "v", "phi_rad": "phi", "a_m_s2": "a"}
 MID_S = 50.0
@@ -42,7 +42,8 @@ def _columns():
                    "us_per_path_obs"]
 
 
-def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) -> list[Path]:
+def aggregate_runs(entries, tables_dir, table_name, progress=None, table_kind=None
+                   ) -> list[Path]:
     rows, curves, runs = [], [], []
     for e in entries:
         err, est, t, ok = errors(e.estimates, e.dataset.read_truth())
@@ -99,7 +100,7 @@ def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) 
         "us / path / obs": table["us_per_path_obs"].map("{:.2f}".format),
     })
     intro = f"""Passive tracking of a manoeuvring AUV by 8 fixed hydrophones
-(`../shared/specs/bearing_doppler3d.md`): elevation sine, bearing cosine and Doppler frequency
+(`docs/families.md`): elevation sine, bearing cosine and Doppler frequency
 every second, with and without the Doppler readings. RMSE over the non-divergent test paths at
 t = 50 s and t = T (units: m, m, m, m/s, rad, m/s^2); a path diverges (`track_lost` in
 the run's `path_metrics.parquet`) when its horizontal error exceeds {DIVERGENCE_M:g} m, or is

@@ -1,8 +1,8 @@
-"""The one grid scatter (``tma.io.grid``): values that arrive one by one put on the (tracks x
-epochs) grid, against a plain loop; a track with two values at one epoch refused naming it
-and the time, in the MCAP readers of ``bearings2d``, ``radar2d`` and ``ranges2d`` and at
-ingest; and the own-ship-off-the-map rule (``tma.maths.geo.check_mapped``), one for ingest and the
-log writer."""
+"""The one scatter onto the track x epoch arrays (``tma.io.track_epochs``): values that arrive
+one by one put on the (tracks x epochs) array, against a plain loop; a track with two values
+at one epoch refused naming it and the time, in the MCAP readers of ``bearings2d``,
+``radar2d`` and ``ranges2d`` and at ingest; and the own-ship-off-the-map rule
+(``tma.maths.geo.check_mapped``), one for ingest and the log writer."""
 
 import numpy as np
 import pandas as pd
@@ -21,9 +21,9 @@ from tma.families.radar2d.log import PLOTS_TOPIC, read_radar_log
 from tma.families.radar2d.log import channels as radar_channels
 from tma.families.ranges2d.log import RANGES_TOPIC, read_ranges_log
 from tma.families.ranges2d.log import channels as ranges_channels
-from tma.io.grid import epochs, scatter
 from tma.io.mcap_log import LogWriter
 from tma.io.mcap_values import json_record
+from tma.io.track_epochs import epochs, scatter
 from tma.maths.geo import check_mapped
 
 

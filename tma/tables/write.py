@@ -8,17 +8,17 @@ from pathlib import Path
 import pandas as pd
 
 from tma.io.atomic import atomic_path, write_text_atomic
-from tma.report.markdown import markdown_table
+from tma.tables.markdown import markdown_table
 
 log = logging.getLogger(__name__)
 
 
 def plots_to_files() -> None:
     """Let matplotlib load whatever ``MPLBACKEND`` says: tma draws every plot into a file
-    (its report modules use Agg), so a backend matplotlib refuses when it is imported (a typo,
-    ``bogus``) must not stop a table. Such a value is left out of the environment, with a
-    warning; a valid one stays. Called before a family's report module is imported
-    (``tma.families.Family.report``); nothing once matplotlib is loaded."""
+    (the families' aggregate modules use Agg), so a backend matplotlib refuses when it is
+    imported (a typo, ``bogus``) must not stop a table. Such a value is left out of the
+    environment, with a warning; a valid one stays. Called before a family's aggregate module
+    is imported (``tma.families.Family.aggregate``); nothing once matplotlib is loaded."""
     value = os.environ.get("MPLBACKEND")
     if not value or "matplotlib" in sys.modules:
         return
@@ -45,10 +45,10 @@ def write_csv(df: pd.DataFrame, path: Path, float_format=None):
 def write_table(tables_dir, name: str, title: str, intro: str, data: pd.DataFrame,
                 shown: pd.DataFrame, *, float_format=None, notes: str = "",
                 paper=None) -> list[Path]:
-    """One table, as every report writes it: ``<name>.csv`` (``data``, every number;
+    """One table, as every family writes it: ``<name>.csv`` (``data``, every number;
     ``float_format`` as ``write_csv``), ``<name>.md`` (``# title``, ``intro``, the formatted
     cells of ``shown``, ``notes``) and, given ``paper`` = ``(rows, intro)`` (the family's
-    comparison, ``tma.report.paper``), the section "Against the paper" at the end of the Markdown
+    comparison, ``tma.tables.paper``), the section "Against the paper" at the end of the Markdown
     and ``<name>_paper.csv``. Returns the paths written: csv, md (, paper csv)."""
     tables_dir = Path(tables_dir)
     paths = [tables_dir / f"{name}.csv", tables_dir / f"{name}.md"]
@@ -57,7 +57,7 @@ def write_table(tables_dir, name: str, title: str, intro: str, data: pd.DataFram
     if notes:
         text += f"\n{notes.strip()}\n"
     if paper is not None:
-        from tma.report.paper import csv_frame, section
+        from tma.tables.paper import csv_frame, section
 
         rows, paper_intro = paper
         text = text.rstrip("\n") + "\n\n" + section(rows, paper_intro)

@@ -1,5 +1,5 @@
 """Values that arrive one by one (a time or a message, a contact, a value) put on the
-rectangular grid every family's log holds in memory: one row per track, one column per epoch,
+track x epoch arrays every family's log holds in memory: one row per track, one column per epoch,
 NaN where a track has no value at an epoch. Written once, for the MCAP log readers (messages:
 ``bearings2d``, ``radar2d``, ``ranges2d``) and for ingest (a recorded log's rows: ``bearings2d``
 ``ingest.py``); a track with two values at one epoch is refused here, naming it and the time.
@@ -25,9 +25,9 @@ def epochs(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def scatter(track: np.ndarray, col: np.ndarray, values: np.ndarray, n_epochs: int, where: str,
             what: str, epoch_time, track_id: np.ndarray | None = None):
-    """``(track_id, grid)``: ``values`` (one per entry of ``track``, the track ids, and of
+    """``(track_id, array)``: ``values`` (one per entry of ``track``, the track ids, and of
     ``col``, their epochs; a value may be a vector: ``values`` shaped ``(n, ...)``) on the
-    grid ``(tracks, n_epochs, ...)``, NaN where a track has no value at an epoch. Its rows are
+    array ``(tracks, n_epochs, ...)``, NaN where a track has no value at an epoch. Its rows are
     ``track_id`` (sorted; holding every id of ``track``), by default the distinct ids. A track
     with two values at one epoch is an InputError naming it and the time there
     (``epoch_time(k)``: of epoch k, in s) as ``<where>: track <id> has two <what> at one time
@@ -42,6 +42,6 @@ def scatter(track: np.ndarray, col: np.ndarray, values: np.ndarray, n_epochs: in
         k = int(twice[np.argmin(cell[twice])])  # the first in (track, epoch) order
         raise InputError(f"{where}: track {track[k]} has two {what} at one time "
                          f"(t = {epoch_time(int(col[k])):.9g} s)")
-    grid = np.full((track_id.size, n_epochs, *values.shape[1:]), np.nan)
-    grid[row, col] = values
-    return track_id, grid
+    array = np.full((track_id.size, n_epochs, *values.shape[1:]), np.nan)
+    array[row, col] = values
+    return track_id, array

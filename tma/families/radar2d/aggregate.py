@@ -25,10 +25,11 @@ from tma.families.radar2d.metrics import (  # noqa: E402
     table_columns,
 )
 from tma.io.atomic import write_parquet_atomic  # noqa: E402
-from tma.report.tables import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
+from tma.maths.angles import course_from_velocity  # noqa: E402
+from tma.tables.write import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
 
 INTRO = """Tracking a small fast boat that turns sharply{radius} in front of a coastal
-radar (`../shared/specs/radar2d.md`); one row per tracker and boat speed over the Monte Carlo
+radar (`docs/families.md`); one row per tracker and boat speed over the Monte Carlo
 runs. Segment columns: mean position error over runs and scans, and the median and 95th
 percentile of each run's maximum error ({segments}). Track loss: share of runs
 whose error exceeds {gate:g} m, or that have no estimate, at any scan from {loss} on (column
@@ -77,13 +78,15 @@ def _intro(by_dataset: dict) -> str:
     return intro + "\n\n" + "\n".join(lines)
 
 
-# the other kinds of table an experiment may ask for (``report=``): vessels of an AIS recording
-REPORTS = {"real_motion": real_motion_table.write_real_motion_table}
+# the other kinds of table an experiment may ask for (``table_kind=``): vessels of an AIS
+# recording
+TABLE_KINDS = {"real_motion": real_motion_table.write_real_motion_table}
 
 
-def aggregate_runs(entries, tables_dir, table_name, progress=None, report=None) -> list[Path]:
-    if report is not None:
-        return REPORTS[report](entries, tables_dir, table_name)
+def aggregate_runs(entries, tables_dir, table_name, progress=None, table_kind=None
+                   ) -> list[Path]:
+    if table_kind is not None:
+        return TABLE_KINDS[table_kind](entries, tables_dir, table_name)
     # one set of segments per dataset, so that its rows are measured on the same scans: the
     # rule's J is the longest memory among the dataset's trackers (the default if none has one)
     configs = {e.dataset.name: e.dataset.manifest["config"] for e in entries}
@@ -215,7 +218,7 @@ def results(run) -> tuple[pd.DataFrame, dict]:
         "x_now_m": last["x_m"], "y_now_m": last["y_m"],
         "vx_now_m_s": last["vx_m_s"], "vy_now_m_s": last["vy_m_s"],
         "speed_m_s": np.hypot(last["vx_m_s"], last["vy_m_s"]),
-        "course_deg": np.rad2deg(np.arctan2(last["vx_m_s"], last["vy_m_s"])) % 360.0,
+        "course_deg": np.rad2deg(course_from_velocity(last["vx_m_s"], last["vy_m_s"])),
         "status": last["status"]})
     tables = {"estimates": est}
     if run.truth is None:
