@@ -136,7 +136,7 @@ def test_a_commands_kernels_are_compiled_ahead_then_only_loaded(tmp_path):
 
     cold = ahead()
     assert sorted(cold.stdout.split()) == ["lm", "nbearings"], cold.stdout
-    assert "note: compiling bearings2d lm kernels" in cold.stderr
+    assert "note: compiling bearings2d marquardt kernels" in cold.stderr
     assert ahead().stdout == ""  # warm: nothing to do ahead
     table = subprocess.run(
         [sys.executable, "-m", "pipeline.table", "experiment=bearings2d_table",
