@@ -40,6 +40,10 @@ from tma.utc import format_utc, stamp_text
 MAX_LISTED_GAPS = 20
 OUTLIER_NEIGHBOURS = 10  # fixes on each side whose median a fix is held against
 OUTLIER_TOLERANCE_M = 100.0  # the fixes' own noise (GNSS, multipath) the rule allows for
+# more steps between successive fixes than this share (and at least MIXED_MIN_JUMPS) faster
+# than own-ship can go: not outliers but own-ship jumping between places, as the rows of
+# several platforms do (refused, ``_one_platform``)
+MIXED_SHARE, MIXED_MIN_JUMPS = 0.1, 10
 
 
 @dataclass
@@ -287,10 +291,28 @@ def far_off(t, x, y, max_speed_m_s: float) -> np.ndarray:
     return np.hypot(x - mx, y - my) > np.sqrt(2) * max_speed_m_s * reach + OUTLIER_TOLERANCE_M
 
 
+def _one_platform(t, x, y, nav: Navigation, max_speed_m_s: float):
+    """Refuses fixes (sorted by time) that jump between places: more than ``MIXED_SHARE`` of
+    the steps between successive fixes (and ``MIXED_MIN_JUMPS`` or more) longer than
+    ``max_speed_m_s`` allows plus ``OUTLIER_TOLERANCE_M``. An outlier makes two such steps;
+    the rows of two platforms taken in turn make nearly every step one."""
+    step = np.hypot(np.diff(x), np.diff(y))
+    jumps = step > max_speed_m_s * np.diff(t) + OUTLIER_TOLERANCE_M
+    if jumps.sum() >= MIXED_MIN_JUMPS and jumps.mean() > MIXED_SHARE:
+        raise InputError(
+            f"{nav.source}: {jumps.sum()} of {jumps.size} steps between successive own-ship "
+            f"fixes ({jumps.mean():.0%}) are faster than nav.max_speed_m_s = "
+            f"{max_speed_m_s:g} m/s allows, up to {step[jumps].max() / 1000:.1f} km: own-ship "
+            "jumps between places, as when the rows are bearings taken by several platforms "
+            "(ships, buoys, stations); tma reads one own-ship per log: give each platform's "
+            "rows as a log of its own")
+
+
 def _on_track(t, x, y, nav: Navigation, index, options, dropped: Dropped) -> np.ndarray:
     """The fixes to keep: those ``far_off`` finds off the track are left out (``index``: the
     rows of ``nav`` they are)."""
     order = np.argsort(t, kind="stable")
+    _one_platform(t[order], x[order], y[order], nav, options.nav.max_speed_m_s)
     off = np.zeros(t.size, dtype=bool)
     off[order] = far_off(t[order], x[order], y[order], options.nav.max_speed_m_s)
     return dropped.drop(off, "own-ship fix far off the track", fix_places(nav, index),

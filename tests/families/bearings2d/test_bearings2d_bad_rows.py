@@ -153,6 +153,35 @@ def test_fixes_at_zero_zero_or_far_off_are_outliers(tmp_path):
                          navigation=tmp_path / "gps.csv")
 
 
+def test_bearings_of_two_platforms_in_one_log_are_refused(tmp_path):
+    """A navigation export of two vessels' bearings (``platform`` a column tma does not read),
+    rows alternating every 5 s between ships 6 km apart: one line saying own-ship jumps
+    between places, never a track of one own-ship jumping back and forth."""
+    t = np.arange(0.0, 1200.0, 5.0)
+    second = np.arange(t.size) % 2 == 1
+    east = np.where(second, 6000.0, 0.0) + 4.0 * t
+    lat, lon = latlon(east, np.zeros(t.size))
+    frame = pd.DataFrame({"timestamp_utc": iso(t), "platform": np.where(second, "B", "A"),
+                          "latitude_deg": lat, "longitude_deg": lon, "contact": "T1",
+                          "bearing_deg": 45.0})
+    frame.to_csv(tmp_path / "two.csv", index=False)
+    with pytest.raises(InputError, match=r"239 of 239 steps between successive own-ship fixes "
+                       r"\(100%\) are faster than nav\.max_speed_m_s = .* up to 6\.0 km: "
+                       r"own-ship jumps between places.*several platforms.*a log of its own"
+                       ) as err:
+        ingest(tmp_path / "two.csv", data_dir=tmp_path / "data")
+    assert "\n" not in str(err.value)
+    assert not (tmp_path / "data" / "datasets").exists()
+    # a few fixes off (one platform's bad fixes) are still left out and counted
+    frame.loc[second, ["latitude_deg", "longitude_deg"]] = np.column_stack(
+        latlon(4.0 * t[second], np.zeros(second.sum())))
+    frame.loc[[11, 101], ["latitude_deg", "longitude_deg"]] = lat[11] + 0.05, lon[11]
+    frame.to_csv(tmp_path / "one.csv", index=False)
+    root = ingest(tmp_path / "one.csv", data_dir=tmp_path / "data")
+    assert _manifest(root)["bad_rows"]["reasons"]["own-ship fix far off the track"][
+        "count"] == 2
+
+
 def test_the_outlier_rule_never_drops_a_fix_of_a_real_track(tmp_path):
     """A fast own-ship (20 m/s) turning hard every 30 s, fixes at 1 Hz with 10 m noise: no
     fix is far off by the rule (a bound any fix within nav.max_speed_m_s meets)."""
