@@ -86,7 +86,6 @@ def test_no_module_of_tma_or_pipeline_imports_itself_back():
     assert len(modules) > 100 and {"tma.stages.estimate", "pipeline.table"} <= set(modules)
     edges = _imports(modules)
     assert "tma.runtime.compile_ahead" in edges["pipeline.table"]  # function-level imports
-    assert "tma.plan.points" in edges["tma.stages.estimate"]  # function-level imports count
     assert circles(edges) == []
 
 
