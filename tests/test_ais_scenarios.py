@@ -9,7 +9,7 @@ import pytest
 
 from tests.families.bearings2d.ais_trial import cases_module
 from tma.ais.recording import RealPairs, RealWindows, pairs_of, windows_of
-from tma.config import validate
+from tma.config_nodes import validate
 from tma.errors import ConfigError
 
 RECORDING = "tests/data/ais/positions.csv.gz"

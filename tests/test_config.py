@@ -14,7 +14,8 @@ from omegaconf import OmegaConf
 from pipeline._common import CONF_DIR, engine, estimator_nodes, scenario_nodes
 from tests.conftest import compose_cfg, run_stage_here
 from tma import options
-from tma.config import describe, to_plain, validate
+from tma.config import describe, to_plain
+from tma.config_nodes import validate
 from tma.errors import ConfigError
 from tma.families import (
     NAMES,
@@ -150,7 +151,7 @@ def test_non_finite_values_anywhere_are_refused_naming_the_dotted_key():
 def test_fields_declared_nonfinite_accept_inf_but_not_nan():
     from dataclasses import dataclass, field
 
-    from tma.config import validate
+    from tma.config_nodes import validate
 
     @dataclass
     class Schema:

@@ -19,6 +19,7 @@ import re
 import shlex
 import shutil
 import subprocess
+import sys
 import tomllib
 from pathlib import Path
 
@@ -421,12 +422,93 @@ def test_the_documented_kinds_are_the_registered_readers():
         list(r.extensions) for r in readers()]
 
 
+# -- what architecture.md draws and walks through ---------------------------------------------
+
+ARCHITECTURE = REPO / "docs" / "architecture.md"
+BOTTOM = ("tma.io", "tma.maths", "tma.runtime", "tma.sources", "tma.tables")
+
+
+def test_the_layers_drawn_are_the_imports():
+    """The drawing of the layers holds: no module of the bottom layer imports a family, the
+    plan, a stage, the API or the command line (save ``tma.runtime.compile_ahead``, which
+    builds the families' estimators, as the page says), and no family imports the plan, a
+    stage, the API or the command line."""
+    from tests.test_imports import _imports, _modules
+
+    (drawing,) = [text for text in drawings(ARCHITECTURE) if "pipeline/<verb>.py" in text]
+    assert all(f"{layer.replace('.', '/')}/" in drawing for layer in BOTTOM)
+    edges = _imports(_modules())
+
+    def upward(modules, above) -> dict:
+        return {m: sorted(e for e in edges[m] if e.startswith(above)) for m in modules
+                if any(e.startswith(above) for e in edges[m])}
+
+    upper = ("tma.families", "tma.plan", "tma.stages", "tma.api", "pipeline")
+    assert upward([m for m in edges if m.startswith(BOTTOM)], upper) == {
+        "tma.runtime.compile_ahead": ["tma.families"]}
+    assert upward([m for m in edges if m.startswith("tma.families.")], upper[1:]) == {}
+
+
+def test_the_contract_drawn_is_the_code():
+    """Every class the drawing of the contracts names is a class of tma (a family's row: of
+    that family), and every registered family has its row."""
+    (drawing,) = [text for text in drawings(ARCHITECTURE) if "tma/estimator.py" in text]
+    classes = {path: set(re.findall(r"^class (\w+)", path.read_text(), re.M))
+               for path in (REPO / "tma").rglob("*.py")}
+    rows = {line.split()[0]: line for line in drawing.splitlines()
+            if line.split() and line.split()[0] in NAMES}
+    assert sorted(rows) == sorted(NAMES)
+    for line in drawing.splitlines():
+        family = next((name for name, row in rows.items() if row == line), None)
+        package = REPO / "tma" / "families" / family if family else REPO / "tma"
+        declared = set().union(*(names for path, names in classes.items()
+                                 if path.is_relative_to(package)))
+        named = re.findall(r"\b[A-Z][A-Za-z0-9]*[a-z][A-Za-z0-9]*\b", line)
+        assert set(named) <= declared, (line, set(named) - declared)
+
+
+def test_the_walk_through_runs_as_written(tmp_path):
+    """The walk-through of architecture.md (a new estimator and a new reader, run), as its
+    reader follows it: each python block whose first line is ``# file: PATH`` saved there,
+    the others run in order as one script in a new interpreter started in that directory
+    (so the registries are fresh, and the files importable), nothing mocked; the blocks'
+    own asserts check what they give."""
+    script, saved = [], []
+    for _, _, text in fenced(ARCHITECTURE, "python"):
+        if named := re.fullmatch(r"# file: ([\w/]+\.py)", text.splitlines()[0]):
+            path = tmp_path / named.group(1)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(text)
+            saved.append(path.read_text())
+        else:
+            script.append(text)
+    assert any("(BearingsEstimator)" in code for code in saved)  # an estimator
+    assert any("READER = Reader(" in code for code in saved)  # and a reader
+    (tmp_path / "walk_through.py").write_text("\n".join(script))
+    proc = subprocess.run([sys.executable, "walk_through.py"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
+    assert (tmp_path / "contacts.jsonl").stat().st_size > 0
+
+
 # -- what the docs cite ------------------------------------------------------------------------
+
+def drawings(doc: Path) -> list[str]:
+    """The drawings of ``doc`` (its ``text`` blocks), whose paths and names count as cited."""
+    return [text for _, _, text in fenced(doc, "text")]
+
+
+def cited_code(doc: Path) -> list[str]:
+    """What ``doc`` quotes as code in its prose (fenced blocks aside), and its drawings'
+    lines."""
+    prose = re.sub(r"```.*?```", "", doc.read_text(), flags=re.S)
+    return [*re.findall(r"`([^`\n]+)`", prose),
+            *(line for text in drawings(doc) for line in text.splitlines())]
+
 
 def cited_paths(doc: Path) -> list[str]:
     found = []
-    for code in re.findall(r"`([^`\n]+)`", re.sub(r"```.*?```", "", doc.read_text(),
-                                                 flags=re.S)):
+    for code in cited_code(doc):
         found += re.findall(r"(?<![\w/])((?:\.\./shared/|tma/|tests/|conf/|docs/|bench/|"
                             r"pipeline/)[\w./<>*-]*)", code)
     return found
@@ -460,7 +542,9 @@ def test_every_path_and_name_the_docs_cite_exists(doc):
                 source = (REPO / module).read_text()
                 if not re.search(rf"^(?:class|def) {attribute}\b|^{attribute} =", source, re.M):
                     missing.append(path)
-    names = re.findall(r"`((?:tma|pipeline)(?:\.[A-Za-z_]\w*)+)`", doc.read_text())
+    names = re.findall(r"`((?:tma|pipeline)(?:\.[A-Za-z_]\w*)+)`", doc.read_text()) + [
+        name for text in drawings(doc)
+        for name in re.findall(r"(?<![\w/.])((?:tma|pipeline)(?:\.[A-Za-z_]\w*)+)", text)]
     for name in names:
         if not _resolves(name):
             missing.append(name)
@@ -478,8 +562,7 @@ def test_every_file_name_the_docs_mention_exists(doc):
     ours = {p.relative_to(REPO).as_posix() for root in ("tma", "pipeline", "conf", "tests",
                                                           "bench", "examples", "docs")
             for p in (REPO / root).rglob("*") if p.is_file()}
-    text = re.sub(r"```.*?```", "", doc.read_text(), flags=re.S)
-    named = {name for code in re.findall(r"`([^`\n]+)`", text)
+    named = {name for code in cited_code(doc)
              for name in FILE_NAME.findall(code) if not name.startswith("../")}
     missing = sorted(n for n in named if n not in ours
                      and not any(path.endswith("/" + n) for path in ours))

@@ -7,7 +7,7 @@ import json
 import pytest
 
 from pipeline._checks import check_stage_options
-from tma.config import defaults
+from tma.config_nodes import defaults
 from tma.errors import ConfigError, IntegrityError
 from tma.families import dataset_name, estimator_class, load_scenario, scenario_module
 from tma.plan.datasets import dataset_roots, open_datasets

@@ -93,7 +93,7 @@ def test_registered_defaults_are_omegaconfs_exactly():
     OmegaConf's structured node (8 ms each): the same values, of the same types."""
     from omegaconf import OmegaConf
 
-    from tma.config import defaults
+    from tma.config_nodes import defaults
     from tma.families import NAMES, family
 
     schemas = [family(n).scenario.Config for n in NAMES] + [
@@ -106,7 +106,7 @@ def test_registered_defaults_are_omegaconfs_exactly():
 def test_defaults_of_a_dataclass_without_every_default_are_omegaconfs():
     from dataclasses import dataclass, field
 
-    from tma.config import defaults
+    from tma.config_nodes import defaults
 
     @dataclass
     class Partial:

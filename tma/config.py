@@ -1,24 +1,17 @@
-"""Parameters declared once, and typed validation of config nodes against them.
-
-Each scenario and estimator declares its parameters as a dataclass whose every field is a
-``param``: its default, its doc (meaning and units) and the values it allows (an interval, or
-choices), written in one place. A Hydra node is merged onto it, so unknown keys and wrong
-types fail with a message that names the key, instead of surfacing later as a numpy error.
-Every float anywhere in the config (nested dataclasses and lists included) must be finite; a
-``param(..., nonfinite=True)`` may be +-inf (e.g. "no limit"), never NaN. ``Params`` (the
-base of every scenario and estimator config) then checks every declared range, in nested
-configs too (``check_params``: one line naming the key, the value and what is allowed), before
-the class's own ``__post_init__`` checks what relates several fields. A field of text may
-declare its ``form`` instead (a date, an address: ``Form``), and a value of the wrong type,
-caught here or by OmegaConf's typed merge, is the same one line. ``describe`` lists them
-(``python -m tma.options``). The ingest reading options (``tma.sources.options``), the family's
-ingest settings and the ``parallel`` options are declared and checked the same way.
+"""Parameters declared once, and checked: each scenario and estimator declares its
+parameters as a dataclass whose every field is a ``param``: its default, its doc (meaning
+and units) and the values it allows (an interval, choices, or the form of a text: ``Form``),
+written in one place. ``Params`` (the base of every scenario and estimator config) checks
+every declared type and range on construction, in nested configs too (``check_params``: one
+line naming the key, the value and what is allowed), before the class's own
+``__post_init__`` checks what relates several fields; a ``param(..., nonfinite=True)`` may be
++-inf (e.g. "no limit"), never NaN. ``describe`` lists them (``python -m tma.options``). The
+ingest reading options (``tma.sources.options``), the family's ingest settings and the
+``parallel`` options are declared and checked the same way. A config node (Hydra's, or a
+plain dict) becomes such a dataclass in ``tma.config_nodes.validate``, whose messages for
+unknown keys and values of a wrong type are the same one line.
 """
 
-import copy
-import datetime
-import functools
-import json
 import math
 import numbers
 import re
@@ -27,163 +20,15 @@ import typing
 from collections.abc import Callable
 from dataclasses import MISSING, Field, asdict, dataclass, field, fields, is_dataclass
 
-from omegaconf import DictConfig, ListConfig, OmegaConf
-from omegaconf.errors import OmegaConfBaseException, ValidationError
+from omegaconf import DictConfig, OmegaConf
 
-from tma.errors import ConfigError, ConfigTypeError, TmaError
-
-
-@functools.cache
-def structured(schema) -> DictConfig:
-    """``OmegaConf.structured(schema)``, built once per dataclass (~8 ms each, and a command
-    needs each several times: Hydra's defaults, the estimator keys, validation). Shared:
-    read it or merge onto it (``OmegaConf.merge`` copies), never modify it."""
-    return OmegaConf.structured(schema)
+from tma.errors import ConfigError, ConfigTypeError
 
 
-def defaults(schema) -> dict:
-    """Every default of dataclass ``schema`` as a plain dict (``???`` where it has none)."""
-    return copy.deepcopy(_defaults(schema))
-
-
-@functools.cache
-def _defaults(schema) -> dict:
-    # every command registers ~20 dataclasses' defaults before Hydra composes: read them off
-    # an instance (0.1 ms) rather than build each one's OmegaConf node (8 ms); a dataclass
-    # with a field that has no default is OmegaConf's to mark '???'
-    try:
-        return _containers(asdict(schema()))
-    except (TypeError, ValueError):
-        return OmegaConf.to_container(structured(schema))
-
-
-def _containers(value):
-    """Tuples as lists, as OmegaConf's ``to_container`` gives them."""
-    if isinstance(value, dict):
-        return {k: _containers(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_containers(v) for v in value]
-    return value
-
-
-def validate(schema, node, where: str):
-    """Return an instance of dataclass ``schema`` built from ``node`` (DictConfig or dict).
-
-    OmegaConf's typed merge costs ~50 ms, and every shard task validates its config again
-    (tasks carry plain dicts to worker processes): a node validated before is answered from a
-    cache with a fresh copy."""
-    if isinstance(node, DictConfig):
-        node = OmegaConf.to_container(node, resolve=True)
-    node = _times_as_text(node)
-    try:
-        key = json.dumps(node, sort_keys=True)
-    except (TypeError, ValueError):  # not JSON-able (e.g. a tuple key): validate uncached
-        return _validate(schema, node, where)
-    return copy.deepcopy(_validated(schema, key, where))
-
-
-@functools.lru_cache(maxsize=256)
-def _validated(schema, key: str, where: str):
-    return _validate(schema, json.loads(key), where)
-
-
-def _times_as_text(value):
-    """``value`` with every ``datetime`` (a pandas ``Timestamp`` too) as the ISO-8601 text a
-    config holds (``time.start_utc``, ``epoch_utc``): one given in Python is read as written
-    there; a time without a zone stays without one, for the key's check to name."""
-    if isinstance(value, dict):
-        return {k: _times_as_text(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_times_as_text(v) for v in value]
-    return value.isoformat() if isinstance(value, datetime.datetime) else value
-
-
-def _validate(schema, node, where: str):
-    try:
-        merged = OmegaConf.merge(structured(schema), node or {})
-        check_finite(merged, where)  # before __post_init__: its range checks assume numbers
-        return OmegaConf.to_object(merged)
-    except OmegaConfBaseException as exc:
-        key = getattr(exc, "full_key", None)
-        declared = _declared(schema, key) if key else None
-        if isinstance(exc, ValidationError) and declared is not None:  # a value of a wrong type
-            value = _given(node, key, getattr(exc, "value", None))
-            raise ConfigTypeError(_at(where, _wrong_type(key, declared, value))) from None
-        msg = (getattr(exc, "msg", None) or str(exc)).splitlines()[0]
-        raise ConfigError(_at(where, msg + (f" (key '{key}')" if key else ""))) from None
-    except TmaError:  # a check's own line (``check_params``, ``__post_init__``)
-        raise
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(_at(where, str(exc))) from None
-
-
-def _at(where: str, text: str) -> str:
+def message_at(where: str, text: str) -> str:
     """``where: text`` (``scenario 'bearings2d': ...``); the text alone where ``where`` is
     empty (options whose keys say where they are: ``csv.delimiter``, ``parallel.n_jobs``)."""
     return f"{where}: {text}" if where else text
-
-
-def _path(key: str) -> list:
-    """``legs[1].duration_s`` -> ``['legs', 1, 'duration_s']``."""
-    return [int(p) if p.isdigit() else p for p in re.findall(r"[^.\[\]]+", key)]
-
-
-def _declared(schema, key: str) -> Field | None:
-    """The field of dataclass ``schema`` at dotted ``key`` (nested and listed configs
-    included); None where there is none, or the key names no single value."""
-    found = None
-    for part in _path(key):
-        if isinstance(part, int):
-            continue  # an element of a list of configs: the same schema
-        found = next((f for f in fields(schema) if f.name == part), None) if is_dataclass(
-            schema) else None
-        if found is None:
-            return None
-        default = (found.default_factory() if found.default_factory is not MISSING
-                   else found.default)
-        if isinstance(default, list) and default and is_dataclass(default[0]):
-            default = default[0]
-        schema = type(default) if is_dataclass(default) else None
-    return found if schema is None else None
-
-
-def _given(node, key: str, fallback):
-    """The value given at dotted ``key`` of ``node`` (a plain dict), as written."""
-    try:
-        for part in _path(key):
-            node = node[part]
-        return node
-    except (KeyError, IndexError, TypeError):
-        return OmegaConf.to_container(fallback) if OmegaConf.is_config(fallback) else fallback
-
-
-MAX_INT = 2**53  # larger integers are not exact as JSON numbers (and no count is that big)
-
-
-def check_finite(node, where: str, key: str = "", allow_inf: bool = False,
-                 numbers: bool = False):
-    """Raise ConfigError naming the dotted key of the first NaN or infinite float, or integer
-    beyond +-2^53, in ``node`` (a merged DictConfig/ListConfig or a value); fields whose
-    metadata has ``nonfinite`` may be infinite (never NaN); elements of a field declared
-    ``list[float]`` must be numbers (``numbers``)."""
-    if isinstance(node, DictConfig):
-        cls = OmegaConf.get_type(node)
-        declared = fields(cls) if is_dataclass(cls) else ()
-        inf_ok = {f.name for f in declared if f.metadata.get("nonfinite")}
-        number_lists = {f.name for f in declared if f.type == list[float]}
-        for k in node:
-            check_finite(node[k], where, f"{key}.{k}" if key else str(k), k in inf_ok,
-                         k in number_lists)
-    elif isinstance(node, ListConfig):
-        for i, value in enumerate(node):
-            if numbers and (isinstance(value, bool) or not isinstance(value, int | float)):
-                raise ConfigError(_at(where, f"{key}[{i}] must be a number, got {value}"))
-            check_finite(value, where, f"{key}[{i}]", allow_inf)
-    elif isinstance(node, float) and not (math.isfinite(node)
-                                          or (allow_inf and math.isinf(node))):
-        raise ConfigError(_at(where, f"{key} must be finite, got {node}"))
-    elif isinstance(node, int) and not isinstance(node, bool) and abs(node) > MAX_INT:
-        raise ConfigError(_at(where, f"{key} = {node} is too large (at most 2^53)"))
 
 
 def to_plain(obj):
@@ -350,32 +195,34 @@ def check_params(config, where: str, prefix: str = ""):
             continue
         meta, simple = f.metadata, _simple(f.type)
         if simple is not None and not (_fits(value, simple[0]) or value is None and simple[1]):
-            raise ConfigTypeError(_at(where, _wrong_type(key, f, value)))
+            raise ConfigTypeError(message_at(where, wrong_type_message(key, f, value)))
         if value is None or isinstance(value, bool) and "form" not in meta:
             continue
         if isinstance(value, float) and not math.isfinite(value) and not meta.get("nonfinite"):
-            raise ConfigError(_at(where, f"{key} must be finite, got {_shown(value)}"))
+            raise ConfigError(message_at(where, f"{key} must be finite, got {_shown(value)}"))
         interval, choices, each, form = (meta.get(k) for k in ("range", "choices", "each",
                                                                "form"))
         if choices is not None and value not in choices:
-            raise ConfigError(_at(where, f"{key} must be one of "
+            raise ConfigError(message_at(where, f"{key} must be one of "
                                          f"{', '.join(map(_choice, choices))}, got "
                                          f"{_shown(value)}"))
         if interval is not None and value not in interval:
-            raise ConfigError(_at(where, f"{key} must be {_in(interval)}, got "
+            raise ConfigError(message_at(where, f"{key} must be {_in(interval)}, got "
                                          f"{_shown(value)}"))
         for i, item in enumerate(value if each is not None else ()):
             if item not in each:
-                raise ConfigError(_at(where, f"{key}[{i}] must be {_in(each)}, got "
+                raise ConfigError(message_at(where, f"{key}[{i}] must be {_in(each)}, got "
                                              f"{_shown(item)}"))
         problem = form.problem(value) if form is not None else None
         if problem:  # what is wrong, then what is allowed
-            raise ConfigError(_at(where, f"{key}={value}: {problem}; {key} must be {form.text}"))
+            raise ConfigError(message_at(where, f"{key}={value}: {problem}; {key} must be "
+                                                f"{form.text}"))
         if problem is not None:
-            raise ConfigError(_at(where, f"{key} must be {form.text}, got {_shown(value)}"))
+            raise ConfigError(message_at(where, f"{key} must be {form.text}, got "
+                                                f"{_shown(value)}"))
 
 
-def _wrong_type(key: str, f, value) -> str:
+def wrong_type_message(key: str, f, value) -> str:
     """``key must be <allowed>, got <value>`` for a value of the wrong type; a float where a
     whole number is due is shown as the float it is (``1e3`` reads as 1000.0), with the
     spelling that works."""

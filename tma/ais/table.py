@@ -1,5 +1,5 @@
 """Decoded AIS position reports as a table (CSV, gzip'd CSV, Parquet), read by the logs'
-table reader (``tma.sources.csv_table``: its layout sniffing, ``tma.utc.time_column``: its
+table reader (``tma.sources.csv_layout``: its layout sniffing, ``tma.utc.time_column``: its
 times) with the ``truth.*`` options of its own: ``truth.columns.time|mmsi|lat|lon|sog|cog``,
 ``truth.time.format|zone|ambiguous``, ``truth.csv.delimiter|decimal``, ``truth.sog_units``.
 
@@ -21,7 +21,7 @@ import numpy as np
 from tma.ais.options import SOG_UNITS, TruthError, TruthOptions
 from tma.errors import InputError
 from tma.sources.base import Dropped, line_places
-from tma.sources.csv_table import CsvFile, Frame
+from tma.sources.csv_layout import CsvFile, Frame
 from tma.utc import UNIX_FROM_S, UNIX_SCALE_NS, UTC_FROM_NS, is_pattern, time_column
 
 SPELLINGS = {  # per role, the names the common exports give it (lower case, spaces as _)

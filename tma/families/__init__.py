@@ -16,7 +16,8 @@ import functools
 import importlib
 from dataclasses import dataclass
 
-from tma.config import defaults, to_plain, validate
+from tma.config import to_plain
+from tma.config_nodes import defaults, validate
 from tma.errors import ConfigError
 from tma.estimator import module_name
 from tma.io.atomic import sha256_json
@@ -128,7 +129,7 @@ def register_configs():
     """Register every scenario and estimator ``Config`` dataclass's defaults with Hydra's
     ConfigStore as ``scenario/<family>`` and ``estimator/<name>``: the dataclass is the one
     source of every default (no YAML copy). The nodes are plain (untyped), so a bad value
-    reaches ``tma.config.validate`` and fails in one line naming the key.
+    reaches ``tma.config_nodes.validate`` and fails in one line naming the key.
 
     Every command runs this first, so it imports every scenario and estimator module: their
     top-level imports stay light (numba, scipy, pandas and matplotlib load where they are

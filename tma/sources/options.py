@@ -18,7 +18,8 @@ from dataclasses import dataclass, field, fields, is_dataclass, make_dataclass
 
 from omegaconf import DictConfig, OmegaConf
 
-from tma.config import Form, Params, describe, param, validate
+from tma.config import Form, Params, describe, param
+from tma.config_nodes import validate
 from tma.errors import ConfigError
 from tma.sources.base import Dropped, Observation
 from tma.utc import parse_utc

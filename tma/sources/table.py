@@ -1,5 +1,5 @@
 """A table's columns -> ``Recording``s: the rows of a CSV file or of a pandas DataFrame
-(``tma.sources.csv_table``: ``CsvFile``, ``Frame``, which find its layout and columns), read
+(``tma.sources.csv_layout``: ``CsvFile``, ``Frame``, which find its layout and columns), read
 alike (``read_table``).
 
 Times are read by ``tma.utc`` (``time_column``); values in the observation's first unit, or
@@ -36,7 +36,7 @@ SAME_FIX = {"x": 1e-6, "lat": 1e-9}  # m, deg (0.1 mm): rows at one time share o
 
 
 def read_table(table, options, *, navigation: bool, contacts: bool) -> list[Recording]:
-    """The Recordings of a table: a file's (``tma.sources.csv_table.CsvFile``: its layout)
+    """The Recordings of a table: a file's (``tma.sources.csv_layout.CsvFile``: its layout)
     or a DataFrame (``Frame``); arguments as ``tma.sources.csv_table.read_csv_table``'s."""
     path = table.path
     role = options.observation.role

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from tma.config import validate
+from tma.config_nodes import validate
 from tma.families.radar2d.estimators.alphabeta import Config as AlphaBetaConfig
 from tma.families.radar2d.scenario import Config, scan_times, vessel_path
 
