@@ -423,3 +423,36 @@ def test_the_readmes_trial_files_are_what_their_script_writes_and_small():
     for name, text in build.files().items():
         assert (here / name).read_text() == text, name
         assert len(text.encode()) < 40_000, name
+
+
+# -- review of issue 38 --------------------------------------------------------------------------
+
+def test_a_campaign_of_logs_of_one_name_in_several_folders_scores_each_under_its_own_name(
+        trial, tmp_path, monkeypatch):
+    """``input='days/*/leg.csv'``: three logs named alike (the third's bearings 20 deg off, so
+    its verdict differs): three datasets, three rows, each labelled by its folder, none lost
+    or overwritten; the counts stay whole beside a refused log, which is counted."""
+    import tma
+
+    log = pd.read_csv(trial / "trial.csv")
+    for day, shift in (("d1", 0), ("d2", 0), ("d3", 20)):
+        (tmp_path / "days" / day).mkdir(parents=True)
+        log.assign(bearing_deg=(log.bearing_deg + shift) % 360).to_csv(
+            tmp_path / "days" / day / "leg.csv", index=False)
+    ais = trial / "trial_ais.csv"
+    monkeypatch.chdir(tmp_path)
+    table = tma.campaign("days/*/leg.csv", truth=ais)
+    assert list(table["log"]) == ["d1/leg.csv", "d2/leg.csv", "d3/leg.csv", "pooled"]
+    assert "no contact" in table.set_index("log").loc["d3/leg.csv"].note
+    assert table["contacts"].dtype == "Int64"
+    proc = run_stage_here("table", "input=days/*/leg.csv", f"truth={ais}", "name=days",
+                          *data_paths(tmp_path), *QUIET, check=False)
+    assert proc.returncode == 0, proc.stderr
+    datasets = {p.name for p in (tmp_path / "data" / "datasets").iterdir()}
+    assert {"days-d1-leg", "days-d2-leg"} <= datasets, datasets
+    written = pd.read_csv(tmp_path / "tables" / "days-campaign-lm.csv")
+    assert list(written["log"]) == list(table["log"])
+    assert (written["contacts"].iloc[[0, 1, 3]] == [2, 2, 4]).all()
+    md = (tmp_path / "tables" / "days-campaign-lm.md").read_text()
+    assert "Campaign of 3 log(s) (1 not scored): 4 of 4 contacts" in md, md
+    assert "4.0" not in md
