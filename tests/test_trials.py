@@ -456,3 +456,61 @@ def test_a_campaign_of_logs_of_one_name_in_several_folders_scores_each_under_its
     md = (tmp_path / "tables" / "days-campaign-lm.md").read_text()
     assert "Campaign of 3 log(s) (1 not scored): 4 of 4 contacts" in md, md
     assert "4.0" not in md
+
+
+def test_sparse_ais_keeps_its_ships_turns_and_drops_a_position_error_counted_and_named(
+        trial, tmp_path, caplog):
+    """Reports every 5 minutes: a ship turns between them, so its genuine reports lie far
+    (km) off the line between their neighbours; every one is kept (the spike bound grows with
+    the gap), while a report moved 50 km off is dropped, counted in the manifest's truth
+    ``dropped`` and named (MMSI and time) in a warning."""
+    import logging
+
+    import tma
+    from tma.ais.tracks import SPIKE_REASON, vessel_tracks
+
+    sparse = _sparse(ais_trial.ais_reports(), 300.0).reset_index(drop=True)
+    ship = ais_trial.TRUTH["T1"]
+    rows = sparse.index[sparse.mmsi == ship]
+    bad = rows[len(rows) // 2]
+    moved = sparse.copy()
+    moved.loc[bad, "lat_deg"] += 0.45  # 50 km north: no ship gets there in 10 minutes
+    ais_trial.write_ais_csv(tmp_path / "sparse.csv", moved)
+    reports = read_reports(tmp_path / "sparse.csv")
+    kept = vessel_tracks(reports)
+    for mmsi, group in sparse.groupby("mmsi"):  # every genuine report kept, the bad one not
+        expected = len(group) - (mmsi == ship)
+        assert kept[mmsi].t_ns.size == expected, mmsi
+    with caplog.at_level(logging.WARNING, logger="tma"):
+        rec = tma.read_log(trial / "trial.csv", truth={"file": tmp_path / "sparse.csv",
+                                                       "max_gap_s": 620})
+    dropped = rec._read.truth.record["dropped"]
+    assert dropped["count"] == 1 and dropped["reasons"][SPIKE_REASON]["count"] == 1
+    when = pd.Timestamp(moved.loc[bad, "t_s"] * 1e9, tz="UTC").strftime("%H:%M:%S")
+    named = dropped["reasons"][SPIKE_REASON]["first"][0]
+    assert f"MMSI {ship}" in named and when in named, named
+    assert any(SPIKE_REASON in r.getMessage() and f"MMSI {ship}" in r.getMessage()
+               for r in caplog.records)
+
+
+def test_a_ship_whose_ais_ends_before_the_log_is_named_with_what_would_score_it(trial,
+                                                                              tmp_path):
+    """T1's ship's last report a minute before the last bearing: it is no candidate, and
+    what the contact's note (and a given match's refusal) says names that ship, that it fits
+    the bearings its AIS covers, and what would score it."""
+    import tma
+
+    reports = ais_trial.ais_reports()
+    log = pd.read_csv(trial / "trial.csv")
+    end = pd.to_datetime(log.timestamp_utc, utc=True).max().value / 1e9
+    ship = ais_trial.TRUTH["T1"]
+    cut = reports[(reports.mmsi != ship) | (reports.t_s < end - 60)]
+    ais_trial.write_ais_csv(tmp_path / "short.csv", cut)
+    rec = tma.read_log(trial / "trial.csv", truth=tmp_path / "short.csv")
+    note = rec.matches.set_index("label").loc["T1", "note"]
+    assert rec.matches.set_index("label").loc["T1", "mmsi"] is None or pd.isna(
+        rec.matches.set_index("label").loc["T1", "mmsi"])
+    assert f"MMSI {ship} fits the" in note and "give an AIS file whose reports" in note, note
+    with pytest.raises(ValueError, match=rf"MMSI {ship}'s AIS .* give an AIS file whose"):
+        tma.read_log(trial / "trial.csv", truth={"file": tmp_path / "short.csv",
+                                                 "match": {"T1": ship}})

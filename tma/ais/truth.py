@@ -36,10 +36,11 @@ import pandas as pd
 from tma.ais.match import Contact, Match, bearings_from, gap_bound, match_contacts
 from tma.ais.options import TruthError, TruthOptions
 from tma.ais.reports import cached_reports
-from tma.ais.tracks import vessel_tracks
+from tma.ais.tracks import cleaning, vessel_tracks
 from tma.io.atomic import sha256_file
 from tma.maths.angles import course_from_velocity
 from tma.maths.geo import local_to_geodetic
+from tma.sources.base import Dropped
 from tma.utc import format_utc
 
 log = logging.getLogger(__name__)
@@ -80,7 +81,9 @@ def log_truth(contacts: list[Contact], origin_deg, epoch_ns, options: TruthOptio
         raise TruthError(f"truth={path}: its AIS covers {reports.span_text()} and {where} "
                          f"{log_span}: AIS of another time, not this log's trial")
     kept = _subset(reports, near | _bracketing(reports, lo, hi))
-    ships = {m: t.on_plane(origin_deg, epoch_ns) for m, t in vessel_tracks(kept).items()}
+    tracks = vessel_tracks(kept)
+    cleaned, cleaned_text = cleaning(tracks, kept.t_ns)
+    ships = {m: t.on_plane(origin_deg, epoch_ns) for m, t in tracks.items()}
     ships = {m: s for m, s in ships.items() if s.t_s.size >= 2 and m != options.own_mmsi}
     _check_place(ships, contacts, options, path, where)
     matches = match_contacts(contacts, ships, options, epoch_ns, where)
@@ -111,7 +114,11 @@ def log_truth(contacts: list[Contact], origin_deg, epoch_ns, options: TruthOptio
     track = pd.concat(track, ignore_index=True)
     track["lat_deg"], track["lon_deg"] = local_to_geodetic(
         track["x_m"].to_numpy(), track["y_m"].to_numpy(), origin_deg)
+    dropped = Dropped()
+    dropped.merge(reports.dropped)
+    dropped.merge(cleaned)
     record = {"path": str(path), "sha256": sha256_file(path), **reports.record(),
+              "dropped": dropped.record(),
               "ships_in_log_times": len(ships),
               "options": options.record(),
               "contacts": [m.record() for m in matches],
@@ -121,6 +128,9 @@ def log_truth(contacts: list[Contact], origin_deg, epoch_ns, options: TruthOptio
     if reports.dropped.count:
         log.warning("truth=%s: left out %d report(s): %s", path, reports.dropped.count,
                     reports.dropped.text())
+    if cleaned.count:
+        log.warning("truth=%s: of the reports in the log's times, left out %d: %s", path,
+                    cleaned.count, cleaned_text)
     return LogTruth(truth, track, matches, record)
 
 
