@@ -514,3 +514,77 @@ def test_a_ship_whose_ais_ends_before_the_log_is_named_with_what_would_score_it(
     with pytest.raises(ValueError, match=rf"MMSI {ship}'s AIS .* give an AIS file whose"):
         tma.read_log(trial / "trial.csv", truth={"file": tmp_path / "short.csv",
                                                  "match": {"T1": ship}})
+
+
+def test_own_ship_ais_sparser_than_nav_max_gap_s_warns_how_many_bearings_and_a_value(
+        trial, tmp_path, caplog):
+    """Own-ship's AIS every 20 s under the default nav.max_gap_s (10 s): the bearings in its
+    gaps are left out, and a WARNING says how many of how many and a nav.max_gap_s that
+    keeps them (which does); nothing says own-ship is interpolated across the gaps."""
+    import logging
+
+    import tma
+
+    reports = ais_trial.ais_reports()
+    own = reports.mmsi == ais_trial.OWN
+    ais_trial.write_ais_csv(tmp_path / "ais.csv", pd.concat(
+        [reports[~own], _sparse(reports[own], 20.0)]))
+    bare = _bare_log(trial, tmp_path)
+    with caplog.at_level(logging.INFO, logger="tma"):
+        rec = tma.read_log(bare, truth=tmp_path / "ais.csv",
+                           options={"truth.own_mmsi": ais_trial.OWN})
+    total = len(pd.read_csv(bare))
+    left = total - len(rec.bearings)
+    assert 0 < left < total
+    line = next(r for r in caplog.records if "lie in gaps of own-ship's AIS" in r.getMessage())
+    assert line.levelno == logging.WARNING
+    assert f"{left} of {total} bearings" in line.getMessage(), line.getMessage()
+    value = int(line.getMessage().split("nav.max_gap_s=")[1].split()[0])
+    assert not any("interpolated across them" in r.getMessage() and "not" not in
+                   r.getMessage() for r in caplog.records)
+    kept = tma.read_log(bare, truth=tmp_path / "ais.csv",
+                        options={"truth.own_mmsi": ais_trial.OWN, "nav.max_gap_s": value})
+    assert len(kept.bearings) == total
+
+
+def test_own_ship_from_ais_and_the_logs_own_ship_columns_named_both_is_one_line(trial):
+    """``truth.own_mmsi`` with ``columns.lat``/``columns.lon`` named: two own-ships asked
+    for; refused in one line saying which to drop (each way then reads)."""
+    import tma
+
+    ais = trial / "trial_ais.csv"
+    own = {"truth.own_mmsi": ais_trial.OWN, "nav.max_gap_s": 30}
+    cols = {"columns.lat": "latitude_deg", "columns.lon": "longitude_deg"}
+    with pytest.raises(ValueError, match=r"not both: drop truth\.own_mmsi .* or "
+                                         r"columns\.lat, columns\.lon to use the AIS's") as e:
+        tma.read_log(trial / "trial.csv", truth=ais, options={**own, **cols})
+    assert "\n" not in str(e.value)
+    assert len(tma.read_log(trial / "trial.csv", truth=ais, options=cols).bearings)
+    assert len(tma.read_log(trial / "trial.csv", truth=ais, options=own).bearings)
+
+
+def test_ais_times_to_the_minute_merge_reports_counted_and_said(trial, tmp_path, caplog):
+    """An export that writes times to the minute: a ship's reports of one minute share a
+    time and all but the first are merged; the count (own-ship's and the contacts' ships')
+    is in the manifest and a warning, which says the times are good to the minute only."""
+    import logging
+
+    import tma
+    from tma.ais.tracks import MERGED_REASON
+
+    reports = ais_trial.ais_reports()
+    minute = reports.assign(t_s=np.floor(reports.t_s / 60) * 60)
+    ais_trial.write_ais_csv(tmp_path / "minutes.csv", minute)
+    own = minute[minute.mmsi == ais_trial.OWN]
+    own_merged = len(own) - own.t_s.nunique()
+    with caplog.at_level(logging.INFO, logger="tma"):
+        rec = tma.read_log(_bare_log(trial, tmp_path), truth={
+            "file": tmp_path / "minutes.csv", "own_mmsi": ais_trial.OWN, "max_gap_s": 130},
+            options={"nav.max_gap_s": 130})
+    said = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    own_line = next(m for m in said if m.startswith(f"truth.own_mmsi={ais_trial.OWN}"))
+    assert f"{own_merged} with {MERGED_REASON}" in own_line, own_line
+    assert "good to the minute only" in own_line
+    merged = rec._read.truth.record["dropped"]["reasons"][MERGED_REASON]
+    assert merged["count"] > 0
+    assert any(f"left out {merged['count']}" in m and "good to the minute" in m for m in said)

@@ -375,7 +375,10 @@ def _ownship_at(t, t_nav, x_nav, y_nav, max_extrapolation_s):
 
 
 def _gaps(t_nav, t_obs, max_gap_s, source, plural) -> list[dict]:
-    """Gaps between consecutive fixes longer than ``max_gap_s`` (common clock seconds)."""
+    """Gaps between consecutive fixes longer than ``max_gap_s`` (common clock seconds) with a
+    value inside: own-ship is interpolated across those; a gap without one is interpolated
+    for none (own-ship from its AIS leaves the values in its gaps out beforehand,
+    ``tma.ais.ownship``)."""
     dt = np.diff(t_nav)
     where = np.flatnonzero(dt > max_gap_s)
     t_sorted = np.sort(t_obs)
@@ -383,7 +386,7 @@ def _gaps(t_nav, t_obs, max_gap_s, source, plural) -> list[dict]:
               - np.searchsorted(t_sorted, t_nav[where], side="right"))
     return [{"from_s": float(t_nav[k]), "to_s": float(t_nav[k + 1]), "length_s": float(dt[k]),
              f"{plural}_inside": int(n), "source": source}
-            for k, n in zip(where, inside, strict=True)]
+            for k, n in zip(where, inside, strict=True) if n > 0]
 
 
 def _span(t) -> str:
