@@ -588,3 +588,31 @@ def test_ais_times_to_the_minute_merge_reports_counted_and_said(trial, tmp_path,
     merged = rec._read.truth.record["dropped"]["reasons"][MERGED_REASON]
     assert merged["count"] > 0
     assert any(f"left out {merged['count']}" in m and "good to the minute" in m for m in said)
+
+
+def test_ais_in_local_time_without_its_zone_names_the_zone_option(trial, tmp_path):
+    """The AIS written in Madrid time (UTC+1 in January) read as UTC: as own-ship's AIS and
+    as the truth, the one line says the clocks are 1 h apart and names truth.time.zone."""
+    import tma
+
+    reports = ais_trial.ais_reports()
+    ais_trial.write_ais_csv(tmp_path / "local.csv", reports.assign(t_s=reports.t_s + 3600))
+    with pytest.raises(ValueError, match=r"\+1 h later.*truth\.time\.zone="):
+        tma.read_log(_bare_log(trial, tmp_path), truth=tmp_path / "local.csv",
+                     options={"truth.own_mmsi": ais_trial.OWN, "nav.max_gap_s": 30})
+    with pytest.raises(ValueError, match=r"[+-]1 h apart.*truth\.time\.zone="):
+        tma.read_log(trial / "trial.csv", truth=tmp_path / "local.csv")
+    rec = tma.read_log(trial / "trial.csv", truth=tmp_path / "local.csv",
+                       options={"truth.time.zone": "Europe/Madrid"})
+    assert list(rec.truth["label"]) == ["T1", "T2"]
+
+
+def test_ais_with_decimal_commas_read_with_a_decimal_point_names_truth_csv_decimal(tmp_path):
+    from tma.ais.options import truth_options
+
+    path = _other_export(ais_trial.ais_reports().head(30), tmp_path / "comma.csv")
+    bad = truth_options({"file": str(path), **_table_options(""), "csv.delimiter": ";",
+                         "csv.decimal": "."})
+    with pytest.raises(ValueError, match=r"decimal comma \(\d+,\d+\); set truth\.csv\."
+                                         r"decimal=, to read them"):
+        read_reports(path, bad)

@@ -78,6 +78,15 @@ def log_truth(contacts: list[Contact], origin_deg, epoch_ns, options: TruthOptio
     lo, hi = epoch_ns + int((t0 - margin) * 1e9), epoch_ns + int((t1 + margin) * 1e9)
     near = (reports.t_ns >= lo) & (reports.t_ns <= hi)
     if not near.any():
+        from tma.sources.align import hours_apart
+
+        hours = hours_apart(np.array([t0, t1]) + epoch_ns / 1e9, reports.t_ns / 1e9)
+        if hours:
+            raise TruthError(
+                f"truth={path}: its AIS covers {reports.span_text()} and {where} {log_span}, "
+                f"{hours:+d} h apart: one of them is local time read as UTC; give its zone "
+                "(truth.time.zone= for the AIS's, time.zone= for the log's, e.g. "
+                "Europe/Madrid)")
         raise TruthError(f"truth={path}: its AIS covers {reports.span_text()} and {where} "
                          f"{log_span}: AIS of another time, not this log's trial")
     kept = _subset(reports, near | _bracketing(reports, lo, hi))
