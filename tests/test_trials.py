@@ -616,3 +616,28 @@ def test_ais_with_decimal_commas_read_with_a_decimal_point_names_truth_csv_decim
     with pytest.raises(ValueError, match=r"decimal comma \(\d+,\d+\); set truth\.csv\."
                                          r"decimal=, to read them"):
         read_reports(path, bad)
+
+
+def test_a_log_across_the_autumn_change_says_it_crosses_it_and_what_to_give():
+    """Madrid, 27 October 2019: 02:40-02:55 CEST, then the clocks go back and 02:00-02:15
+    CET follow. With either time.ambiguous the times go back; the one line says the log
+    crosses the change back and to give UTC times or offsets (which then read)."""
+    import tma
+
+    local = ["02:40", "02:45", "02:50", "02:55", "02:00", "02:05", "02:10", "02:15"]
+    offset = ["+02:00"] * 4 + ["+01:00"] * 4
+    frame = pd.DataFrame({"time": [f"27/10/2019 {t}" for t in local],
+                          "bearing_deg": np.arange(8.0), "x": np.arange(8) * 10.0, "y": 0.0})
+    options = {"time.format": "%d/%m/%Y %H:%M", "time.zone": "Europe/Madrid",
+               "nav.max_gap_s": 1e5}
+    for how in ("earliest", "latest"):
+        with pytest.raises(ValueError, match=r"line \d+ .*crosses the daylight-saving change "
+                                             r"back in Europe/Madrid.*give its times in UTC "
+                                             r"or with their offset") as e:
+            tma.Recording.from_frames(frame, options={**options, "time.ambiguous": how})
+        assert "\n" not in str(e.value)
+    iso = frame.assign(time=[f"2019-10-27T{t}:00{o}" for t, o in zip(local, offset,
+                                                                        strict=True)])
+    rec = tma.Recording.from_frames(iso, options={"nav.max_gap_s": 1e5})
+    assert rec.bearings["time_utc"].iloc[4] - rec.bearings["time_utc"].iloc[3] == pd.Timedelta(
+        minutes=5)
