@@ -641,3 +641,23 @@ def test_a_log_across_the_autumn_change_says_it_crosses_it_and_what_to_give():
     rec = tma.Recording.from_frames(iso, options={"nav.max_gap_s": 1e5})
     assert rec.bearings["time_utc"].iloc[4] - rec.bearings["time_utc"].iloc[3] == pd.Timedelta(
         minutes=5)
+
+
+def test_a_frame_is_scored_against_ais_as_a_file_is(trial):
+    """``Recording.from_frames(df, truth=AIS)`` and ``estimate(df, truth=AIS)`` give the
+    file's truth and scores; own-ship from the AIS is read_log's, refused in one line."""
+    import tma
+
+    ais = trial / "trial_ais.csv"
+    frame = pd.read_csv(trial / "trial.csv")
+    from_file = tma.read_log(trial / "trial.csv", truth=ais)
+    rec = tma.Recording.from_frames(frame, truth=ais)
+    assert dict(zip(rec.truth["label"], rec.truth["mmsi"], strict=True)) == ais_trial.TRUTH
+    assert np.allclose(rec.truth.range_now_m, from_file.truth.range_now_m)
+    dotted = tma.Recording.from_frames(frame, options={"truth.file": str(ais)})
+    assert list(dotted.truth["label"]) == ["T1", "T2"]
+    scored, want = tma.estimate(frame, truth=ais), tma.estimate(from_file)
+    assert list(scored["truth_mmsi"]) == list(want["truth_mmsi"])
+    assert np.allclose(scored["range_z"], want["range_z"], equal_nan=True)
+    with pytest.raises(TypeError, match=r"truth\.own_mmsi=.*tma\.read_log"):
+        tma.Recording.from_frames(frame, truth={"file": ais, "own_mmsi": ais_trial.OWN})
