@@ -661,3 +661,32 @@ def test_a_frame_is_scored_against_ais_as_a_file_is(trial):
     assert np.allclose(scored["range_z"], want["range_z"], equal_nan=True)
     with pytest.raises(TypeError, match=r"truth\.own_mmsi=.*tma\.read_log"):
         tma.Recording.from_frames(frame, truth={"file": ais, "own_mmsi": ais_trial.OWN})
+
+
+def test_the_truths_own_uncertainty_is_stated_and_a_vague_truth_velocity_leaves_campaigns(
+        trial, tmp_path):
+    """Reports every 9 minutes: the truth's velocity sd per axis exceeds half the ship's
+    speed; the coverage line states the truth's uncertainty even with no `ok` contact, names
+    those contacts, and a campaign leaves their course and speed z-scores out (its range
+    z-scores in); the CSV's truth sd is written as computed, without float noise."""
+    import tma
+    from tma.ais.campaign import campaign_table
+    from tma.families.bearings2d.truth_report import VAGUE_VELOCITY, coverage_text
+
+    ais_trial.write_ais_csv(tmp_path / "sparse.csv", _sparse(ais_trial.ais_reports(), 540.0))
+    rec = tma.read_log(trial / "trial.csv", truth={"file": tmp_path / "sparse.csv",
+                                                   "max_gap_s": 1200})
+    report = tma.estimate(rec)
+    vague = report.truth_vel_sd_m_s >= VAGUE_VELOCITY * report.true_speed_m_s
+    assert vague.any(), report[["truth_vel_sd_m_s", "true_speed_m_s"]]
+    text = coverage_text(report.assign(status="diverged"))
+    assert "none of them `ok`" in text and "truth's own uncertainty" in text, text
+    for label in report.label[vague]:
+        assert f"{label} (" in text
+    row = campaign_table({"log": report.assign(status="ok")}).iloc[0]
+    ok = report.covered.notna()
+    assert np.isclose(row.range_z_mean, report.range_z[ok].mean())
+    kept = report.course_z[ok & ~vague]
+    assert (np.isnan(row.course_z_mean) if kept.empty
+            else np.isclose(row.course_z_mean, kept.mean()))
+    assert all(len(repr(v)) < 16 for v in rec.truth.truth_pos_sd_m)

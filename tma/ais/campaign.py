@@ -14,7 +14,9 @@ contacts with a truth: how many contacts, with a truth, ``ok``; the ``ok`` share
 share of the ``ok`` ones (their truth within the estimate's 95 % region) with its 95 % Wilson
 interval (honest errors cover 95 %); per quantity (range, course, speed) the mean and the
 standard deviation of the ``ok`` contacts' z-scores (honest errors: 0 and 1) and how many lie
-beyond 3; the gross errors: ``ok`` contacts whose normalised error (NEES) exceeds the
+beyond 3 (course and speed: not of a contact whose truth's velocity is uncertain by about its
+size, sparse AIS: ``truth_report.vague_velocity``, a z-score against it tests nothing); the
+gross errors: ``ok`` contacts whose normalised error (NEES) exceeds the
 chi-square(4) 99.9 % point, which honest errors pass once in a thousand. The plot
 (``write_campaign``) sets the pooled z-scores' histograms against the standard normal and
 each log's covered share with its interval against 95 %.
@@ -102,8 +104,12 @@ def _row(name: str, report: pd.DataFrame) -> dict:
     row = {"log": name, "contacts": len(report), "with_truth": int(has.sum()),
            "ok": n, "ok_share": _share(n, int(has.sum())), "covered": k,
            "covered_share": _share(k, n), "covered_lo": float(lo), "covered_hi": float(hi)}
+    from tma.families.bearings2d.truth_report import vague_velocity
+
+    vague = vague_velocity(report)  # sparse AIS: a course/speed z against it tests nothing
     for q in QUANTITIES:
-        z = report.loc[ok, f"{q}_z"].to_numpy(float) if f"{q}_z" in report else np.array([])
+        use = ok & ~vague if q in ("course", "speed") else ok
+        z = report.loc[use, f"{q}_z"].to_numpy(float) if f"{q}_z" in report else np.array([])
         z = z[np.isfinite(z)]
         row[f"{q}_z_mean"] = float(z.mean()) if z.size else np.nan
         row[f"{q}_z_sd"] = float(z.std(ddof=1)) if z.size > 1 else np.nan
@@ -186,7 +192,8 @@ def write_campaign(table: pd.DataFrame, contacts: pd.DataFrame, tables_dir, name
              "answer is `ok`; covered: the truth within the estimate's 95 % region of position "
              "and velocity (honest errors cover 95 %; the interval is Wilson's); z: (estimate "
              "- truth) / one sigma of the `ok` contacts (honest errors: mean 0, sd 1; |z| > 3 "
-             "counted per range / course / speed); gross errors: `ok` contacts whose "
+             "counted per range / course / speed; course and speed not of a contact whose "
+             "truth's velocity is uncertain by about its size); gross errors: `ok` contacts whose "
              "normalised error exceeds the chi-square(4) 99.9 % point. "
              f"`{name}.png`: the pooled z-scores against the standard normal, and each log's "
              "covered share.\n\n")

@@ -207,7 +207,8 @@ def _truth_row(contact: Contact, ship, m: Match, options: TruthOptions, epoch_ns
     return {
         # the truth's own uncertainty (per axis, x and y alike and independent): position now,
         # velocity, and (x0, vx) of the straight line, x0 = x - vx t
-        "truth_pos_sd_m": sd_now, "truth_vel_sd_m_s": float(np.sqrt(var_v)),
+        "truth_pos_sd_m": float(f"{sd_now:.12g}"),  # 264.48, not 264.47999999999996
+        "truth_vel_sd_m_s": float(f"{np.sqrt(var_v):.12g}"),
         "truth_gap_s": float(ship.gap([t])[0]),
         "truth_var_x0_m2": var_p - 2 * t * cov_pv + t * t * var_v,
         "truth_cov_x0_v_m2_s": cov_pv - t * var_v, "truth_var_v_m2_s2": var_v,
