@@ -690,3 +690,36 @@ def test_the_truths_own_uncertainty_is_stated_and_a_vague_truth_velocity_leaves_
     assert (np.isnan(row.course_z_mean) if kept.empty
             else np.isclose(row.course_z_mean, kept.mean()))
     assert all(len(repr(v)) < 16 for v in rec.truth.truth_pos_sd_m)
+
+
+def test_naive_datetimes_with_a_zone_are_read_as_its_local_times(trial, tmp_path):
+    """A DataFrame's and a Parquet AIS's datetime column without a zone, with time.zone /
+    truth.time.zone: local times of that zone (Madrid, UTC+1 in January), as the same
+    times written as text are read; the autumn repeat read as time.ambiguous says."""
+    import tma
+
+    frame = pd.read_csv(trial / "trial.csv")
+    utc = pd.to_datetime(frame.timestamp_utc, utc=True)
+    local = frame.assign(timestamp_utc=utc.dt.tz_convert("Europe/Madrid").dt.tz_localize(None))
+    rec = tma.Recording.from_frames(local, time={"zone": "Europe/Madrid"})
+    assert (rec.bearings["time_utc"].reset_index(drop=True)
+            == tma.read_log(trial / "trial.csv").bearings["time_utc"].reset_index(
+                drop=True)).all()
+    reports = ais_trial.ais_reports()
+    t = pd.to_datetime(reports.t_s * 1e9, utc=True).dt.tz_convert("Europe/Madrid")
+    pd.DataFrame({"BaseDateTime": t.dt.tz_localize(None), "MMSI": reports.mmsi,
+                  "LAT": reports.lat_deg, "LON": reports.lon_deg}).to_parquet(
+        tmp_path / "naive.parquet")
+    got = read_reports(tmp_path / "naive.parquet", __import__(
+        "tma.ais.options", fromlist=["truth_options"]).truth_options(
+        {"file": str(tmp_path / "naive.parquet"), "time.zone": "Europe/Madrid"}))
+    assert np.abs(np.sort(got.t_ns) / 1e9 - np.sort(reports.t_s.to_numpy())).max() < 1e-3
+    repeat = pd.DataFrame({"time": pd.to_datetime(["2019-10-27 02:30", "2019-10-27 03:30",
+                                                   "2019-10-27 03:40", "2019-10-27 03:50",
+                                                   "2019-10-27 04:00"]),
+                           "bearing_deg": np.arange(5.0), "x": np.arange(5) * 10.0, "y": 0.0})
+    options = {"time.zone": "Europe/Madrid", "nav.max_gap_s": 1e5}
+    with pytest.raises(ValueError, match=r"time\.ambiguous=earliest or latest"):
+        tma.Recording.from_frames(repeat, options=options)
+    rec = tma.Recording.from_frames(repeat, options={**options, "time.ambiguous": "latest"})
+    assert rec.bearings["time_utc"].iloc[0] == pd.Timestamp("2019-10-27T01:30:00Z")
