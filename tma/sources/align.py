@@ -401,7 +401,7 @@ def _gaps(t_nav, t_obs, max_gap_s, source, plural) -> list[dict]:
 
 def hours_apart(t_a, t_b, max_hours: int = 14) -> int:
     """The whole number of hours k (1 <= |k| <= ``max_hours``, the smallest) by which times
-    ``t_a`` (s) shifted lie mostly (half or more) within the span of ``t_b``, when unshifted
+    ``t_a`` (s) shifted lie nearly all (90 %) within the span of ``t_b``, when unshifted
     none does: two clocks a zone apart (local time read as UTC). 0 when there is none."""
     t_a, t_b = np.asarray(t_a, float), np.asarray(t_b, float)
     if not t_a.size or not t_b.size:
@@ -411,7 +411,7 @@ def hours_apart(t_a, t_b, max_hours: int = 14) -> int:
         return 0
     for k in sorted(range(-max_hours, max_hours + 1), key=lambda k: (abs(k), k)):
         shifted = t_a + 3600.0 * k
-        if k and ((shifted >= lo) & (shifted <= hi)).mean() >= 0.5:
+        if k and ((shifted >= lo) & (shifted <= hi)).mean() >= 0.9:
             return k
     return 0
 
