@@ -66,9 +66,9 @@ def campaign_stage(cfg):
     name = campaign_name(cfg.input, cfg.name)
     tables_dir = Path(str(cfg.paths.tables_dir))
 
-    def score(log, ais):
+    def score(log, ais, stem):
         one = copy.deepcopy(cfg)
-        dataset = log_name(name, log, cfg.name is not None)
+        dataset = log_name(name, stem, cfg.name is not None)
         with open_dict(one):
             one.input, one.name, one.dataset = str(log), dataset, None
             one.truth.file, one.table = str(ais), f"{dataset}-{estimator}"

@@ -423,3 +423,303 @@ def test_the_readmes_trial_files_are_what_their_script_writes_and_small():
     for name, text in build.files().items():
         assert (here / name).read_text() == text, name
         assert len(text.encode()) < 40_000, name
+
+
+# -- review of issue 38 --------------------------------------------------------------------------
+
+def test_a_campaign_of_logs_of_one_name_in_several_folders_scores_each_under_its_own_name(
+        trial, tmp_path, monkeypatch):
+    """``input='days/*/leg.csv'``: three logs named alike (the third's bearings 20 deg off, so
+    its verdict differs): three datasets, three rows, each labelled by its folder, none lost
+    or overwritten; the counts stay whole beside a refused log, which is counted."""
+    import tma
+
+    log = pd.read_csv(trial / "trial.csv")
+    for day, shift in (("d1", 0), ("d2", 0), ("d3", 20)):
+        (tmp_path / "days" / day).mkdir(parents=True)
+        log.assign(bearing_deg=(log.bearing_deg + shift) % 360).to_csv(
+            tmp_path / "days" / day / "leg.csv", index=False)
+    ais = trial / "trial_ais.csv"
+    monkeypatch.chdir(tmp_path)
+    table = tma.campaign("days/*/leg.csv", truth=ais)
+    assert list(table["log"]) == ["d1/leg.csv", "d2/leg.csv", "d3/leg.csv", "pooled"]
+    assert "no contact" in table.set_index("log").loc["d3/leg.csv"].note
+    assert table["contacts"].dtype == "Int64"
+    proc = run_stage_here("table", "input=days/*/leg.csv", f"truth={ais}", "name=days",
+                          *data_paths(tmp_path), *QUIET, check=False)
+    assert proc.returncode == 0, proc.stderr
+    datasets = {p.name for p in (tmp_path / "data" / "datasets").iterdir()}
+    assert {"days-d1-leg", "days-d2-leg"} <= datasets, datasets
+    written = pd.read_csv(tmp_path / "tables" / "days-campaign-lm.csv")
+    assert list(written["log"]) == list(table["log"])
+    assert (written["contacts"].iloc[[0, 1, 3]] == [2, 2, 4]).all()
+    md = (tmp_path / "tables" / "days-campaign-lm.md").read_text()
+    assert "Campaign of 3 log(s) (1 not scored): 4 of 4 contacts" in md, md
+    assert "4.0" not in md
+
+
+def test_sparse_ais_keeps_its_ships_turns_and_drops_a_position_error_counted_and_named(
+        trial, tmp_path, caplog):
+    """Reports every 5 minutes: a ship turns between them, so its genuine reports lie far
+    (km) off the line between their neighbours; every one is kept (the spike bound grows with
+    the gap), while a report moved 50 km off is dropped, counted in the manifest's truth
+    ``dropped`` and named (MMSI and time) in a warning."""
+    import logging
+
+    import tma
+    from tma.ais.tracks import SPIKE_REASON, vessel_tracks
+
+    sparse = _sparse(ais_trial.ais_reports(), 300.0).reset_index(drop=True)
+    ship = ais_trial.TRUTH["T1"]
+    rows = sparse.index[sparse.mmsi == ship]
+    bad = rows[len(rows) // 2]
+    moved = sparse.copy()
+    moved.loc[bad, "lat_deg"] += 0.45  # 50 km north: no ship gets there in 10 minutes
+    ais_trial.write_ais_csv(tmp_path / "sparse.csv", moved)
+    reports = read_reports(tmp_path / "sparse.csv")
+    kept = vessel_tracks(reports)
+    for mmsi, group in sparse.groupby("mmsi"):  # every genuine report kept, the bad one not
+        expected = len(group) - (mmsi == ship)
+        assert kept[mmsi].t_ns.size == expected, mmsi
+    with caplog.at_level(logging.WARNING, logger="tma"):
+        rec = tma.read_log(trial / "trial.csv", truth={"file": tmp_path / "sparse.csv",
+                                                       "max_gap_s": 620})
+    dropped = rec._read.truth.record["dropped"]
+    assert dropped["count"] == 1 and dropped["reasons"][SPIKE_REASON]["count"] == 1
+    when = pd.Timestamp(moved.loc[bad, "t_s"] * 1e9, tz="UTC").strftime("%H:%M:%S")
+    named = dropped["reasons"][SPIKE_REASON]["first"][0]
+    assert f"MMSI {ship}" in named and when in named, named
+    assert any(SPIKE_REASON in r.getMessage() and f"MMSI {ship}" in r.getMessage()
+               for r in caplog.records)
+
+
+def test_a_ship_whose_ais_ends_before_the_log_is_named_with_what_would_score_it(trial,
+                                                                              tmp_path):
+    """T1's ship's last report a minute before the last bearing: it is no candidate, and
+    what the contact's note (and a given match's refusal) says names that ship, that it fits
+    the bearings its AIS covers, and what would score it."""
+    import tma
+
+    reports = ais_trial.ais_reports()
+    log = pd.read_csv(trial / "trial.csv")
+    end = pd.to_datetime(log.timestamp_utc, utc=True).max().value / 1e9
+    ship = ais_trial.TRUTH["T1"]
+    cut = reports[(reports.mmsi != ship) | (reports.t_s < end - 60)]
+    ais_trial.write_ais_csv(tmp_path / "short.csv", cut)
+    rec = tma.read_log(trial / "trial.csv", truth=tmp_path / "short.csv")
+    note = rec.matches.set_index("label").loc["T1", "note"]
+    assert rec.matches.set_index("label").loc["T1", "mmsi"] is None or pd.isna(
+        rec.matches.set_index("label").loc["T1", "mmsi"])
+    assert f"MMSI {ship} fits the" in note and "give an AIS file whose reports" in note, note
+    with pytest.raises(ValueError, match=rf"MMSI {ship}'s AIS .* give an AIS file whose"):
+        tma.read_log(trial / "trial.csv", truth={"file": tmp_path / "short.csv",
+                                                 "match": {"T1": ship}})
+
+
+def test_own_ship_ais_sparser_than_nav_max_gap_s_warns_how_many_bearings_and_a_value(
+        trial, tmp_path, caplog):
+    """Own-ship's AIS every 20 s under the default nav.max_gap_s (10 s): the bearings in its
+    gaps are left out, and a WARNING says how many of how many and a nav.max_gap_s that
+    keeps them (which does); nothing says own-ship is interpolated across the gaps."""
+    import logging
+
+    import tma
+
+    reports = ais_trial.ais_reports()
+    own = reports.mmsi == ais_trial.OWN
+    ais_trial.write_ais_csv(tmp_path / "ais.csv", pd.concat(
+        [reports[~own], _sparse(reports[own], 20.0)]))
+    bare = _bare_log(trial, tmp_path)
+    with caplog.at_level(logging.INFO, logger="tma"):
+        rec = tma.read_log(bare, truth=tmp_path / "ais.csv",
+                           options={"truth.own_mmsi": ais_trial.OWN})
+    total = len(pd.read_csv(bare))
+    left = total - len(rec.bearings)
+    assert 0 < left < total
+    line = next(r for r in caplog.records if "lie in gaps of own-ship's AIS" in r.getMessage())
+    assert line.levelno == logging.WARNING
+    assert f"{left} of {total} bearings" in line.getMessage(), line.getMessage()
+    value = int(line.getMessage().split("nav.max_gap_s=")[1].split()[0])
+    assert not any("interpolated across them" in r.getMessage() and "not" not in
+                   r.getMessage() for r in caplog.records)
+    kept = tma.read_log(bare, truth=tmp_path / "ais.csv",
+                        options={"truth.own_mmsi": ais_trial.OWN, "nav.max_gap_s": value})
+    assert len(kept.bearings) == total
+
+
+def test_own_ship_from_ais_and_the_logs_own_ship_columns_named_both_is_one_line(trial):
+    """``truth.own_mmsi`` with ``columns.lat``/``columns.lon`` named: two own-ships asked
+    for; refused in one line saying which to drop (each way then reads)."""
+    import tma
+
+    ais = trial / "trial_ais.csv"
+    own = {"truth.own_mmsi": ais_trial.OWN, "nav.max_gap_s": 30}
+    cols = {"columns.lat": "latitude_deg", "columns.lon": "longitude_deg"}
+    with pytest.raises(ValueError, match=r"not both: drop truth\.own_mmsi .* or "
+                                         r"columns\.lat, columns\.lon to use the AIS's") as e:
+        tma.read_log(trial / "trial.csv", truth=ais, options={**own, **cols})
+    assert "\n" not in str(e.value)
+    assert len(tma.read_log(trial / "trial.csv", truth=ais, options=cols).bearings)
+    assert len(tma.read_log(trial / "trial.csv", truth=ais, options=own).bearings)
+
+
+def test_ais_times_to_the_minute_merge_reports_counted_and_said(trial, tmp_path, caplog):
+    """An export that writes times to the minute: a ship's reports of one minute share a
+    time and all but the first are merged; the count (own-ship's and the contacts' ships')
+    is in the manifest and a warning, which says the times are good to the minute only."""
+    import logging
+
+    import tma
+    from tma.ais.tracks import MERGED_REASON
+
+    reports = ais_trial.ais_reports()
+    minute = reports.assign(t_s=np.floor(reports.t_s / 60) * 60)
+    ais_trial.write_ais_csv(tmp_path / "minutes.csv", minute)
+    own = minute[minute.mmsi == ais_trial.OWN]
+    own_merged = len(own) - own.t_s.nunique()
+    with caplog.at_level(logging.INFO, logger="tma"):
+        rec = tma.read_log(_bare_log(trial, tmp_path), truth={
+            "file": tmp_path / "minutes.csv", "own_mmsi": ais_trial.OWN, "max_gap_s": 130},
+            options={"nav.max_gap_s": 130})
+    said = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    own_line = next(m for m in said if m.startswith(f"truth.own_mmsi={ais_trial.OWN}"))
+    assert f"{own_merged} with {MERGED_REASON}" in own_line, own_line
+    assert "good to the minute only" in own_line
+    merged = rec._read.truth.record["dropped"]["reasons"][MERGED_REASON]
+    assert merged["count"] > 0
+    assert any(f"left out {merged['count']}" in m and "good to the minute" in m for m in said)
+
+
+def test_ais_in_local_time_without_its_zone_names_the_zone_option(trial, tmp_path):
+    """The AIS written in Madrid time (UTC+1 in January) read as UTC: as own-ship's AIS and
+    as the truth, the one line says the clocks are 1 h apart and names truth.time.zone."""
+    import tma
+
+    reports = ais_trial.ais_reports()
+    ais_trial.write_ais_csv(tmp_path / "local.csv", reports.assign(t_s=reports.t_s + 3600))
+    with pytest.raises(ValueError, match=r"\+1 h later.*truth\.time\.zone="):
+        tma.read_log(_bare_log(trial, tmp_path), truth=tmp_path / "local.csv",
+                     options={"truth.own_mmsi": ais_trial.OWN, "nav.max_gap_s": 30})
+    with pytest.raises(ValueError, match=r"[+-]1 h apart.*truth\.time\.zone="):
+        tma.read_log(trial / "trial.csv", truth=tmp_path / "local.csv")
+    rec = tma.read_log(trial / "trial.csv", truth=tmp_path / "local.csv",
+                       options={"truth.time.zone": "Europe/Madrid"})
+    assert list(rec.truth["label"]) == ["T1", "T2"]
+
+
+def test_ais_with_decimal_commas_read_with_a_decimal_point_names_truth_csv_decimal(tmp_path):
+    from tma.ais.options import truth_options
+
+    path = _other_export(ais_trial.ais_reports().head(30), tmp_path / "comma.csv")
+    bad = truth_options({"file": str(path), **_table_options(""), "csv.delimiter": ";",
+                         "csv.decimal": "."})
+    with pytest.raises(ValueError, match=r"decimal comma \(\d+,\d+\); set truth\.csv\."
+                                         r"decimal=, to read them"):
+        read_reports(path, bad)
+
+
+def test_a_log_across_the_autumn_change_says_it_crosses_it_and_what_to_give():
+    """Madrid, 27 October 2019: 02:40-02:55 CEST, then the clocks go back and 02:00-02:15
+    CET follow. With either time.ambiguous the times go back; the one line says the log
+    crosses the change back and to give UTC times or offsets (which then read)."""
+    import tma
+
+    local = ["02:40", "02:45", "02:50", "02:55", "02:00", "02:05", "02:10", "02:15"]
+    offset = ["+02:00"] * 4 + ["+01:00"] * 4
+    frame = pd.DataFrame({"time": [f"27/10/2019 {t}" for t in local],
+                          "bearing_deg": np.arange(8.0), "x": np.arange(8) * 10.0, "y": 0.0})
+    options = {"time.format": "%d/%m/%Y %H:%M", "time.zone": "Europe/Madrid",
+               "nav.max_gap_s": 1e5}
+    for how in ("earliest", "latest"):
+        with pytest.raises(ValueError, match=r"line \d+ .*crosses the daylight-saving change "
+                                             r"back in Europe/Madrid.*give its times in UTC "
+                                             r"or with their offset") as e:
+            tma.Recording.from_frames(frame, options={**options, "time.ambiguous": how})
+        assert "\n" not in str(e.value)
+    iso = frame.assign(time=[f"2019-10-27T{t}:00{o}" for t, o in zip(local, offset,
+                                                                        strict=True)])
+    rec = tma.Recording.from_frames(iso, options={"nav.max_gap_s": 1e5})
+    assert rec.bearings["time_utc"].iloc[4] - rec.bearings["time_utc"].iloc[3] == pd.Timedelta(
+        minutes=5)
+
+
+def test_a_frame_is_scored_against_ais_as_a_file_is(trial):
+    """``Recording.from_frames(df, truth=AIS)`` and ``estimate(df, truth=AIS)`` give the
+    file's truth and scores; own-ship from the AIS is read_log's, refused in one line."""
+    import tma
+
+    ais = trial / "trial_ais.csv"
+    frame = pd.read_csv(trial / "trial.csv")
+    from_file = tma.read_log(trial / "trial.csv", truth=ais)
+    rec = tma.Recording.from_frames(frame, truth=ais)
+    assert dict(zip(rec.truth["label"], rec.truth["mmsi"], strict=True)) == ais_trial.TRUTH
+    assert np.allclose(rec.truth.range_now_m, from_file.truth.range_now_m)
+    dotted = tma.Recording.from_frames(frame, options={"truth.file": str(ais)})
+    assert list(dotted.truth["label"]) == ["T1", "T2"]
+    scored, want = tma.estimate(frame, truth=ais), tma.estimate(from_file)
+    assert list(scored["truth_mmsi"]) == list(want["truth_mmsi"])
+    assert np.allclose(scored["range_z"], want["range_z"], equal_nan=True)
+    with pytest.raises(TypeError, match=r"truth\.own_mmsi=.*tma\.read_log"):
+        tma.Recording.from_frames(frame, truth={"file": ais, "own_mmsi": ais_trial.OWN})
+
+
+def test_the_truths_own_uncertainty_is_stated_and_a_vague_truth_velocity_leaves_campaigns(
+        trial, tmp_path):
+    """Reports every 9 minutes: the truth's velocity sd per axis exceeds half the ship's
+    speed; the coverage line states the truth's uncertainty even with no `ok` contact, names
+    those contacts, and a campaign leaves their course and speed z-scores out (its range
+    z-scores in); the CSV's truth sd is written as computed, without float noise."""
+    import tma
+    from tma.ais.campaign import campaign_table
+    from tma.families.bearings2d.truth_report import VAGUE_VELOCITY, coverage_text
+
+    ais_trial.write_ais_csv(tmp_path / "sparse.csv", _sparse(ais_trial.ais_reports(), 540.0))
+    rec = tma.read_log(trial / "trial.csv", truth={"file": tmp_path / "sparse.csv",
+                                                   "max_gap_s": 1200})
+    report = tma.estimate(rec)
+    vague = report.truth_vel_sd_m_s >= VAGUE_VELOCITY * report.true_speed_m_s
+    assert vague.any(), report[["truth_vel_sd_m_s", "true_speed_m_s"]]
+    text = coverage_text(report.assign(status="diverged"))
+    assert "none of them `ok`" in text and "truth's own uncertainty" in text, text
+    for label in report.label[vague]:
+        assert f"{label} (" in text
+    row = campaign_table({"log": report.assign(status="ok")}).iloc[0]
+    ok = report.covered.notna()
+    assert np.isclose(row.range_z_mean, report.range_z[ok].mean())
+    kept = report.course_z[ok & ~vague]
+    assert (np.isnan(row.course_z_mean) if kept.empty
+            else np.isclose(row.course_z_mean, kept.mean()))
+    assert all(len(repr(v)) < 16 for v in rec.truth.truth_pos_sd_m)
+
+
+def test_naive_datetimes_with_a_zone_are_read_as_its_local_times(trial, tmp_path):
+    """A DataFrame's and a Parquet AIS's datetime column without a zone, with time.zone /
+    truth.time.zone: local times of that zone (Madrid, UTC+1 in January), as the same
+    times written as text are read; the autumn repeat read as time.ambiguous says."""
+    import tma
+
+    frame = pd.read_csv(trial / "trial.csv")
+    utc = pd.to_datetime(frame.timestamp_utc, utc=True)
+    local = frame.assign(timestamp_utc=utc.dt.tz_convert("Europe/Madrid").dt.tz_localize(None))
+    rec = tma.Recording.from_frames(local, time={"zone": "Europe/Madrid"})
+    assert (rec.bearings["time_utc"].reset_index(drop=True)
+            == tma.read_log(trial / "trial.csv").bearings["time_utc"].reset_index(
+                drop=True)).all()
+    reports = ais_trial.ais_reports()
+    t = pd.to_datetime(reports.t_s * 1e9, utc=True).dt.tz_convert("Europe/Madrid")
+    pd.DataFrame({"BaseDateTime": t.dt.tz_localize(None), "MMSI": reports.mmsi,
+                  "LAT": reports.lat_deg, "LON": reports.lon_deg}).to_parquet(
+        tmp_path / "naive.parquet")
+    got = read_reports(tmp_path / "naive.parquet", __import__(
+        "tma.ais.options", fromlist=["truth_options"]).truth_options(
+        {"file": str(tmp_path / "naive.parquet"), "time.zone": "Europe/Madrid"}))
+    assert np.abs(np.sort(got.t_ns) / 1e9 - np.sort(reports.t_s.to_numpy())).max() < 1e-3
+    repeat = pd.DataFrame({"time": pd.to_datetime(["2019-10-27 02:30", "2019-10-27 03:30",
+                                                   "2019-10-27 03:40", "2019-10-27 03:50",
+                                                   "2019-10-27 04:00"]),
+                           "bearing_deg": np.arange(5.0), "x": np.arange(5) * 10.0, "y": 0.0})
+    options = {"time.zone": "Europe/Madrid", "nav.max_gap_s": 1e5}
+    with pytest.raises(ValueError, match=r"time\.ambiguous=earliest or latest"):
+        tma.Recording.from_frames(repeat, options=options)
+    rec = tma.Recording.from_frames(repeat, options={**options, "time.ambiguous": "latest"})
+    assert rec.bearings["time_utc"].iloc[0] == pd.Timestamp("2019-10-27T01:30:00Z")

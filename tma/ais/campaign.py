@@ -14,13 +14,16 @@ contacts with a truth: how many contacts, with a truth, ``ok``; the ``ok`` share
 share of the ``ok`` ones (their truth within the estimate's 95 % region) with its 95 % Wilson
 interval (honest errors cover 95 %); per quantity (range, course, speed) the mean and the
 standard deviation of the ``ok`` contacts' z-scores (honest errors: 0 and 1) and how many lie
-beyond 3; the gross errors: ``ok`` contacts whose normalised error (NEES) exceeds the
+beyond 3 (course and speed: not of a contact whose truth's velocity is uncertain by about its
+size, sparse AIS: ``truth_report.vague_velocity``, a z-score against it tests nothing); the
+gross errors: ``ok`` contacts whose normalised error (NEES) exceeds the
 chi-square(4) 99.9 % point, which honest errors pass once in a thousand. The plot
 (``write_campaign``) sets the pooled z-scores' histograms against the standard normal and
 each log's covered share with its interval against 95 %.
 """
 
 import glob as globbing
+import re
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +34,7 @@ from tma.ais.options import TruthError, TruthFileNotFound
 QUANTITIES = ("range", "course", "speed")
 NEES_999 = 18.4668269529  # chi-square(4) 99.9 % point: scipy.stats.chi2.ppf(0.999, 4)
 Z_GROSS = 3.0
+COUNTS = ("contacts", "with_truth", "ok", "covered", "gross_errors")
 LOG_EXTENSIONS = (".csv", ".tsv", ".txt", ".mcap")
 AIS_EXTENSIONS = (".csv", ".csv.gz", ".nmea", ".txt", ".log", ".parquet", ".gz")
 
@@ -100,8 +104,12 @@ def _row(name: str, report: pd.DataFrame) -> dict:
     row = {"log": name, "contacts": len(report), "with_truth": int(has.sum()),
            "ok": n, "ok_share": _share(n, int(has.sum())), "covered": k,
            "covered_share": _share(k, n), "covered_lo": float(lo), "covered_hi": float(hi)}
+    from tma.families.bearings2d.truth_report import vague_velocity
+
+    vague = vague_velocity(report)  # sparse AIS: a course/speed z against it tests nothing
     for q in QUANTITIES:
-        z = report.loc[ok, f"{q}_z"].to_numpy(float) if f"{q}_z" in report else np.array([])
+        use = ok & ~vague if q in ("course", "speed") else ok
+        z = report.loc[use, f"{q}_z"].to_numpy(float) if f"{q}_z" in report else np.array([])
         z = z[np.isfinite(z)]
         row[f"{q}_z_mean"] = float(z.mean()) if z.size else np.nan
         row[f"{q}_z_sd"] = float(z.std(ddof=1)) if z.size > 1 else np.nan
@@ -130,16 +138,16 @@ def campaign_text(table: pd.DataFrame) -> str:
     """The pooled verdict in one line, for the log and under the table."""
     p = table.iloc[-1]
     refused = int((table.get("note", pd.Series(dtype=str)).fillna("") != "").sum())
-    scored = len(table) - 1 - refused
-    if not p["ok"]:
-        return (f"Campaign of {scored} log(s) ({refused} not scored): {p['with_truth']} of "
-                f"{p['contacts']} contacts have a truth, none of them `ok`.")
-    return (f"Campaign of {scored} log(s) ({refused} not scored): {p['with_truth']} of "
-            f"{p['contacts']} contacts "
-            f"have a truth, {p['ok']} `ok` ({100 * p['ok_share']:.0f} %); {p['covered']} of "
+    logs = len(table) - 1  # every log, scored or not
+    ok, covered = int(p["ok"]), int(p["covered"])
+    head = (f"Campaign of {logs} log(s) ({refused} not scored): {int(p['with_truth'])} of "
+            f"{int(p['contacts'])} contacts have a truth")
+    if not ok:
+        return f"{head}, none of them `ok`."
+    return (f"{head}, {ok} `ok` ({100 * p['ok_share']:.0f} %); {covered} of "
             f"them covered ({100 * p['covered_share']:.0f} %, 95 % interval "
             f"{100 * p['covered_lo']:.0f}-{100 * p['covered_hi']:.0f} %; honest errors cover "
-            f"95 %); {p['gross_errors']} gross error(s).")
+            f"95 %); {int(p['gross_errors'])} gross error(s).")
 
 
 def _markdown(table: pd.DataFrame) -> str:
@@ -184,7 +192,8 @@ def write_campaign(table: pd.DataFrame, contacts: pd.DataFrame, tables_dir, name
              "answer is `ok`; covered: the truth within the estimate's 95 % region of position "
              "and velocity (honest errors cover 95 %; the interval is Wilson's); z: (estimate "
              "- truth) / one sigma of the `ok` contacts (honest errors: mean 0, sd 1; |z| > 3 "
-             "counted per range / course / speed); gross errors: `ok` contacts whose "
+             "counted per range / course / speed; course and speed not of a contact whose "
+             "truth's velocity is uncertain by about its size); gross errors: `ok` contacts whose "
              "normalised error exceeds the chi-square(4) 99.9 % point. "
              f"`{name}.png`: the pooled z-scores against the standard normal, and each log's "
              "covered share.\n\n")
@@ -245,28 +254,59 @@ def campaign_name(input_path, name=None) -> str:
     return folder.resolve().name or "campaign"
 
 
-def log_name(campaign: str, log: Path, named: bool) -> str:
-    """A log's dataset name: its stem, after the campaign's name when ``name=`` gave one."""
-    stem = log.name.split(".")[0]
+def _plain_name(text: str) -> str:
+    """``text`` as a plain file name: ``/`` as ``-``, anything but letters, digits, ``._-``
+    as ``_``."""
+    return re.sub(r"[^A-Za-z0-9._-]", "_", text.replace("/", "-")).strip("-") or "log"
+
+
+def log_labels(logs) -> dict[Path, tuple[str, str]]:
+    """Each log's ``(row label, dataset stem)``, unique within ``logs`` and the same on every
+    run over the same logs: its file name (and its stem) where that alone tells it apart,
+    else the shortest trailing part of its path that does (``d1/leg.csv``, ``d1-leg``), so
+    that logs of one name in several folders (``input='days/*/leg.csv'``) are each scored
+    under their own name, none overwriting another."""
+    paths = [Path(p) for p in logs]
+    parts = {p: p.resolve().parts for p in paths}
+    longest = max((len(v) for v in parts.values()), default=1)
+    for depth in range(1, longest + 1):
+        labels = {p: "/".join(parts[p][-depth:]) for p in paths}
+        stems = {p: _plain_name("/".join([*parts[p][-depth:-1], p.name.split(".")[0]]))
+                 for p in paths}
+        if len(set(stems.values())) == len(paths) and len(set(labels.values())) == len(paths):
+            return {p: (labels[p], stems[p]) for p in paths}
+    # stems alike to the root (``leg.csv`` and ``leg.tsv``): the whole name, sanitised
+    out = {p: ("/".join(parts[p]), _plain_name("/".join(parts[p]))) for p in paths}
+    return {p: (label, f"{stem}-{k}" if list(d for _, d in out.values()).count(stem) > 1
+                else stem) for k, (p, (label, stem)) in enumerate(out.items())}
+
+
+def log_name(campaign: str, stem: str, named: bool) -> str:
+    """A log's dataset name from its stem (``log_labels``), after the campaign's name when
+    ``name=`` gave one."""
     return f"{campaign}-{stem}" if named else stem
 
 
 def run_campaign(pairs, score, where: str) -> tuple[dict[str, pd.DataFrame], dict[str, str]]:
-    """Each ``(log, ais)`` of ``pairs`` scored by ``score(log, ais) -> report`` (its
-    per-contact report): ``({log: report}, {log: the one line that refused it})``. A log that
-    cannot be scored is said and the campaign goes on; none scored is one line."""
+    """Each ``(log, ais)`` of ``pairs`` scored by ``score(log, ais, stem) -> report`` (its
+    per-contact report; ``stem`` its dataset's plain name, ``log_labels``):
+    ``({label: report}, {label: the one line that refused it})``, each log under its own label
+    (``log_labels``). A log that cannot be scored is said and the campaign goes on; none
+    scored is one line."""
     import logging
 
     from tma.errors import TmaError
 
     log = logging.getLogger(__name__)
     reports, refused = {}, {}
+    labels = log_labels([path for path, _ in pairs])
     for path, ais in pairs:
+        label, stem = labels[path]
         try:
-            reports[path.name] = score(path, ais)
+            reports[label] = score(path, ais, stem)
         except (TmaError, FileNotFoundError) as exc:
-            refused[path.name] = " ".join(str(exc).split())
-            log.warning("%s: log %s not scored: %s", where, path.name, refused[path.name])
+            refused[label] = " ".join(str(exc).split())
+            log.warning("%s: log %s not scored: %s", where, label, refused[label])
     if not reports:
         first = next(iter(refused.items()))
         raise TruthError(f"{where}: no log of the campaign could be scored ({len(refused)} "
@@ -281,7 +321,9 @@ def with_refused(table: pd.DataFrame, refused: dict[str, str]) -> pd.DataFrame:
         return table
     rows = pd.DataFrame([{"log": name, "note": why} for name, why in refused.items()])
     logs = pd.concat([table.iloc[:-1], rows]).sort_values("log", kind="stable")
-    return pd.concat([logs, table.iloc[-1:]], ignore_index=True)  # the logs in file order
+    table = pd.concat([logs, table.iloc[-1:]], ignore_index=True)  # the logs in file order
+    counts = [c for c in table.columns if c in COUNTS or c.endswith("_beyond_3")]
+    return table.astype({c: "Int64" for c in counts})  # counts stay whole beside the gaps
 
 
 def write_campaign_tables(reports: dict[str, pd.DataFrame], refused: dict[str, str],

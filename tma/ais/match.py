@@ -177,7 +177,9 @@ def _match(contact: Contact, ships: dict[int, PlaneTrack], options: TruthOptions
             raise TruthError(
                 f"truth.match: MMSI {given}'s AIS ({_utc(epoch_ns, ship.t_s[0])} to "
                 f"{_utc(epoch_ns, ship.t_s[-1])}) does not cover contact {contact.label}'s "
-                f"bearings ({span}); check the MMSI, or the AIS file")
+                f"bearings ({span}), and no option extrapolates a ship's track: give an AIS "
+                "file whose reports of it cover those times (or cut the log to its AIS's "
+                "times), or check the MMSI")
         if f.min_range_m > reach:
             raise TruthError(
                 f"truth.match: MMSI {given} never comes within {options.max_range_km:g} km of "
@@ -194,10 +196,11 @@ def _match(contact: Contact, ships: dict[int, PlaneTrack], options: TruthOptions
                                note=f"MMSI {given} (given): RMS bearing difference "
                                     f"{f.rms_deg:.2f} deg against {sigma_text}"),
                          f, options, epoch_ns)
-    fits, counts = [], {"outside the AIS times": 0, "out of reach": 0}
+    fits, counts, short = [], {"outside the AIS times": 0, "out of reach": 0}, []
     for ship in ships.values():
         if ship.t_s[0] > contact.t_s[0] or ship.t_s[-1] < contact.t_s[-1]:
             counts["outside the AIS times"] += 1
+            short.append(ship)
             continue
         f = fit(contact, ship)
         if f.min_range_m > reach:
@@ -206,10 +209,11 @@ def _match(contact: Contact, ships: dict[int, PlaneTrack], options: TruthOptions
         fits.append(f)
     fits.sort(key=lambda f: f.rms_deg)
     candidates = {"ships": len(ships), "candidates": len(fits), **counts}
+    partly = _partly_covering(contact, short, bound, reach, epoch_ns, span)
     if not fits:
         why = (f"no ship's AIS covers its bearings ({span}) within {options.max_range_km:g} km "
                f"of own-ship ({len(ships)} ships: {counts['outside the AIS times']} outside "
-               f"those times, {counts['out of reach']} out of reach)")
+               f"those times, {counts['out of reach']} out of reach){partly}")
         return Match(**base, mmsi=None, how="bearings", verdict="no fit", rms_deg=np.nan,
                      note=why, candidates=candidates)
     best = fits[0]
@@ -220,8 +224,9 @@ def _match(contact: Contact, ships: dict[int, PlaneTrack], options: TruthOptions
                      runner_up=runner, candidates=candidates,
                      note=f"no ship fits its bearings: the nearest is MMSI {best.mmsi} at an "
                           f"RMS difference of {best.rms_deg:.2f} deg, beyond the bound "
-                          f"{bound:.2f} deg ({sigma_text}){next_text}; give truth.match= or "
-                          "truth.max_rms_deg= if you know better")
+                          f"{bound:.2f} deg ({sigma_text}){next_text}"
+                          + (partly or "; give truth.match= or truth.max_rms_deg= if you "
+                                       "know better"))
     if runner is not None and runner[1] <= bound and runner[1] < (
             options.ambiguity_ratio * best.rms_deg):
         return Match(**base, mmsi=None, how="bearings", verdict="ambiguous",
@@ -236,6 +241,33 @@ def _match(contact: Contact, ships: dict[int, PlaneTrack], options: TruthOptions
                            note=f"MMSI {best.mmsi}: RMS bearing difference {best.rms_deg:.2f} "
                                 f"deg against {sigma_text} (bound {bound:.2f} deg){next_text}"),
                      best, options, epoch_ns)
+
+
+def _partly_covering(contact: Contact, ships: list[PlaneTrack], bound: float, reach: float,
+                     epoch_ns: int, span: str) -> str:
+    """What to say of the ships whose AIS covers only part of the contact's bearings (so are
+    no candidates): the best of them that fits the bearings it covers (most of them), named
+    with where its reports end and what would make it a candidate; "" when none fits."""
+    best = None
+    for ship in ships:
+        inside = (contact.t_s >= ship.t_s[0]) & (contact.t_s <= ship.t_s[-1])
+        if inside.sum() < max(5, contact.t_s.size // 2):
+            continue
+        part = Contact(contact.track_id, contact.label, contact.t_s[inside],
+                       contact.own_x_m[inside], contact.own_y_m[inside],
+                       contact.bearing_deg[inside], contact.sigma_deg)
+        f = fit(part, ship)
+        if f is not None and f.rms_deg <= bound and f.min_range_m <= reach and (
+                best is None or f.rms_deg < best[1].rms_deg):
+            best = (ship, f, int(inside.sum()))
+    if best is None:
+        return ""
+    ship, f, n = best
+    return (f"; MMSI {ship.mmsi} fits the {n} of {contact.t_s.size} bearings its AIS covers "
+            f"(RMS {f.rms_deg:.2f} deg) but its reports run {_utc(epoch_ns, ship.t_s[0])} to "
+            f"{_utc(epoch_ns, ship.t_s[-1])}, not over the contact's {span}, and no option "
+            "extrapolates a ship's track: give an AIS file whose reports of it cover those "
+            "times, or cut the log to its AIS's times")
 
 
 def _with_gap(match: Match, f: Fit, options: TruthOptions, epoch_ns: int) -> Match:

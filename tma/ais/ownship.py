@@ -12,6 +12,8 @@ line naming a ``nav.max_gap_s`` that would keep them. The bearings must have UTC
 ``source_text``.
 """
 
+import logging
+
 import numpy as np
 
 from tma.ais.match import gap_bound
@@ -20,6 +22,7 @@ from tma.errors import InputError
 from tma.sources.base import Contacts, Navigation, Recording
 from tma.utc import format_utc
 
+log = logging.getLogger(__name__)
 GAP_REASON = "bearing in a gap of own-ship's AIS longer than nav.max_gap_s"
 
 
@@ -37,6 +40,13 @@ def ownship_recording(options: TruthOptions, reading, contacts: list[Recording],
     from tma.ais.tracks import vessel_tracks
 
     own = options.own_mmsi
+    named = [f"columns.{r}={reading.column(r)}" for r in ("lat", "lon", "x", "y")
+             if _named(reading, r)]
+    if named:  # two own-ships asked for: which one is meant is the user's to say
+        raise TruthError(f"{where}: own-ship from its AIS (truth.own_mmsi={own}) or from the "
+                         f"log's {' and '.join(named)}, not both: drop truth.own_mmsi to use "
+                         f"the log's own-ship, or {', '.join(n.split('=')[0] for n in named)} "
+                         "to use the AIS's")
     if len(contacts) != 1 or contacts[0].contacts is None:
         raise InputError(f"{where}: no {reading.observation.plural} found in the input")
     values = contacts[0].contacts
@@ -52,6 +62,14 @@ def ownship_recording(options: TruthOptions, reading, contacts: list[Recording],
                          f"report of MMSI {own} in truth={options.file} ({ships.size} ships: "
                          f"{', '.join(map(str, ships[:8]))}{', ...' if ships.size > 8 else ''})"
                          "; check the MMSI")
+    merged = ""
+    if track.merged:
+        from tma.ais.tracks import cleaning
+
+        _, merged = cleaning({own: track}, reports.t_ns[reports.mmsi == own])
+        log.warning("truth.own_mmsi=%d: of own-ship's AIS reports in %s, left out %d: %s", own,
+                    options.file, track.merged + track.spikes, merged)
+        merged = f"; {merged}"
     epoch = int(track.t_ns[0])
     t_own = (track.t_ns - epoch) / 1e9
     t_obs = (values.epoch_utc_ns - epoch) / 1e9 + values.t_s
@@ -67,6 +85,13 @@ def ownship_recording(options: TruthOptions, reading, contacts: list[Recording],
             f"nav.max_gap_s={gap_bound(gap.max())} to interpolate own-ship across them")
     rec = contacts[0]
     if in_gap.any():
+        log.warning(
+            "%s: %d of %d %s (%.0f %%) lie in gaps of own-ship's AIS (MMSI %d) longer than "
+            "nav.max_gap_s = %g s and are left out (own-ship is not interpolated across "
+            "them); own-ship reports every %.0f s (median), gaps up to %.0f s: "
+            "nav.max_gap_s=%d keeps them all", where, int(in_gap.sum()), in_gap.size,
+            reading.observation.plural, 100 * in_gap.mean(), own, reading.nav.max_gap_s,
+            np.median(np.diff(t_own)), gap.max(), gap_bound(gap.max()))
         lines = [f"{format_utc(values.epoch_utc_ns + int(round(t * 1e9)))}"
                  for t in values.t_s[in_gap][:5]]
         rec.dropped.add(GAP_REASON, int(in_gap.sum()), lines)
@@ -77,9 +102,18 @@ def ownship_recording(options: TruthOptions, reading, contacts: list[Recording],
                      lon_deg=track.lon_deg)
     note = (f"own-ship from the AIS of MMSI {own} in {options.file} (truth.own_mmsi): "
             f"{t_own.size} reports, every {np.median(np.diff(t_own)):.1f} s (median)"
+            + merged
             + (f"; {int(in_gap.sum())} {reading.observation.plural} in its gaps over "
                f"nav.max_gap_s = {reading.nav.max_gap_s:g} s left out" if in_gap.any() else ""))
     return Recording(nav, None, notes=[note])
+
+
+def _named(reading, role: str) -> bool:
+    """Whether the user named the log's own-ship column ``role`` (lat, lon, x, y)."""
+    try:
+        return reading.column(role) is not None
+    except AttributeError:  # a reader without that column
+        return False
 
 
 def ownship_of(manifest: dict) -> dict:

@@ -154,17 +154,38 @@ def read_table(path: Path, data: bytes, truth: TruthOptions):
     cog = np.where((cog >= 0) & (cog < 360), cog, np.nan)  # 360: not available
     dropped, keep = Dropped("drop"), np.ones(len(df), dtype=bool)
     places = line_places(line)
+    no_position = ~(np.isfinite(lat) & np.isfinite(lon))
     for bad, reason in (
             (t_ns < 0, "time missing or unreadable"),
             (~((mmsi > 0) & (mmsi < 1e9) & (mmsi == np.round(mmsi))),
              "MMSI missing or not a whole number"),
-            (~(np.isfinite(lat) & np.isfinite(lon)), "position missing or not a number"),
+            (no_position, "position missing or not a number"
+             + _decimal_commas(df[cols["lat"]], no_position)),
             (~((np.abs(lat) <= 90) & (np.abs(lon) <= 180)),
              "position not available (lat 91, lon 181) or off the globe")):
         bad &= keep
         keep &= dropped.drop(bad, reason, places, "")
     return (mmsi[keep].astype(np.int64), t_ns[keep], lat[keep], lon[keep], sog[keep],
             cog[keep], dropped, notes)
+
+
+def _decimal_commas(series, bad) -> str:
+    """What to say when most of the unreadable positions ``bad`` are numbers written with a
+    decimal comma (``50,79``): the option that reads them; else ""."""
+    if not bad.any() or pd_numeric(series):
+        return ""
+    text = series[bad].astype(str).str.strip()
+    comma = text.str.fullmatch(r"[-+]?\d+,\d+")
+    if comma.mean() < 0.5:
+        return ""
+    return (f": numbers with a decimal comma ({text[comma].iloc[0]}); set truth.csv.decimal=, "
+            "to read them")
+
+
+def pd_numeric(series) -> bool:
+    import pandas as pd
+
+    return pd.api.types.is_numeric_dtype(series)
 
 
 def _numbers(series) -> np.ndarray:

@@ -36,10 +36,11 @@ import pandas as pd
 from tma.ais.match import Contact, Match, bearings_from, gap_bound, match_contacts
 from tma.ais.options import TruthError, TruthOptions
 from tma.ais.reports import cached_reports
-from tma.ais.tracks import vessel_tracks
+from tma.ais.tracks import cleaning, vessel_tracks
 from tma.io.atomic import sha256_file
 from tma.maths.angles import course_from_velocity
 from tma.maths.geo import local_to_geodetic
+from tma.sources.base import Dropped
 from tma.utc import format_utc
 
 log = logging.getLogger(__name__)
@@ -77,10 +78,21 @@ def log_truth(contacts: list[Contact], origin_deg, epoch_ns, options: TruthOptio
     lo, hi = epoch_ns + int((t0 - margin) * 1e9), epoch_ns + int((t1 + margin) * 1e9)
     near = (reports.t_ns >= lo) & (reports.t_ns <= hi)
     if not near.any():
+        from tma.sources.align import hours_apart
+
+        hours = hours_apart(np.array([t0, t1]) + epoch_ns / 1e9, reports.t_ns / 1e9)
+        if hours:
+            raise TruthError(
+                f"truth={path}: its AIS covers {reports.span_text()} and {where} {log_span}, "
+                f"{hours:+d} h apart: one of them is local time read as UTC; give its zone "
+                "(truth.time.zone= for the AIS's, time.zone= for the log's, e.g. "
+                "Europe/Madrid)")
         raise TruthError(f"truth={path}: its AIS covers {reports.span_text()} and {where} "
                          f"{log_span}: AIS of another time, not this log's trial")
     kept = _subset(reports, near | _bracketing(reports, lo, hi))
-    ships = {m: t.on_plane(origin_deg, epoch_ns) for m, t in vessel_tracks(kept).items()}
+    tracks = vessel_tracks(kept)
+    cleaned, cleaned_text = cleaning(tracks, kept.t_ns)
+    ships = {m: t.on_plane(origin_deg, epoch_ns) for m, t in tracks.items()}
     ships = {m: s for m, s in ships.items() if s.t_s.size >= 2 and m != options.own_mmsi}
     _check_place(ships, contacts, options, path, where)
     matches = match_contacts(contacts, ships, options, epoch_ns, where)
@@ -111,7 +123,11 @@ def log_truth(contacts: list[Contact], origin_deg, epoch_ns, options: TruthOptio
     track = pd.concat(track, ignore_index=True)
     track["lat_deg"], track["lon_deg"] = local_to_geodetic(
         track["x_m"].to_numpy(), track["y_m"].to_numpy(), origin_deg)
+    dropped = Dropped()
+    dropped.merge(reports.dropped)
+    dropped.merge(cleaned)
     record = {"path": str(path), "sha256": sha256_file(path), **reports.record(),
+              "dropped": dropped.record(),
               "ships_in_log_times": len(ships),
               "options": options.record(),
               "contacts": [m.record() for m in matches],
@@ -121,6 +137,9 @@ def log_truth(contacts: list[Contact], origin_deg, epoch_ns, options: TruthOptio
     if reports.dropped.count:
         log.warning("truth=%s: left out %d report(s): %s", path, reports.dropped.count,
                     reports.dropped.text())
+    if cleaned.count:
+        log.warning("truth=%s: of the reports in the log's times, left out %d: %s", path,
+                    cleaned.count, cleaned_text)
     return LogTruth(truth, track, matches, record)
 
 
@@ -188,7 +207,8 @@ def _truth_row(contact: Contact, ship, m: Match, options: TruthOptions, epoch_ns
     return {
         # the truth's own uncertainty (per axis, x and y alike and independent): position now,
         # velocity, and (x0, vx) of the straight line, x0 = x - vx t
-        "truth_pos_sd_m": sd_now, "truth_vel_sd_m_s": float(np.sqrt(var_v)),
+        "truth_pos_sd_m": float(f"{sd_now:.12g}"),  # 264.48, not 264.47999999999996
+        "truth_vel_sd_m_s": float(f"{np.sqrt(var_v):.12g}"),
         "truth_gap_s": float(ship.gap([t])[0]),
         "truth_var_x0_m2": var_p - 2 * t * cov_pv + t * t * var_v,
         "truth_cov_x0_v_m2_s": cov_pv - t * var_v, "truth_var_v_m2_s2": var_v,

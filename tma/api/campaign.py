@@ -34,7 +34,7 @@ def campaign(input, truth=None, *, estimator: str | None = None,
     node = {} if node is None else dict(node) if isinstance(node, dict) else {"file": node}
     pairs = campaign_logs(input, node.get("file"))
 
-    def score(log, ais):
+    def score(log, ais, _stem):
         rec = read_log(log, truth={**node, "file": str(ais)}, sigma_deg=sigma_deg,
                        options=reading)
         return estimate(rec, estimator)

@@ -86,6 +86,14 @@ def estimate(data, estimator: str | None = None, sigma_deg: float | None = None,
     from tma.families import family
     from tma.stages.estimate import estimate_log
 
+    if "truth" in options:  # the AIS of a log: read with it, as read_log reads a file
+        if not isinstance(data, pd.DataFrame):
+            raise TypeError("estimate(truth=...) scores a DataFrame read with its AIS; a file "
+                            "is read with it by tma.read_log(path, truth=...), a Recording "
+                            "by Recording.from_frames(..., truth=...)")
+        from tma.api.recording import Recording
+
+        data = Recording.from_frames(data, truth=options.pop("truth"))
     data = _data(data, "estimate")
     _plain({"sigma_deg": sigma_deg, **options}, "estimate")
     fam = family(data.family)

@@ -31,13 +31,15 @@ class Recording:
 
     @classmethod
     def from_frames(cls, bearings: pd.DataFrame, navigation: pd.DataFrame | None = None, *,
-                    options: dict | None = None, **groups) -> "Recording":
+                    truth=None, options: dict | None = None, **groups) -> "Recording":
         """A Recording of pandas DataFrames: ``bearings`` with a time (datetime64, Unix
         epoch or seconds), a bearing (deg, or radians said so) and a contact column, and
         the own-ship (latitude/longitude or x/y, as a navigation export has them) unless
         ``navigation`` gives it; columns are found as in a CSV file, and named with
-        ``columns={...}`` where they are not. Options as ``read_log``'s."""
-        from tma.stages.ingest import read_frames
+        ``columns={...}`` where they are not. Options and ``truth`` (the AIS to score the
+        contacts against: a path or the ``truth.*`` options, also dotted in ``options``) as
+        ``read_log``'s; own-ship from the AIS (``truth.own_mmsi``) is ``read_log``'s only."""
+        from tma.stages.ingest import read_frames, with_truth
 
         for name, frame in (("bearings", bearings), ("navigation", navigation)):
             if not isinstance(frame, pd.DataFrame) and (name == "bearings" or frame is not None):
@@ -45,9 +47,20 @@ class Recording:
                         else "")
                 raise TypeError(f"{name} must be a pandas DataFrame, got "
                                 f"{type(frame).__name__}{hint}")
-        settings, reading = _split(_nested(options, groups))
-        return cls(read_frames(bearings, navigation, family=_recorded(), options=reading,
-                               **settings))
+        if not (truth is None or isinstance(truth, str | os.PathLike | dict)):
+            raise TypeError("truth must be the AIS file's path or a dict of truth.* options, "
+                            f"got {type(truth).__name__}")
+        nested = _nested(options, groups)
+        truth = _with_dotted_truth(truth, nested.pop("truth", None))
+        own = truth.get("own_mmsi") if isinstance(truth, dict) else None
+        if own is not None:
+            raise TypeError(f"truth.own_mmsi={own} takes own-ship from the AIS for a log file "
+                            "(tma.read_log(path, truth=...)); a frame gives its own-ship in "
+                            "its columns or navigation=")
+        settings, reading = _split(nested)
+        read = read_frames(bearings, navigation, family=_recorded(), options=reading,
+                           **settings)
+        return cls(with_truth(read, truth, read.sources["input"]["path"]))
 
     @property
     def _summary(self) -> dict:

@@ -114,6 +114,16 @@ def align(recordings: list[Recording], options, where: str) -> Aligned:
                         rec))
     if not any(p[0].size for p in per_nav):
         r = recordings[0]
+        hours = hours_apart(obs[0], navs[0])
+        if hours:
+            zone = ("truth.time.zone= for the AIS's, " if "truth.own_mmsi" in
+                    str(r.navigation.source) else "")
+            raise InputError(
+                f"{where}: no {observation.role} lies within the own-ship fixes' time span, "
+                f"but they would {hours:+d} h later (fixes {_span(navs[0])}, {plural} "
+                f"{_span(obs[0])} s on the common clock; see {r.navigation.source}): one of "
+                f"them is local time read as UTC; give its zone ({zone}time.zone= for the "
+                "log's, e.g. Europe/Madrid)")
         raise InputError(
             f"{where}: no {observation.role} lies within the own-ship fixes' time span (fixes "
             f"{_span(navs[0])}, {plural} {_span(obs[0])} s on the common clock; see "
@@ -375,7 +385,10 @@ def _ownship_at(t, t_nav, x_nav, y_nav, max_extrapolation_s):
 
 
 def _gaps(t_nav, t_obs, max_gap_s, source, plural) -> list[dict]:
-    """Gaps between consecutive fixes longer than ``max_gap_s`` (common clock seconds)."""
+    """Gaps between consecutive fixes longer than ``max_gap_s`` (common clock seconds) with a
+    value inside: own-ship is interpolated across those; a gap without one is interpolated
+    for none (own-ship from its AIS leaves the values in its gaps out beforehand,
+    ``tma.ais.ownship``)."""
     dt = np.diff(t_nav)
     where = np.flatnonzero(dt > max_gap_s)
     t_sorted = np.sort(t_obs)
@@ -383,7 +396,24 @@ def _gaps(t_nav, t_obs, max_gap_s, source, plural) -> list[dict]:
               - np.searchsorted(t_sorted, t_nav[where], side="right"))
     return [{"from_s": float(t_nav[k]), "to_s": float(t_nav[k + 1]), "length_s": float(dt[k]),
              f"{plural}_inside": int(n), "source": source}
-            for k, n in zip(where, inside, strict=True)]
+            for k, n in zip(where, inside, strict=True) if n > 0]
+
+
+def hours_apart(t_a, t_b, max_hours: int = 14) -> int:
+    """The whole number of hours k (1 <= |k| <= ``max_hours``, the smallest) by which times
+    ``t_a`` (s) shifted lie nearly all (90 %) within the span of ``t_b``, when unshifted
+    none does: two clocks a zone apart (local time read as UTC). 0 when there is none."""
+    t_a, t_b = np.asarray(t_a, float), np.asarray(t_b, float)
+    if not t_a.size or not t_b.size:
+        return 0
+    lo, hi = t_b.min(), t_b.max()
+    if ((t_a >= lo) & (t_a <= hi)).any():
+        return 0
+    for k in sorted(range(-max_hours, max_hours + 1), key=lambda k: (abs(k), k)):
+        shifted = t_a + 3600.0 * k
+        if k and ((shifted >= lo) & (shifted <= hi)).mean() >= 0.9:
+            return k
+    return 0
 
 
 def _span(t) -> str:

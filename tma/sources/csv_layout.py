@@ -286,11 +286,13 @@ class Frame(CsvFile):
             series = self.frame.iloc[:, self.header.index(name)]
             if pd.api.types.is_datetime64_any_dtype(series):
                 if getattr(series.dt, "tz", None) is None and self.zone is not None:
-                    pass  # local times of time.zone: tma.utc.time_column says which instants
+                    pass  # local times of time.zone, left naive: tma.utc.time_column
+                    # localizes them (time.ambiguous) and says which instants
                 elif getattr(series.dt, "tz", None) is None:
                     self.notes.append(f"{self.path}: {name} without time zone read as UTC")
                     series = series.dt.tz_localize("UTC")
-                series = series.dt.tz_convert("UTC")
+                else:
+                    series = series.dt.tz_convert("UTC")
             elif role == "track":
                 if pd.api.types.is_float_dtype(series):  # 7 and 7.0 are one float there
                     self.id_hint = (f"; the frame's column {name} holds floats ({series.dtype}), "

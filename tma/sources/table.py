@@ -88,7 +88,7 @@ def read_table(table, options, *, navigation: bool, contacts: bool) -> list[Reco
         b, stated = _values(b_raw[keep], cols[role], options, table, path, line, notes)
         track = _tracks(None if track_raw is None else track_raw[keep], len(t), notes,
                         f"{path}: {cols.get('track')}")
-        _check_increasing(t, track, tcol, path, line, table.id_hint)
+        _check_increasing(t, track, tcol, path, line, table.id_hint, options.time.zone, epoch)
     if not navigation:
         return [Recording(None, Contacts(t, epoch, track, b, str(path), stated), notes=notes,
                           dropped=rows)]
@@ -231,8 +231,10 @@ def _codes(track: np.ndarray) -> np.ndarray:
     return pd.factorize(track)[0] if track.dtype == object else track
 
 
-def _check_increasing(t, track, col, path, line, hint=""):
-    """Times must increase strictly within each track, in file order."""
+def _check_increasing(t, track, col, path, line, hint="", zone=None, epoch_ns=None):
+    """Times must increase strictly within each track, in file order. ``zone``, ``epoch_ns``:
+    the local times' zone and the times' epoch, to tell a log that crosses the
+    daylight-saving change back."""
     code = _codes(track)
     order = np.argsort(code, kind="stable")
     ts, tr = t[order], code[order]
@@ -240,8 +242,30 @@ def _check_increasing(t, track, col, path, line, hint=""):
     if bad.any():
         k = int(np.argmax(bad))
         kind = "duplicate" if ts[k + 1] == ts[k] else "non-increasing"
+        back = _clocks_back(ts[k], ts[k + 1], zone, epoch_ns)
         raise InputError(f"{path}: {kind} {col} for track {track[order[k + 1]]} on line "
-                         f"{line[order[k + 1]]} ({col} must increase within a track){hint}")
+                         f"{line[order[k + 1]]} ({col} must increase within a track)"
+                         f"{back or hint}")
+
+
+def _clocks_back(before_s, after_s, zone, epoch_ns) -> str:
+    """What to say when local times (``zone``) go back by up to an hour into a time of day
+    the daylight-saving change back repeats: the log crosses the change, and no
+    ``time.ambiguous`` reads it (it reads every repeated time as one instant); else ""."""
+    from datetime import UTC, datetime
+    from zoneinfo import ZoneInfo
+
+    if zone is None or epoch_ns is None or not -3600 <= after_s - before_s < 0:
+        return ""
+    at = datetime.fromtimestamp(epoch_ns / 1e9 + after_s, UTC).astimezone(ZoneInfo(zone))
+    local = at.replace(tzinfo=None)
+    offsets = {local.replace(fold=f, tzinfo=ZoneInfo(zone)).utcoffset() for f in (0, 1)}
+    if len(offsets) < 2:
+        return ""
+    return (f": the log crosses the daylight-saving change back in {zone} (its times go "
+            f"back to {local:%H:%M:%S}, a time of day that happened twice), so its local times "
+            "are ambiguous and no time.ambiguous reads both sides of the change; give its "
+            "times in UTC or with their offset (e.g. +02:00 before, +01:00 after)")
 
 
 def _check_lat_lon(lat, lon, cols, path, line):

@@ -133,16 +133,49 @@ def coverage(report: pd.DataFrame) -> dict:
             "share": k / n if n else np.nan, "share_lo": float(lo), "share_hi": float(hi)}
 
 
+VAGUE_VELOCITY = 0.5  # the truth's velocity sd (per axis) over its speed beyond which its
+# course and speed say little: a course/speed z-score against it is no test
+
+
+def vague_velocity(report: pd.DataFrame) -> np.ndarray:
+    """Per contact whether its truth's velocity is uncertain by about its size (sparse AIS:
+    velocity sd per axis at least ``VAGUE_VELOCITY`` times the true speed), so that its
+    course and speed comparisons are not informative."""
+    if "truth_vel_sd_m_s" not in report or "true_speed_m_s" not in report:
+        return np.zeros(len(report), dtype=bool)
+    sd = report["truth_vel_sd_m_s"].to_numpy(float)
+    speed = report["true_speed_m_s"].to_numpy(float)
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(sd) & (sd >= VAGUE_VELOCITY * np.nan_to_num(speed))
+
+
+def _truth_own_text(report: pd.DataFrame) -> str:
+    """What the table says of the truth's own uncertainty, whenever a contact's truth has one
+    (whatever the contacts' status)."""
+    sd = report.get("truth_pos_sd_m", pd.Series(dtype=float)).max()
+    if not (np.isfinite(sd) and sd >= 1.0):
+        return ""
+    text = (f" The z-scores and covered include the truth's own uncertainty where its AIS is "
+            f"sparse (position sd up to {sd:.0f} m: truth.accel_sd_m_s2).")
+    vague = vague_velocity(report)
+    if vague.any():
+        rows = report[vague]
+        shown = ", ".join(f"{r.label} ({r.truth_vel_sd_m_s:.1f} m/s at {r.true_speed_m_s:.1f} "
+                          "m/s)" for r in rows.itertuples())
+        text += (f" The truth's velocity is uncertain by about its size (sd per axis at "
+                 f"least {VAGUE_VELOCITY:g} of the speed) for {shown}: their course and speed "
+                 "comparisons are not informative, and a campaign leaves their course and "
+                 "speed z-scores out.")
+    return text
+
+
 def coverage_text(report: pd.DataFrame) -> str:
     """The log's line of coverage, for the table and the log."""
     c = coverage(report)
+    own = _truth_own_text(report)
     if not c["ok"]:
         return (f"Against the AIS truth: {c['with_truth']} of {c['contacts']} contacts have a "
-                "truth, none of them `ok`.")
-    sd = report.get("truth_pos_sd_m", pd.Series(dtype=float)).max()
-    own = (f" The z-scores and covered include the truth's own uncertainty where its AIS is "
-           f"sparse (position sd up to {sd:.0f} m: truth.accel_sd_m_s2)."
-           if np.isfinite(sd) and sd >= 1.0 else "")
+                f"truth, none of them `ok`.{own}")
     return (f"Against the AIS truth: {c['with_truth']} of {c['contacts']} contacts have a truth; "
             f"{c['covered']} of the {c['ok']} `ok` ones are covered by their errors "
             f"({100 * c['share']:.0f} %, 95 % interval {100 * c['share_lo']:.0f}-"
