@@ -300,6 +300,36 @@ def test_own_ship_from_its_ais_scores_a_log_of_bearings_alone(trial, tmp_path, m
     assert f"MMSI {ais_trial.OWN}" in json.dumps(meta)
 
 
+def test_own_ship_from_ais_says_it_leaves_the_logs_own_positions_aside(trial, tmp_path,
+                                                                         caplog):
+    """A log with own-ship columns found without being named, scored with ``truth.own_mmsi``:
+    the AIS's own-ship is used and a warning says the log's positions are left aside (named
+    columns are refused in one line); a frame with ``truth.own_mmsi`` is
+    told that this is a file's option, never told to give it; a campaign of a DataFrame is one
+    line."""
+    import logging
+
+    import tma
+
+    ais = trial / "trial_ais.csv"
+    with caplog.at_level(logging.WARNING):
+        tma.read_log(trial / "trial.csv", truth=ais,
+                     options={"truth.own_mmsi": ais_trial.OWN, "nav.max_gap_s": 30})
+    assert any("the log's own-ship positions are left aside (drop truth.own_mmsi"
+               in r.getMessage() for r in caplog.records), caplog.text
+    frame = pd.read_csv(_bare_log(trial, tmp_path))
+    with pytest.raises((TypeError, ValueError), match=r"takes own-ship from the AIS for a log "
+                                                      r"file \(tma\.read_log") as err:
+        tma.estimate(frame, truth=ais, options={"truth.own_mmsi": ais_trial.OWN})
+    assert "give it" not in str(err.value) and "\n" not in str(err.value)
+    with pytest.raises(ValueError, match=r"no own-ship position") as err:
+        tma.Recording.from_frames(frame, truth=ais)
+    assert "truth.own_mmsi" not in str(err.value)
+    with pytest.raises(TypeError, match=r"campaign takes a folder or a glob of log files, got "
+                                        r"DataFrame; a DataFrame is scored by tma\.estimate"):
+        tma.campaign(frame, truth=ais)
+
+
 def test_own_ship_ais_too_sparse_for_nav_max_gap_s_is_one_line(trial, tmp_path):
     import tma
 
@@ -458,6 +488,28 @@ def test_a_campaign_of_logs_of_one_name_in_several_folders_scores_each_under_its
     assert "4.0" not in md
 
 
+def test_logs_whose_folders_differ_only_in_punctuation_keep_their_own_labels(tmp_path):
+    """Folders ``d 1``, ``d_1`` and ``D-1`` (alike once made plain names) and ``leg.csv``
+    beside ``leg.tsv``: each log is labelled by its own path, its dataset stem unique and the
+    same from run to run; no label names another log's folder."""
+    from tma.ais.campaign import log_labels
+
+    logs = []
+    for folder in ("d 1", "d_1", "D-1"):
+        (tmp_path / folder).mkdir()
+        logs.append(tmp_path / folder / "leg.csv")
+    logs += [tmp_path / "d_1" / "leg.tsv"]
+    for p in logs:
+        p.write_text("t\n")
+    labels = log_labels(logs)
+    assert [labels[p][0] for p in logs] == ["d 1/leg.csv", "d_1/leg.csv", "D-1/leg.csv",
+                                            "d_1/leg.tsv"]
+    stems = [labels[p][1] for p in logs]
+    assert len(set(stems)) == 4 and all("/" not in s and " " not in s for s in stems), stems
+    assert stems[2] == "D-1-leg" and stems[0].startswith("d_1-leg-"), stems
+    assert log_labels(list(reversed(logs))) == labels  # stable, whatever the order
+
+
 def test_sparse_ais_keeps_its_ships_turns_and_drops_a_position_error_counted_and_named(
         trial, tmp_path, caplog):
     """Reports every 5 minutes: a ship turns between them, so its genuine reports lie far
@@ -597,9 +649,11 @@ def test_ais_in_local_time_without_its_zone_names_the_zone_option(trial, tmp_pat
 
     reports = ais_trial.ais_reports()
     ais_trial.write_ais_csv(tmp_path / "local.csv", reports.assign(t_s=reports.t_s + 3600))
-    with pytest.raises(ValueError, match=r"\+1 h later.*truth\.time\.zone="):
+    with pytest.raises(ValueError, match=r"they would if the bearings were \+1 h later .*"
+                       r"truth\.time\.zone=<Area/City>") as err:
         tma.read_log(_bare_log(trial, tmp_path), truth=tmp_path / "local.csv",
                      options={"truth.own_mmsi": ais_trial.OWN, "nav.max_gap_s": 30})
+    assert "Europe/Madrid" not in str(err.value)  # no zone named as if it were known
     with pytest.raises(ValueError, match=r"[+-]1 h apart.*truth\.time\.zone="):
         tma.read_log(trial / "trial.csv", truth=tmp_path / "local.csv")
     rec = tma.read_log(trial / "trial.csv", truth=tmp_path / "local.csv",

@@ -23,6 +23,7 @@ each log's covered share with its interval against 95 %.
 """
 
 import glob as globbing
+import hashlib
 import re
 from pathlib import Path
 
@@ -270,15 +271,17 @@ def log_labels(logs) -> dict[Path, tuple[str, str]]:
     parts = {p: p.resolve().parts for p in paths}
     longest = max((len(v) for v in parts.values()), default=1)
     for depth in range(1, longest + 1):
-        labels = {p: "/".join(parts[p][-depth:]) for p in paths}
+        labels = {p: "/".join(parts[p][-depth:]).lstrip("/") for p in paths}
+        if len(set(labels.values())) < len(paths):
+            continue
         stems = {p: _plain_name("/".join([*parts[p][-depth:-1], p.name.split(".")[0]]))
                  for p in paths}
-        if len(set(stems.values())) == len(paths) and len(set(labels.values())) == len(paths):
-            return {p: (labels[p], stems[p]) for p in paths}
-    # stems alike to the root (``leg.csv`` and ``leg.tsv``): the whole name, sanitised
-    out = {p: ("/".join(parts[p]), _plain_name("/".join(parts[p]))) for p in paths}
-    return {p: (label, f"{stem}-{k}" if list(d for _, d in out.values()).count(stem) > 1
-                else stem) for k, (p, (label, stem)) in enumerate(out.items())}
+        # names alike once made plain (``d 1``, ``d_1``; ``leg.csv``, ``leg.tsv``): each
+        # with a short hash of its own label, stable from run to run
+        return {p: (labels[p], stems[p] if list(stems.values()).count(stems[p]) == 1 else
+                    f"{stems[p]}-{hashlib.sha1(labels[p].encode()).hexdigest()[:6]}")
+                for p in paths}
+    raise TruthError(f"the same log twice among {', '.join(map(str, paths))}: name each once")
 
 
 def log_name(campaign: str, stem: str, named: bool) -> str:

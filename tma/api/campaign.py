@@ -1,6 +1,8 @@
 """A campaign of trials scored against AIS from Python (``tma.campaign``): what ``python -m
 pipeline.table input=DIR`` tabulates, as one DataFrame (``tma.ais.campaign``)."""
 
+import os
+
 import pandas as pd
 
 from tma.api.options import _nested, _plain
@@ -28,6 +30,10 @@ def campaign(input, truth=None, *, estimator: str | None = None,
     from tma.api.estimate import estimate
     from tma.api.recording import _with_dotted_truth, read_log
 
+    if not isinstance(input, str | os.PathLike):
+        raise TypeError(f"campaign takes a folder or a glob of log files, got "
+                        f"{type(input).__name__}; a DataFrame is scored by "
+                        "tma.estimate(frame, truth=...)")
     _plain({"truth": truth, "estimator": estimator, "sigma_deg": sigma_deg}, "campaign")
     reading = _nested(options, groups)
     node = _with_dotted_truth(truth, reading.pop("truth", None))

@@ -93,7 +93,8 @@ def estimate(data, estimator: str | None = None, sigma_deg: float | None = None,
                             "by Recording.from_frames(..., truth=...)")
         from tma.api.recording import Recording
 
-        data = Recording.from_frames(data, truth=options.pop("truth"))
+        data = Recording.from_frames(data, truth=options.pop("truth"),
+                                     options=options.pop("options", None))
     data = _data(data, "estimate")
     _plain({"sigma_deg": sigma_deg, **options}, "estimate")
     fam = family(data.family)

@@ -116,14 +116,15 @@ def align(recordings: list[Recording], options, where: str) -> Aligned:
         r = recordings[0]
         hours = hours_apart(obs[0], navs[0])
         if hours:
-            zone = ("truth.time.zone= for the AIS's, " if "truth.own_mmsi" in
+            zone = ("truth.time.zone=<Area/City> for the AIS's, " if "truth.own_mmsi" in
                     str(r.navigation.source) else "")
             raise InputError(
                 f"{where}: no {observation.role} lies within the own-ship fixes' time span, "
-                f"but they would {hours:+d} h later (fixes {_span(navs[0])}, {plural} "
-                f"{_span(obs[0])} s on the common clock; see {r.navigation.source}): one of "
-                f"them is local time read as UTC; give its zone ({zone}time.zone= for the "
-                "log's, e.g. Europe/Madrid)")
+                f"but they would if the {plural} were {hours:+d} h later (fixes {_span(navs[0])}, "
+                f"{plural} {_span(obs[0])} s on the common clock; see "
+                f"{r.navigation.source}): one of them is local time read as UTC, or the two "
+                f"are in different zones; give each the IANA zone it was written in ({zone}"
+                "time.zone=<Area/City> for the log's, e.g. Europe/Helsinki)")
         raise InputError(
             f"{where}: no {observation.role} lies within the own-ship fixes' time span (fixes "
             f"{_span(navs[0])}, {plural} {_span(obs[0])} s on the common clock; see "

@@ -44,6 +44,7 @@ class CsvFile:
     chosen columns with pandas. ``tma.sources.table.Frame`` is a DataFrame's."""
 
     id_hint = ""  # what a refusal of duplicate times per contact adds (a frame's float ids)
+    own_from_ais = True  # own-ship may come from the AIS (truth.own_mmsi): a file's, not a frame's
 
     def __init__(self, path: Path, options, head: bytes | None = None):
         self.path, self.options, self.notes = path, options, []
@@ -188,8 +189,9 @@ class CsvFile:
         raise InputError(f"{self.path}: no own-ship position: columns found: "
                          f"{', '.join(self.header)}; set columns.lat=<name> columns.lon=<name> "
                          "(degrees) or columns.x=<name> columns.y=<name> (metres east, north), "
-                         "give the own-ship in a separate file with navigation=FILE, or take it "
-                         "from the AIS with truth.own_mmsi=<MMSI>")
+                         "give the own-ship in a separate file with navigation=FILE"
+                         + (", or take it from the AIS with truth.own_mmsi=<MMSI>"
+                            if self.own_from_ais else ""))
 
     def read(self, cols: dict[str, str]):
         """The chosen columns (by position, so odd header spellings cannot get in the way).
@@ -259,6 +261,8 @@ def with_leading_space(kept, raw):
 
 class Frame(CsvFile):
     """A pandas DataFrame as a table: its columns are the header, its rows the lines."""
+
+    own_from_ais = False  # a frame gives its own-ship in its columns or navigation=
 
     def __init__(self, frame, name: str, options):
         import pandas as pd

@@ -24,7 +24,7 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 
 from tma.config import to_plain
-from tma.errors import ConfigError, ConfigTypeError, InputError, MissingFileError
+from tma.errors import ConfigError, ConfigTypeError, InputError, MissingFileError, TmaError
 from tma.families import family as family_named
 from tma.io.atomic import sha256_file
 from tma.io.dataset import MANIFEST, datasets_dir, file_record, shard_relpath, write_manifest
@@ -102,6 +102,7 @@ def read_recordings(path: Path, fmt, navigation: Path | None, options, own=None)
                               f"truth.own_mmsi={own.own_mmsi}, not both: give one")
         found = read_source(path, kind, options, navigation=False, contacts=True)
         nav = [ownship_recording(own, options, found, str(path))]
+        _own_columns_left_aside(path, kind, options, own.own_mmsi)
         return [_with_navigation(found, nav, path, source_text(own), options)], kind, "ais"
     if navigation is None:
         recordings = read_source(path, kind, options, navigation=True, contacts=True)
@@ -113,6 +114,19 @@ def read_recordings(path: Path, fmt, navigation: Path | None, options, own=None)
     nav = read_source(navigation, nav_kind, options, navigation=True, contacts=False,
                       date_hint_ns=_first_utc_ns(found))
     return [_with_navigation(found, nav, path, navigation, options)], kind, nav_kind
+
+
+def _own_columns_left_aside(path, kind, options, own_mmsi):
+    """Says so where the log has own-ship positions of its own that ``truth.own_mmsi``
+    leaves aside (found without being named: named ones are refused, ``ownship``)."""
+    try:
+        own = read_source(path, kind, options, navigation=True, contacts=False)
+    except (TmaError, ValueError, OSError):
+        return  # none the reader can find: nothing left aside
+    if any(r.navigation is not None for r in own):
+        log.warning("%s: own-ship from its AIS (truth.own_mmsi=%d); the log's own-ship "
+                    "positions are left aside (drop truth.own_mmsi to use them)", path,
+                    own_mmsi)
 
 
 def _with_navigation(found, nav, where, nav_where, options):
