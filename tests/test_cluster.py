@@ -223,8 +223,11 @@ def test_a_scheduler_address_where_no_scheduler_answers_is_one_line(tmp_path, cl
                                                                     message):
     t0 = time.monotonic()
     with _service(kind, cluster) as address:
-        # a bad address as the issue gave it; a service within half a second
-        timeout = [] if "://" in kind else ["parallel.connect_timeout=0.5"]
+        # a bad address as the issue gave it; a service within half a second (one that
+        # closes the connection: within 5 s, so that a loaded machine still sees it close
+        # before the timeout)
+        wait = 5 if kind == "closes" else 0.5
+        timeout = [] if "://" in kind else [f"parallel.connect_timeout={wait}"]
         proc = _within(60, run_stage_here, "simulate", f"paths.data_dir={tmp_path}",
                        "scenario.n_tracks=4", "scenario.shard_size=2", "progress=false",
                        "parallel=dask", f"parallel.address='{address}'", *timeout, check=False)
