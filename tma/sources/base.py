@@ -180,6 +180,7 @@ class Navigation:
     lon_deg: np.ndarray | None = None
     lines: np.ndarray | None = None
     topic: str | None = None  # the MCAP topic, for messages
+    zone_option: str = "time.zone"  # what sets the zone its times were written in
 
     @property
     def geographic(self) -> bool:

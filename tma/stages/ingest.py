@@ -18,6 +18,7 @@ is a plain name; the dataset is built beside its final place and swapped in only
 complete, so a failed ingest (even with ``force=true``) leaves an existing dataset byte-identical.
 """
 
+import dataclasses
 import logging
 import os
 from dataclasses import dataclass, fields
@@ -100,9 +101,8 @@ def read_recordings(path: Path, fmt, navigation: Path | None, options, own=None)
         if navigation is not None:
             raise ConfigError(f"own-ship comes from navigation={navigation} or from "
                               f"truth.own_mmsi={own.own_mmsi}, not both: give one")
-        found = read_source(path, kind, options, navigation=False, contacts=True)
+        found = _without_own_ship(path, kind, options, own.own_mmsi)
         nav = [ownship_recording(own, options, found, str(path))]
-        _own_columns_left_aside(path, kind, options, own.own_mmsi)
         return [_with_navigation(found, nav, path, source_text(own), options)], kind, "ais"
     if navigation is None:
         recordings = read_source(path, kind, options, navigation=True, contacts=True)
@@ -116,17 +116,19 @@ def read_recordings(path: Path, fmt, navigation: Path | None, options, own=None)
     return [_with_navigation(found, nav, path, navigation, options)], kind, nav_kind
 
 
-def _own_columns_left_aside(path, kind, options, own_mmsi):
-    """Says so where the log has own-ship positions of its own that ``truth.own_mmsi``
-    leaves aside (found without being named: named ones are refused, ``ownship``)."""
+def _without_own_ship(path, kind, options, own_mmsi):
+    """The log's contacts for own-ship from the AIS (``truth.own_mmsi``), read once: where
+    the log has own-ship positions of its own (found, not named: named ones are refused,
+    ``ownship``), they are left aside, and a warning says so."""
     try:
-        own = read_source(path, kind, options, navigation=True, contacts=False)
-    except (TmaError, ValueError, OSError):
-        return  # none the reader can find: nothing left aside
-    if any(r.navigation is not None for r in own):
+        found = read_source(path, kind, options, navigation=True, contacts=True)
+    except (TmaError, ValueError):  # no own-ship the reader can find: the contacts alone
+        return read_source(path, kind, options, navigation=False, contacts=True)
+    if any(r.navigation is not None for r in found):
         log.warning("%s: own-ship from its AIS (truth.own_mmsi=%d); the log's own-ship "
                     "positions are left aside (drop truth.own_mmsi to use them)", path,
                     own_mmsi)
+    return [dataclasses.replace(r, navigation=None) for r in found]
 
 
 def _with_navigation(found, nav, where, nav_where, options):

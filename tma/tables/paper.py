@@ -58,7 +58,7 @@ def printed_unit(text: str) -> float:
 class Published:
     """One number as the paper printed it (``text``, e.g. "0.942" or "1e6"). ``quantity``,
     ``setting``: how our table names it; ``n``: the paper's sample size when the number is a
-    share of n (its sampling error is then known); ``row``: the papers.md table row it was
+    share of n (its sampling error is then known); ``row``: the paper's table row it was
     transcribed from (None for a number derived in the text)."""
 
     family: str

@@ -18,6 +18,7 @@ Used by ``test_bearings2d_real_motion.py`` (the assertions) and ``bench/bench.py
 figures).
 """
 
+import functools
 import importlib.util
 import sys
 from pathlib import Path
@@ -32,6 +33,7 @@ from tma.families import build_estimator
 from tma.families.bearings2d.log import read_bearings_log
 from tma.io.dataset import Dataset
 from tma.maths.angles import wrap_to_180
+from tma.maths.stats import wilson_interval
 
 AIS = Path(__file__).resolve().parents[2] / "data" / "ais"
 CRITERIA = {  # issue 28, item 3, on every recording
@@ -181,9 +183,8 @@ def wilson_clustered(success, cluster, z: float = Z95) -> tuple[float, float]:
         robust = k / (k - 1) * np.sum((hits - p * rows) ** 2) / n**2
         deff = max(1.0, robust / (p * (1 - p) / n))
     m = n / deff * ((z / student_t.ppf(norm.cdf(z), k - 1)) ** 2 if k > 1 else 1.0)
-    centre = (p + z * z / (2 * m)) / (1 + z * z / m)
-    half = z / (1 + z * z / m) * np.sqrt(p * (1 - p) / m + z * z / (4 * m * m))
-    return float(max(0.0, centre - half)), float(min(1.0, centre + half))
+    lo, hi = wilson_interval(p * m, m, confidence=2 * norm.cdf(z) - 1)
+    return float(max(0.0, lo)), float(min(1.0, hi))
 
 
 def median_boot(values, cluster, boot: int = BOOT, seed: int = BOOT_SEED
@@ -268,6 +269,11 @@ def _stats_module():
 
 
 def measured_prior(recordings) -> dict:
+    return dict(_measured_prior(tuple(recordings)))  # (a copy: callers may change it)
+
+
+@functools.cache
+def _measured_prior(recordings: tuple) -> dict:
     """The targets' motion prior measured by ``tests/data/ais/motion_stats.py`` on the
     positions of ``recordings`` (names of ``build_cases.RECORDINGS``, pooled where several;
     the Solent's committed subset, as ``motion_stats.py`` measures it by default), as

@@ -160,7 +160,7 @@ def _result_columns(state: str, values: np.ndarray, kind: str) -> tuple[str, np.
         values = (90.0 - values) % 360.0 if kind == "now" else (
             values if kind == "sd" else wrap_to_180(-values))
     if kind == "now":
-        return (f"{name}_now_{unit}" if name in "xyz" else f"{name}_{unit}"), values
+        return (f"{name}_now_{unit}" if name in ("x", "y", "z") else f"{name}_{unit}"), values
     return f"{name}_{kind}_{unit}", values
 
 

@@ -19,7 +19,7 @@ from tma.families.bearings2d import (
 from tma.families.bearings2d.contact_plots import contact_figure
 from tma.families.bearings2d.map_mcap import write_map_mcap
 from tma.families.bearings2d.metrics import THETA, summary_row, track_metrics
-from tma.families.bearings2d.status import HEADING_UNDETERMINED
+from tma.families.bearings2d.status import heading_undetermined
 from tma.families.bearings2d.success_table import write_success_table
 from tma.families.bearings2d.track_report import contact_report, write_report_without_truth
 from tma.families.bearings2d.truth_report import with_truth
@@ -93,8 +93,7 @@ def results(run) -> tuple[pd.DataFrame, dict]:
     elif run.truth is not None:  # a simulation
         metrics = track_metrics(est, run.truth)
         metrics.loc[blank, SIMULATED_ERRORS] = np.nan
-        metrics.loc[report["status"].isin(HEADING_UNDETERMINED).to_numpy(),
-                    HEADING_ERRORS] = np.nan
+        metrics.loc[heading_undetermined(report["status"]), HEADING_ERRORS] = np.nan
         report = pd.concat([report, metrics.drop(columns=[c for c in metrics
                                                           if c in report])], axis=1)
     estimates = est.copy()

@@ -19,9 +19,9 @@ the manoeuvres it made over the observation (truth ``n_manoeuvres``: 0, 1, 2, 3+
 targets that move); and the posterior probability of a manoeuvre the answer states
 (``p_manoeuvre``: < 0.5, 0.5-0.99, > 0.99; ``lm`` with manoeuvres in its prior). A cell
 without the column its split needs is absent, one without tracks left out. Cells with at
-least ``GRADED_MIN_OK`` ``ok`` tracks are graded: their consistency against its target, and
-in the cell ``all`` (the whole row) the per-quantity shares too; ``outside`` names the
-figures of a graded cell that miss their targets. Shares come with 95 % Wilson intervals.
+least ``GRADED_MIN_OK`` ``ok`` tracks are graded: their consistency and their per-quantity
+shares against their targets (a cell is not honest by its pooled 4D figure); ``outside``
+names the figures of a graded cell that miss their targets. Shares come with 95 % Wilson intervals.
 """
 
 import numpy as np
@@ -144,16 +144,15 @@ def cell_row(tracks: pd.DataFrame, mask) -> dict:
     return row
 
 
-def outside_targets(row: dict, per_quantity: bool) -> list[str]:
+def outside_targets(row: dict) -> list[str]:
     """The figures of a graded cell ``row`` (``cell_row``) outside their targets, e.g.
-    ``"consistent 67.1 % < 88 %"``; with ``per_quantity``, the shares within 1 and 2 sd
-    too. None for a cell not graded."""
+    ``"consistent 67.1 % < 88 %"``: the shares within 1 and 2 sd per quantity and the 4D
+    consistency. None for a cell not graded."""
     if not row["graded"]:
         return []
-    checks = [("consistent", "consistent", CONSISTENT_TARGET)]
-    if per_quantity:
-        checks = [(f"{q}_within_{k}sd", f"{q} within {k} sd", WITHIN_TARGETS[k])
-                  for q in QUANTITIES for k in WITHIN_TARGETS] + checks
+    checks = [(f"{q}_within_{k}sd", f"{q} within {k} sd", WITHIN_TARGETS[k])
+              for q in QUANTITIES for k in WITHIN_TARGETS]
+    checks.append(("consistent", "consistent", CONSISTENT_TARGET))
     out = []
     for key, name, (lo, hi) in checks:
         share = row[key]
@@ -183,7 +182,7 @@ def calibration_rows(label: str, motion: str, sigma_deg: float, estimates: pd.Da
             continue
         row = {"estimator": label, "motion": motion, "sigma_deg": sigma_deg,
                "cell_group": group, "cell": cell, **cell_row(tracks, mask)}
-        row["outside"] = "; ".join(outside_targets(row, per_quantity=group == "all"))
+        row["outside"] = "; ".join(outside_targets(row))
         rows.append(row)
     return rows
 
@@ -201,8 +200,8 @@ mean NEES beside the interval where the mean of that many chi-square(4) draws li
 the time (low: errors too wide; high: too narrow). Cells: the true range at the last bearing,
 the manoeuvres the target made over the observation, and the probability of a manoeuvre the
 answer states (`p_manoeuvre`, `lm` with manoeuvres in its prior). A cell with at least 100
-`ok` tracks is graded (consistency, and for the whole row the per-quantity shares, against
-their targets); "outside" names what misses. N: tracks in the cell, ok: the `ok` ones (cells
+`ok` tracks is graded (consistency and the per-quantity shares, against their targets);
+"outside" names what misses. N: tracks in the cell, ok: the `ok` ones (cells
 without `ok` tracks are in the CSV only, which has every number with 95 % Wilson
 intervals)."""
 

@@ -75,7 +75,8 @@ class JudgedFit:
     ``sigma2`` (rad^2) and fit test ``fit_p`` (``own_fit_test``: the solver's own), the
     bearings it rests on (``use``, n x K or None: all; ``n_bearings``; from each track's
     bearing ``start``), which tracks the trend test reads (``tested``) and its p-value
-    (``motion_p``), the motion fit's ``p_manoeuvre``, ``tail_scale`` and ``extra`` columns,
+    (``motion_p``), the manoeuvre mixture's ``p_manoeuvre``, ``tail_scale``, ``p_omitted``
+    and ``n_manoeuvres`` (``ncv.MotionFit``; NaN, and 1 for ``tail_scale``, where none),
     the trajectory tables ``paths``, and the tracks whose range own-ship's motion leaves
     ``undetermined``."""
 
@@ -93,6 +94,7 @@ class JudgedFit:
     motion_p: np.ndarray
     p_manoeuvre: np.ndarray
     tail_scale: np.ndarray
+    p_omitted: np.ndarray
+    n_manoeuvres: np.ndarray
     undetermined: np.ndarray
-    extra: dict = field(default_factory=dict)
     paths: list = field(default_factory=list)

@@ -19,11 +19,11 @@ import pandas as pd
 
 from tma.errors import InputError
 from tma.families.bearings2d.log import BearingsLog, read_bearings_log
-from tma.families.bearings2d.status import HEADING_UNDETERMINED
+from tma.families.bearings2d.metrics import THETA, jtj_matrices
+from tma.families.bearings2d.status import heading_undetermined
 from tma.maths.linalg import scaled_inverse
 
 CHI2_2_P95 = 5.991464547107979  # chi-square(2) 95 % point: the 95 % position ellipse
-THETA = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")  # position at t = 0 and velocity (m, m/s)
 
 
 # -- covariance ------------------------------------------------------------------------------
@@ -33,11 +33,7 @@ def theta_covariance(estimates: pd.DataFrame) -> np.ndarray:
     run's ``jtj_ij`` (upper triangle) and ``sigma_used_deg``; inverted in the diagonally
     scaled form, as the estimators do. NaN where the estimator found J^T J singular (its
     one-sigma columns are blank there)."""
-    n = len(estimates)
-    jtj = np.empty((n, 4, 4))
-    for i in range(4):
-        for j in range(i, 4):
-            jtj[:, i, j] = jtj[:, j, i] = estimates[f"jtj_{i}{j}"].to_numpy(float)
+    jtj = jtj_matrices(estimates).astype(float)
     usable = (np.isfinite(estimates["range_sd_m"].to_numpy(float))
               & np.isfinite(jtj).all(axis=(1, 2)))
     cov, _ = scaled_inverse(np.where(usable[:, None, None], jtj, np.eye(4)), 0.0)
@@ -61,7 +57,7 @@ def now_only(report: pd.DataFrame) -> np.ndarray:
     """Per track whether only its position now is drawn: where its status says where it is
     heading is not determined (``status.HEADING_UNDETERMINED``, ``position_only``), the line
     back from now along its velocity would draw a past the bearings do not give."""
-    return report["status"].isin(HEADING_UNDETERMINED).to_numpy()
+    return heading_undetermined(report["status"])
 
 
 def position_covariance(theta_cov: np.ndarray, t_s) -> np.ndarray:

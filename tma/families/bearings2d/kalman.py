@@ -23,10 +23,16 @@ def step_noise(t, lo, hi, lam, Q):
     for j in range(3):
         Q[lo, j] = 0.0
     for k in range(lo + 1, hi + 1):
-        T = t[k] - t[k - 1]
-        Q[k, 0] = lam * T * T * T / 3.0
-        Q[k, 1] = lam * T * T / 2.0
-        Q[k, 2] = lam * T
+        white_step(lam, t[k] - t[k - 1], Q[k])
+
+
+@njit(error_model="numpy")
+def white_step(lam, T, Qk):
+    """``Qk`` = lam (T^3 / 3, T^2 / 2, T): white acceleration of level ``lam`` over a step
+    of ``T`` seconds, per axis (q_pp, q_pv, q_vv)."""
+    Qk[0] = lam * T * T * T / 3.0
+    Qk[1] = lam * T * T / 2.0
+    Qk[2] = lam * T
 
 
 @njit(error_model="numpy")

@@ -6,14 +6,14 @@ import math
 
 import numpy as np
 
-from tma.families.bearings2d.kalman import _filter, _fit, _predict, filter_on
+from tma.families.bearings2d.kalman import _filter, _fit, _predict, filter_on, white_step
 from tma.families.bearings2d.ncv import (
     MAX_PASSES,
     MIN_PRIOR_M,
     PRIOR_RANGES,
     PRIOR_SPEED_M_S,
 )
-from tma.families.bearings2d.shocks import shift_posterior
+from tma.families.bearings2d.shocks import shift_posterior, state_with_shock
 from tma.runtime.jit import njit
 
 REFINE_TOL_M = 0.1  # a refinement stops when no position moves more than this (m)
@@ -34,11 +34,7 @@ def _component_noise(t, lo, hi, q, taus, durations, burst, cells, count, Q):
         for m in range(count):
             c, d = cells[m] // D, cells[m] % D
             extra += burst[d] * max(min(tb, taus[c] + durations[d]) - max(ta, taus[c]), 0.0)
-        T = tb - ta
-        lam = q + extra / T
-        Q[k, 0] = lam * T * T * T / 3.0
-        Q[k, 1] = lam * T * T / 2.0
-        Q[k, 2] = lam * T
+        white_step(q + extra / (tb - ta), tb - ta, Q[k])
 
 
 @njit(error_model="numpy", depends=(_filter,))
@@ -69,18 +65,7 @@ def _logaddexp(a, b):
     return top + math.log(math.exp(a - top) + math.exp(b - top))
 
 
-@njit(error_model="numpy")
-def _same_set(cells, c1, n1, c2, n2):
-    """Whether components c1 and c2 hold the same manoeuvres (``cells`` kept sorted)."""
-    if n1 != n2:
-        return False
-    for m in range(n1):
-        if cells[c1, m] != cells[c2, m]:
-            return False
-    return True
-
-
-@njit(error_model="numpy", depends=(filter_on, _predict, shift_posterior))
+@njit(error_model="numpy", depends=(filter_on, _predict, shift_posterior, state_with_shock))
 def _extension(t, ox, oy, z, w, weighted, k1, k2, hi, nom, Q, Q2, mf, Pf, Pp, g, G, W,
                suffix, s2, mf2, Pf2, Pp2, nu, S, mean, cov):
     """The log Bayes factor of a component extended by a burst over epochs k1..k2 (its
@@ -124,19 +109,7 @@ def _extension(t, ox, oy, z, w, weighted, k1, k2, hi, nom, Q, Q2, mf, Pf, Pp, g,
             Delta[a, b] = Pn[a, b] - Pp[k2 + 1, a, b]
     A, rhs, dm, dc = np.empty((4, 4)), np.empty((4, 5)), np.empty(4), np.empty((4, 4))
     loglik += shift_posterior(g[k2 + 1], G[k2 + 1], d0, Delta, A, rhs, dm, dc)
-    Wk = W[k2 + 1]
-    for a in range(4):
-        v = mf[hi, a]
-        for b in range(4):
-            v += Wk[a, b] * dm[b] / inv_s
-        mean[a] = v
-    for a in range(4):
-        for b in range(4):
-            v = Pf[hi, a, b]
-            for c in range(4):
-                for e in range(4):
-                    v += Wk[a, c] * dc[c, e] * Wk[b, e]
-            cov[a, b] = v
+    state_with_shock(mf[hi], Pf[hi], W[k2 + 1], dm, dc, 1.0 / inv_s, mean, cov)
     return loglik
 
 

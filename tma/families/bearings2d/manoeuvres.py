@@ -52,7 +52,6 @@ from tma.families.bearings2d.manoeuvre_components import (  # noqa: F401 (compon
     _laplace,
     _logaddexp,
     _pool,
-    _same_set,
     component,
 )
 from tma.families.bearings2d.manoeuvre_prior import (  # noqa: F401 (the prior's home is there)
@@ -88,7 +87,26 @@ LOG_STOP = math.log(1e-3)  # a level holding less of the mixture's mass ends the
 LOG_SCREEN = math.log(1e-2)  # an extension screened below this share of the mass is left out
 
 
-@njit(error_model="numpy", depends=(_filter, _fit, finish_track, start_track, backward_pass,
+@njit(error_model="numpy")
+def _from_earlier_base(cells, bases, bi, b, nb, code):
+    """Whether the set of base ``b``'s ``nb`` manoeuvres and ``code`` is also an extension
+    of a base before it in ``bases[:bi]`` (one of the set's subsets of ``nb``): each set is
+    weighed from the first base that reaches it, so that no mass is counted twice."""
+    for bj in range(bi):
+        inside = True
+        for m in range(nb):
+            v = cells[bases[bj], m]
+            found = v == code
+            for mm in range(nb):
+                found |= cells[b, mm] == v
+            inside &= found
+        if inside:
+            return True
+    return False
+
+
+@njit(error_model="numpy", depends=(_from_earlier_base, _filter, _fit, finish_track,
+                                         start_track, backward_pass,
                                          shock_posterior, state_with_shock, tail_scale,
                                          _extension, blank_path, smoothed_positions))
 def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q, taus, starts,
@@ -196,6 +214,8 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
                     if clash:
                         continue
                     for d in range(D):
+                        if _from_earlier_base(cells, bases, bi, b, nb, cj * D + d):
+                            continue  # that set's mass is counted once, from that base
                         k = epochs[i, cj, d]
                         # every extension's weight at once (the burst as a shock at its
                         # centre, shocks.py); those far below the mixture's mass are left
@@ -218,12 +238,6 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
                             continue
                         _insert(cells, b, nb, cj * D + d, C)
                         count[C] = nb + 1
-                        duplicate = False
-                        for cc in range(start, used):
-                            if _same_set(cells, cc, count[cc], C, nb + 1):
-                                duplicate = True
-                        if duplicate:
-                            continue
                         # the extension exactly (the bearings linearised about the base's
                         # trajectory): its filter over the burst, the bearings after it
                         # through the base's backward pass (shocks.shift_posterior)
@@ -310,7 +324,8 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
             beyond = level_mass + (ratio - math.log(-math.expm1(ratio)) if ratio < 0.0
                                    else 0.0)
             omitted = _logaddexp(omitted, beyond)
-        if pooled > -np.inf and used < C:  # the pooled light extensions: one component
+        if pooled > -np.inf:  # the pooled light extensions: one component (slot C - 1:
+            # used is at most 1 + L KEEP)
             c = used
             used += 1
             logw[c], slot[c], count[c] = pooled, -1, max(int(round(pool_count[0])), 1)
@@ -383,7 +398,8 @@ def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_p
     if prior.rate_per_h == 0:  # no manoeuvres: the nearly-constant-velocity answer itself
         out = smooth(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_psd,
                      sigma, path_cov=path_cov)
-        return dataclasses.replace(out, p_manoeuvre=np.zeros(n), tail_scale=np.ones(n))
+        return dataclasses.replace(out, p_manoeuvre=np.zeros(n), tail_scale=np.ones(n),
+                                   p_omitted=np.zeros(n), n_manoeuvres=np.zeros(n))
     known = np.isfinite(sigma)
     weighted = valid is not None
     weight = valid.astype(float) if weighted else np.empty((0, 0))

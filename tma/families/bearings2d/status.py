@@ -52,7 +52,7 @@ import math
 
 import numpy as np
 
-from tma.maths.angles import bearing_from_north, course_from_velocity
+from tma.maths.angles import bearing_from_north, course_from_velocity, wrap_to_180
 from tma.maths.linalg import scaled_inverse
 from tma.runtime.jit import njit
 
@@ -65,6 +65,12 @@ STATUSES = ("ok", "not_converged", "poor_fit", "unobservable", "manoeuvring", "a
             "position_only")
 # the statuses whose course and speed are no answer: every output leaves them blank
 HEADING_UNDETERMINED = ("position_only",)
+
+
+def heading_undetermined(status) -> np.ndarray:
+    """Per track whether its ``status`` says where it is heading is not determined
+    (``HEADING_UNDETERMINED``): its course and speed are blank in every output."""
+    return np.isin(np.asarray(status, dtype=str), HEADING_UNDETERMINED)
 NOISELESS_RMS_DEG = 1e-4  # far above round-off, far below any real bearing sensor
 
 
@@ -346,7 +352,7 @@ def off_the_last_bearings(bearings):
     if bearings is None or any(c not in bearings for c in END_COLUMNS):
         return None
     now, now_sd, end, end_sd = (np.asarray(bearings[c], dtype=float) for c in END_COLUMNS)
-    off = (now - end + 180.0) % 360.0 - 180.0
+    off = wrap_to_180(now - end)
     with np.errstate(invalid="ignore"):
         far = np.abs(off) > END_SIGMAS * np.hypot(now_sd, end_sd)
     return now, end, np.where(far, off, np.nan)

@@ -21,7 +21,7 @@ from tma.families.bearings2d.drawn_tracks import (
     theta_covariance,
 )
 from tma.families.bearings2d.map_mcap import write_map_mcap
-from tma.families.bearings2d.status import HEADING_UNDETERMINED, STATUSES, not_an_answer
+from tma.families.bearings2d.status import STATUSES, heading_undetermined, not_an_answer
 from tma.families.bearings2d.truth_report import (
     coverage_text,
     dataset_truth,
@@ -147,7 +147,7 @@ def blank_headings(report: pd.DataFrame) -> np.ndarray:
     """Blank (NaN) course and speed and their errors of the tracks whose status says where
     they are heading is not determined (``status.HEADING_UNDETERMINED``), in place; their
     position now stays, and their note says why. Returns the mask."""
-    headless = report["status"].isin(HEADING_UNDETERMINED).to_numpy()
+    headless = heading_undetermined(report["status"])
     if headless.any():
         for column in HEADING_COLUMNS:
             report[column] = report[column].astype(float).mask(headless)
@@ -216,8 +216,7 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str,
     blank estimate as ``-``); ``geographic``: the log has a geographic origin (a column of
     latitude and longitude; None: where the report has any)."""
 
-    headless = (report["status"].isin(HEADING_UNDETERMINED)
-                & report["range_now_m"].notna()).to_numpy()
+    headless = heading_undetermined(report["status"]) & report["range_now_m"].notna().to_numpy()
 
     def pm(value, sd, fmt, heading=False):  # blank ("-") where the estimate is no answer
         # (its note says), "not determined" where its heading is not (position_only)
@@ -338,7 +337,7 @@ def write_report_without_truth(entry, tables_dir, name: str, progress=None) -> l
                                  m.get("input", {}).get("path", dataset.name)
                                  + (f"; own-ship: {own['ownship']}" if own else ""),
                                  geographic=origin is not None)
-    paths = run_path(entry.run_root)
+    paths = kept_path_table(entry.run_root)
     written += write_track_plots(report, entry.estimates, logs, tables_dir, name, progress,
                                  paths)
     if origin is None:
@@ -358,7 +357,7 @@ def write_report_without_truth(entry, tables_dir, name: str, progress=None) -> l
     return written
 
 
-def run_path(run_root) -> pd.DataFrame | None:
+def kept_path_table(run_root) -> pd.DataFrame | None:
     """The run's side table ``path`` (``estimated_path``: the trajectory each answer rests
     on, which the plots and the map draw), None where it kept none (an estimator that
     assumes constant velocity, a simulation, a run from before it)."""

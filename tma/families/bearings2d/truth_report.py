@@ -18,6 +18,7 @@ fits, ambiguous, an AIS gap: the manifest says why) have these columns blank.
 import numpy as np
 import pandas as pd
 
+from tma.families.bearings2d.drawn_tracks import theta_covariance
 from tma.families.bearings2d.metrics import NEES_95, THETA, normalised_error
 from tma.families.bearings2d.status import kinematics_now
 from tma.maths.angles import wrap_to_180
@@ -109,17 +110,18 @@ def _truth_sd(df, true, own) -> dict:
 def _nees_with_truth(df) -> np.ndarray:
     """The normalised error with the truth's covariance of (x0, y0, vx, vy) added to the
     estimate's (x and y alike, independent)."""
-    from tma.families.bearings2d.metrics import jtj_matrices
-
     e = df[list(THETA)].to_numpy() - df[[f"{c}_true" for c in THETA]].to_numpy()
-    sigma2 = np.deg2rad(df["sigma_used_deg"].to_numpy()) ** 2
-    cov = np.linalg.pinv(jtj_matrices(df)) * sigma2[:, None, None]
+    cov = theta_covariance(df)  # (NaN where the estimate states no error)
     for a, b in ((0, 2), (1, 3)):  # (x0, vx) and (y0, vy)
         cov[:, a, a] += df["truth_var_x0_m2"].fillna(0.0).to_numpy()
         cov[:, b, b] += df["truth_var_v_m2_s2"].fillna(0.0).to_numpy()
         cov[:, a, b] += df["truth_cov_x0_v_m2_s"].fillna(0.0).to_numpy()
         cov[:, b, a] = cov[:, a, b]
-    return np.einsum("ni,ni->n", e, np.linalg.solve(cov, e[..., None])[..., 0])
+    out = np.full(len(df), np.nan)
+    stated = np.isfinite(cov).all(axis=(1, 2)) & np.isfinite(e).all(axis=1)
+    out[stated] = np.einsum("ni,ni->n", e[stated],
+                            np.linalg.solve(cov[stated], e[stated][..., None])[..., 0])
+    return out
 
 
 def coverage(report: pd.DataFrame) -> dict:

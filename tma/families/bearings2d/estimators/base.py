@@ -32,6 +32,8 @@ from tma.families.bearings2d.status import (
 from tma.maths.linalg import scaled_inverse
 
 BLOCK_TRACKS = 64
+# what the manoeuvre mixture says of each answer (ncv.MotionFit), output in this order
+MIXTURE_COLUMNS = ("p_manoeuvre", "tail_scale", "p_omitted", "n_manoeuvres")
 GROSS_SIGMAS = 5.0  # a robust fit's outliers: bearings this many sigma off (Gaussian: 6e-7)
 
 
@@ -226,7 +228,8 @@ class BearingsEstimator(Estimator):
                          use=valid if solution.inliers is None else solution.inliers,
                          start=b.first, tested=np.zeros(n, dtype=bool),
                          motion_p=np.full(n, np.nan), p_manoeuvre=np.full(n, np.nan),
-                         tail_scale=np.ones(n), undetermined=np.zeros(n, dtype=bool))
+                         tail_scale=np.ones(n), p_omitted=np.full(n, np.nan),
+                         n_manoeuvres=np.full(n, np.nan), undetermined=np.zeros(n, dtype=bool))
 
     def _follow(self, b: Bearings, motion: TargetMotion, solution: Solution,
                 log: BearingsLog, fit: JudgedFit):
@@ -285,13 +288,9 @@ class BearingsEstimator(Estimator):
                 fit.paths.append(estimated_path.path_table(
                     log.track_id[rows], t, motion_fit.path_m, motion_fit.path_cov_m2,
                     motion_fit.cov[:, :2, :2], np.searchsorted(t, leg_start[rows]), points))
-            if motion_fit.p_manoeuvre is not None:
-                fit.p_manoeuvre[rows] = motion_fit.p_manoeuvre
-                fit.tail_scale[rows] = motion_fit.tail_scale
-            for key in ("p_omitted", "n_manoeuvres"):
+            for key in MIXTURE_COLUMNS:  # (a mixture's own: None from ncv.smooth)
                 if getattr(motion_fit, key) is not None:
-                    fit.extra.setdefault(key, np.full(n, np.nan))[rows] = getattr(motion_fit,
-                                                                                   key)
+                    getattr(fit, key)[rows] = getattr(motion_fit, key)
             if iterate:
                 fit.theta, fit.cost, fit.jtj, fit.sigma2, fit.fit_p = (
                     np.array(v, dtype=float)
@@ -336,9 +335,7 @@ class BearingsEstimator(Estimator):
         }
         if prior is not None and self.models_motion:  # (not in the constant-velocity runs)
             columns["manoeuvre_rate_per_h"] = np.full(n, prior.rate_per_h)
-            columns["p_manoeuvre"] = fit.p_manoeuvre
-            columns["tail_scale"] = fit.tail_scale
-            columns.update(fit.extra)
+            columns.update({key: getattr(fit, key) for key in MIXTURE_COLUMNS})
         for i in range(4):
             for j in range(i, 4):
                 columns[f"jtj_{i}{j}"] = fit.jtj[:, i, j]
