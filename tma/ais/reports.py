@@ -23,6 +23,7 @@ MCAP log, own-ship NMEA, a bearing log) or with no usable report left is refused
 Times are the receiver's stamps (the reports' own UTC second is not used).
 """
 
+import copy
 import functools
 import gzip
 import json
@@ -141,7 +142,8 @@ def cached_reports(options: TruthOptions) -> Reports:
              **{k.removeprefix("truth."): v for k, v in options.table_options().items()}}
     reports = _cached(str(path), (stat.st_mtime_ns, stat.st_size),
                       json.dumps(table, sort_keys=True))
-    return replace(reports, dropped=reports.dropped, notes=list(reports.notes))
+    # (copies: a caller that counts more in them must not change the cached reports)
+    return replace(reports, dropped=copy.deepcopy(reports.dropped), notes=list(reports.notes))
 
 
 # -- raw NMEA ----------------------------------------------------------------------------------
