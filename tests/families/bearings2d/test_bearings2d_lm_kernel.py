@@ -14,6 +14,8 @@ from tma.families.bearings2d.marquardt import (
     STOP_F_TOL,
     STOP_LAMBDA_MAX,
     STOP_MAX_ITER,
+    MarquardtSettings,
+    fit_starts,
     scaled_eigh,
 )
 from tma.families.bearings2d.model import (
@@ -190,3 +192,27 @@ def test_compiled_marquardt_takes_the_plain_loops_decisions(options):
     for key, reason in expected.items():
         if key in options:
             assert reason in stops  # the case is exercised, not only converged tracks
+
+
+def test_fit_starts_keeps_each_tracks_best_start_and_takes_no_track():
+    """``fit_starts`` from several starts: each track keeps the start of lowest F (the
+    earliest within the tolerance), n_f_evals summed over the starts; a batch of no track
+    (``last_leg``'s rounds where none is left) gives empty arrays, not a division by zero."""
+    log, _ = simulate_shard(Config(n_tracks=6, shard_size=6, sigma_deg=0.5, seed=2), 0)
+    lm = build_estimator({"name": "lm"})
+    b = lm.read(log)
+    settings = MarquardtSettings.of(lm.config)
+    near = initial_theta(lm.config, b.t, b.own_x, b.own_y, b.measured, b.first, 2000.0)
+    far = initial_theta(lm.config, b.t, b.own_x, b.own_y, b.measured, b.first, 60000.0)
+    args = (b.t, b.own_x, b.own_y, b.measured, np.empty((0, 0)), False)
+    each = [fit_starts(settings, start, *args) for start in (near, far)]
+    both = fit_starts(settings, np.concatenate([near, far]), *args)
+    won = np.where(each[1]["cost_rad2"] < each[0]["cost_rad2"] - settings.f_tol_rad2, 1, 0)
+    np.testing.assert_array_equal(both["start_won"], won)
+    for key in ("theta", "cost_rad2", "n_iter", "stop_reason"):
+        np.testing.assert_array_equal(both[key], np.where(
+            won.reshape(-1, *[1] * (each[0][key].ndim - 1)) == 1, each[1][key], each[0][key]))
+    np.testing.assert_array_equal(both["n_f_evals"], each[0]["n_f_evals"] + each[1]["n_f_evals"])
+    none = fit_starts(settings, np.empty((0, 4)), b.t, b.own_x, b.own_y,
+                      np.empty((0, b.t.size)), np.empty((0, b.t.size)), True)
+    assert none["theta"].shape == (0, 4) and none["cost_rad2"].shape == (0,)

@@ -234,7 +234,7 @@ def fit_starts(settings: MarquardtSettings, starts, t, ox, oy, measured, weight,
     result: ``cost_rad2`` with ``jtj`` (the normal matrix) for the squared loss,
     ``cost_robust_rad2`` for a robust one; with several starts, ``start_won``."""
     n = measured.shape[0]
-    k, m = starts.shape[0] // n, starts.shape[0]
+    k, m = (starts.shape[0] // n if n else 1), starts.shape[0]  # (no track: nothing to fit)
     robust = loss != "squared"
     cost_key = "cost_robust_rad2" if robust else "cost_rad2"
     out = {"theta": np.array(starts, dtype=float), "n_f_evals": np.zeros(m, dtype=np.int64),
