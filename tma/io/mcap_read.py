@@ -263,9 +263,11 @@ class McapFile:
         return out
 
 
-def read_log(path, expected: dict[str, str], nonempty: bool = False):
-    """Read an MCAP log of tma's schemas. ``expected`` maps topic -> schema name;
-    ``nonempty``: each of these topics must hold a message.
+def read_log(path, expected, nonempty: bool = False):
+    """Read an MCAP log of tma's schemas. ``expected`` maps topic -> schema name (or is a
+    function of the metadata records and the file's name for messages that gives that map:
+    a log whose records say which topics it holds); ``nonempty``: each of these topics must
+    hold a message.
 
     Returns ``(messages, metadata)``: ``messages[topic]`` is a list of decoded dicts in
     log-time order, ``metadata`` maps metadata record names to dicts. Raises one
@@ -275,6 +277,8 @@ def read_log(path, expected: dict[str, str], nonempty: bool = False):
     """
     file = McapFile(path)
     where = file.where
+    if callable(expected):
+        expected = expected(file.metadata, where)
     missing = [t for t in expected if t not in file.topics]
     if missing:
         raise InputError(

@@ -15,7 +15,11 @@ class Bearings:
     ``own_x``, ``own_y`` (K,, m), the bearings ``measured`` (n, K, rad; 0 where missing),
     ``valid`` (n, K; None: every bearing present, which spares the masks in the hot loops),
     each track's ``first`` and ``last`` bearing (n,), ``n_bearings`` (n,) and the log's
-    nominal noise ``sigma_deg`` (None: unknown)."""
+    nominal noise ``sigma_deg`` (None: unknown). Several platforms: ``own_x``, ``own_y`` are
+    those of the platform that took each epoch's bearings, ``platform`` (K,) its index into
+    ``platforms`` (None: one own-ship); ``reference`` the platform range and bearing now
+    are read from, and ``now_x``, ``now_y`` (n,, m) where it was at each track's last bearing
+    (``platforms.observer_now``; one own-ship: own-ship there)."""
 
     t: np.ndarray
     own_x: np.ndarray
@@ -26,6 +30,11 @@ class Bearings:
     last: np.ndarray
     n_bearings: np.ndarray
     sigma_deg: float | None
+    now_x: np.ndarray | None = None
+    now_y: np.ndarray | None = None
+    platform: np.ndarray | None = None
+    platforms: tuple[str, ...] | None = None
+    reference: int = 0
 
 
 @dataclass(frozen=True)

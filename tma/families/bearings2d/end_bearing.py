@@ -41,12 +41,14 @@ def window(valid, n_window=END_BEARINGS):
 
 
 def end_bearing(t_s, measured_rad, valid, last, sigma_rad, n_window=END_BEARINGS,
-                floor_rad=FLOOR_RAD) -> dict:
+                floor_rad=FLOOR_RAD, at_s=None) -> dict:
     """Per track the bearing at its last bearing time from its last ``n_window`` bearings
     (module docstring): ``end_bearing_deg`` in [0, 360) and its one-sigma error
     ``end_bearing_sd_deg``. ``measured_rad`` (n, K), ``valid`` (n, K; None: every bearing
     present), ``last`` (n,) each track's last bearing, ``sigma_rad`` (n,) the noise sigma the
-    estimate used (NaN: none), ``floor_rad`` the least scale of the error (round-off)."""
+    estimate used (NaN: none), ``floor_rad`` the least scale of the error (round-off),
+    ``at_s`` (n,, s) when the line is read elsewhere than at the last bearing's time (one
+    platform's bearings of a track that others saw later: at the track's last bearing)."""
     n, K = measured_rad.shape
     if valid is None:  # every bearing present: the last n_window columns
         idx = np.broadcast_to(np.arange(K - n_window, K), (n, n_window))
@@ -54,7 +56,8 @@ def end_bearing(t_s, measured_rad, valid, last, sigma_rad, n_window=END_BEARINGS
     else:
         idx, m = window(valid, n_window)
     rows = np.arange(n)[:, None]
-    tau = np.where(m, t_s[idx] - t_s[last][:, None], 0.0)  # s, <= 0
+    at = t_s[last] if at_s is None else np.asarray(at_s, dtype=float)
+    tau = np.where(m, t_s[idx] - at[:, None], 0.0)  # s, <= 0
     y = np.where(m, wrap_residual(measured_rad[rows, idx] - measured_rad[rows, last[:, None]]), 0.0)
     sigma = np.nan_to_num(np.asarray(sigma_rad, dtype=float), nan=0.0)
 

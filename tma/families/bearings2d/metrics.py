@@ -22,6 +22,7 @@ import pandas as pd
 from scipy.special import gammaincinv  # scipy.stats takes 0.5 s to import, for one quantile
 
 from tma.families.bearings2d.model import bearing_jacobian
+from tma.families.bearings2d.platforms import observer_now
 from tma.families.bearings2d.status import STATUSES, kinematics_now
 from tma.maths.angles import wrap_to_180
 from tma.maths.linalg import scaled_inverse
@@ -174,7 +175,8 @@ def crlb_now(log, truth: pd.DataFrame) -> pd.DataFrame:
     last = valid.shape[1] - 1 - np.argmax(valid[:, ::-1], axis=1)
     cov = crlb_theta(theta, log.t_s, log.own_x_m, log.own_y_m,
                      None if valid.all() else valid, log.sigma_deg)
-    _, G = kinematics_now(theta, log.t_s[last], log.own_x_m[last], log.own_y_m[last])
+    now = observer_now(log.t_s, log.own_x_m, log.own_y_m, log.platform, 0, last)
+    _, G = kinematics_now(theta, log.t_s[last], *now)
     finite = np.isfinite(cov).all(axis=(1, 2))
     with np.errstate(invalid="ignore"):
         var = np.einsum("nij,njk,nik->ni", G, np.where(finite[:, None, None], cov, 0.0), G)

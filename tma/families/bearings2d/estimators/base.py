@@ -22,6 +22,7 @@ from tma.families.bearings2d.log import BearingsLog
 from tma.families.bearings2d.manoeuvre_prior import RECORDED_MANOEUVRES
 from tma.families.bearings2d.model import BearingTerms
 from tma.families.bearings2d.ncv import RECORDED_ACCEL_PSD
+from tma.families.bearings2d.platforms import observer_now, reference_index
 from tma.families.bearings2d.status import (
     assess,
     noise_fit,
@@ -95,6 +96,9 @@ class BearingsConfig(EstimatorConfig):
                                 "(0, 1)")
     motion_terms: int = param(8, "cosines of the trend test's smooth bias (1: a constant bias)",
                               "[1, 64]")
+    reference_platform: str | None = param(
+        None, "the platform range and bearing now are given from, in a log of several "
+        "(ships, buoys, stations); null: the first", None)
 
     def __post_init__(self):
         super().__post_init__()
@@ -126,6 +130,7 @@ class BearingsEstimator(Estimator):
     models_motion = False
     honest_errors = True
     tests_motion = False  # runs the trend test even where the log declares its motion
+    several_platforms = True  # takes each bearing from its own platform (BearingsLog.platform)
     conformance_scenario = {"sigma_deg": 0.5, "seed": 3}
 
     def estimate(self, log: BearingsLog) -> Estimates:
@@ -146,11 +151,20 @@ class BearingsEstimator(Estimator):
                 f"{self.name}: tracks {ids} have fewer than {self.config.min_bearings} "
                 f"bearings (min {n_bearings.min()}); 4 parameters (x0, y0, vx, vy) need more"
             )
+        if log.platforms is not None and not self.several_platforms:
+            raise InputError(f"{self.name}: the log's bearings come from {log.n_platforms} "
+                             f"platforms ({', '.join(log.platforms)}); {self.name} needs one "
+                             "own-ship: use lm, last_leg, iv or nbearings")
+        reference = reference_index(log.platforms, self.config.reference_platform, self.name)
+        last = valid.shape[1] - 1 - np.argmax(valid[:, ::-1], axis=1)
+        now_x, now_y = observer_now(log.t_s, log.own_x_m, log.own_y_m, log.platform,
+                                    reference, last)
         return Bearings(t=log.t_s, own_x=log.own_x_m, own_y=log.own_y_m,
                         measured=np.where(valid, measured, 0.0),
                         valid=None if valid.all() else valid, first=np.argmax(valid, axis=1),
-                        last=valid.shape[1] - 1 - np.argmax(valid[:, ::-1], axis=1),
-                        n_bearings=n_bearings, sigma_deg=log.sigma_deg)
+                        last=last, n_bearings=n_bearings, sigma_deg=log.sigma_deg,
+                        now_x=now_x, now_y=now_y, platform=log.platform,
+                        platforms=log.platforms, reference=reference)
 
     def motion(self, log: BearingsLog) -> TargetMotion:
         """The targets' motion the outputs assume: the random acceleration q (m^2/s^3) and
@@ -192,13 +206,13 @@ class BearingsEstimator(Estimator):
         self._follow(b, motion, solution, log, fit)
         approximate = np.full(fit.theta.shape[0], not self.honest_errors)
         approximate |= motion.moving and not self.models_motion
-        t, ox, oy, last = b.t, b.own_x, b.own_y, b.last
+        t, last = b.t, b.last
         trust = assess(fit.theta, fit.jtj, fit.sigma2, fit.fit_p, fit.motion_p, fit.converged,
-                       approximate, t[last], ox[last], oy[last], self.config,
+                       approximate, t[last], b.now_x, b.now_y, self.config,
                        motion_tested=fit.tested, undetermined=fit.undetermined,
                        moving=motion.moving, tail_scale=fit.tail_scale)
         # where the log's own last bearings point now, for status.not_an_answer's rule
-        trust.update(end_bearing(t, b.measured, b.valid, last, np.sqrt(fit.sigma2)))
+        trust.update(self._end_bearing(b, np.sqrt(fit.sigma2)))
         return self._columns(b, motion, solution, log, fit, trust)
 
     def _noise_fit(self, b: Bearings, solution: Solution) -> JudgedFit:
@@ -272,7 +286,7 @@ class BearingsEstimator(Estimator):
                 fit.use = inside if fit.use is None else fit.use & inside
                 fit.n_bearings = fit.use.sum(axis=1)
         elif follows:
-            follow = range_rel_sd(fit.theta, fit.jtj, fit.sigma2, t[last], ox[last], oy[last],
+            follow = range_rel_sd(fit.theta, fit.jtj, fit.sigma2, t[last], b.now_x, b.now_y,
                                   cfg.singular_rcond) <= cfg.max_range_rel_sd
         innovations = np.full(b.measured.shape, np.nan)
         leg_start = self._leg_start(t, fit.start, solution)
@@ -308,7 +322,7 @@ class BearingsEstimator(Estimator):
             _, jtj_cv, _ = evaluate_in_blocks(
                 BearingTerms(t, ox, oy, b.measured, fit.use), fit.theta)
             fit.undetermined = ~(range_rel_sd(fit.theta, jtj_cv, fit.sigma2, t[last],
-                                              ox[last], oy[last], cfg.singular_rcond)
+                                              b.now_x, b.now_y, cfg.singular_rcond)
                                  <= cfg.max_range_rel_sd)
             # there no one-sigma error can be given (the prior's would pretend one): the
             # estimate is no answer (status.not_an_answer)
@@ -317,7 +331,7 @@ class BearingsEstimator(Estimator):
     def _columns(self, b: Bearings, motion: TargetMotion, solution: Solution,
                  log: BearingsLog, fit: JudgedFit, trust: dict) -> Estimates:
         """The output columns by name and the side table ``path`` (``path_points``)."""
-        t, ox, oy, last = b.t, b.own_x, b.own_y, b.last
+        t, last = b.t, b.last
         theta, n = fit.theta, fit.theta.shape[0]
         q, prior = motion.accel_psd_m2_s3, motion.manoeuvres
         columns = {
@@ -327,7 +341,7 @@ class BearingsEstimator(Estimator):
             **solution.columns,
             "cost_rad2": fit.cost,
             "n_bearings": fit.n_bearings.astype(np.int64),
-            "t_last_s": t[last], "own_x_last_m": ox[last], "own_y_last_m": oy[last],
+            "t_last_s": t[last], "own_x_last_m": b.now_x, "own_y_last_m": b.now_y,
             **trust,
             "leg_start_s": self._leg_start(t, fit.start, solution),
             "accel_psd_m2_s3": np.full(n, float(q) if self.models_motion else 0.0),
@@ -342,6 +356,21 @@ class BearingsEstimator(Estimator):
         path = self.models_motion and self.config.path_points > 0
         return Estimates(columns, {"path": estimated_path.joined(fit.paths, log.track_id.dtype)}
                          if path else {})
+
+    @staticmethod
+    def _end_bearing(b: Bearings, sigma_rad) -> dict:
+        """Where the log's own last bearings point at each track's last bearing time
+        (``end_bearing``): from the reference platform's bearings alone when there are
+        several (the answer's bearing now is read from it); NaN for a track it took fewer
+        than two of."""
+        if b.platform is None:
+            return end_bearing(b.t, b.measured, b.valid, b.last, sigma_rad)
+        valid = np.ones(b.measured.shape, dtype=bool) if b.valid is None else b.valid
+        mine = valid & (b.platform == b.reference)[None, :]
+        has = mine.sum(axis=1) >= 2
+        last_mine = mine.shape[1] - 1 - np.argmax(mine[:, ::-1], axis=1)
+        out = end_bearing(b.t, b.measured, mine, last_mine, sigma_rad, at_s=b.t[b.last])
+        return {k: np.where(has, v, np.nan) for k, v in out.items()}
 
     @staticmethod
     def _leg_start(t, start, solution: Solution):

@@ -267,6 +267,7 @@ def consistent_information(t, own_x, own_y, measured_rad, valid, theta, sigma_ra
 class ModifiedPolarEKF(BearingsEstimator):
     Config = Config
     outputs = ("n_gated",)  # bearings the innovation gate skipped (0 without a gate)
+    several_platforms = False  # its relative-state model moves with one own-ship
 
     def solve(self, bearings: Bearings, motion: TargetMotion) -> Solution:
         t, own_x, own_y, measured_rad, valid, first = (
