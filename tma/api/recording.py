@@ -107,12 +107,15 @@ class Recording:
     def ownship(self) -> pd.DataFrame:
         """Own-ship at each bearing epoch: ``log`` (which own-ship), ``t_s`` (from the log's
         time 0), ``time_utc``, ``x_m``/``y_m`` (east, north of ``origin_deg``), and with an
-        origin ``lat_deg``/``lon_deg``."""
+        origin ``lat_deg``/``lon_deg``; a log of several platforms says whose position each
+        is (``platform``)."""
         from tma.maths.geo import local_to_geodetic
 
         frames = []
         for k, lg in enumerate(self.logs):
             frame = {"log": k, **self._times(lg.t_s), "x_m": lg.own_x_m, "y_m": lg.own_y_m}
+            if lg.platforms is not None:
+                frame["platform"] = np.asarray(lg.platforms, dtype=object)[lg.platform]
             if lg.origin_deg is not None:
                 frame["lat_deg"], frame["lon_deg"] = local_to_geodetic(lg.own_x_m, lg.own_y_m,
                                                                        lg.origin_deg)
@@ -122,16 +125,19 @@ class Recording:
     @property
     def bearings(self) -> pd.DataFrame:
         """One row per bearing: ``log``, ``t_s``, ``time_utc``, ``track_id``, ``label`` (the
-        contact as written) and ``bearing_deg`` (clockwise from north)."""
+        contact as written) and ``bearing_deg`` (clockwise from north); with several
+        platforms the one that took it (``platform``)."""
         frames = []
         for k, lg in enumerate(self.logs):
             row, col = np.nonzero(np.isfinite(lg.bearing_deg))
             labels = (lg.track_label if lg.track_label is not None
                       else lg.track_id.astype(str))
-            frames.append(pd.DataFrame({
-                "log": k, **self._times(lg.t_s[col]), "track_id": lg.track_id[row],
-                "label": np.asarray(labels, dtype=object)[row],
-                "bearing_deg": lg.bearing_deg[row, col]}))
+            frame = {"log": k, **self._times(lg.t_s[col]), "track_id": lg.track_id[row],
+                     "label": np.asarray(labels, dtype=object)[row],
+                     "bearing_deg": lg.bearing_deg[row, col]}
+            if lg.platforms is not None:
+                frame["platform"] = np.asarray(lg.platforms, dtype=object)[lg.platform[col]]
+            frames.append(pd.DataFrame(frame))
         return pd.concat(frames, ignore_index=True).sort_values(
             ["log", "t_s", "track_id"], kind="stable").reset_index(drop=True)
 

@@ -24,7 +24,10 @@
   ``OUTLIER_TOLERANCE_M`` for the fixes' own noise).
 
 What comes out is one ``Platform`` per own-ship: flat arrays, one row per value; the family
-makes its logs from them (``bearings2d``: one epoch grid per own-ship, shared by its tracks).
+makes its logs from them (``bearings2d``: one epoch grid per own-ship, shared by its tracks;
+platforms named by the input, ``Recording.platform``, share one grid, a contact's values from
+all of them one track). A platform given by a single fix (a buoy, a shore station) is fixed
+there: it is at that place at every value's time.
 """
 
 from dataclasses import dataclass
@@ -103,9 +106,15 @@ def align(recordings: list[Recording], options, where: str) -> Aligned:
     for rec, t_nav, (x_nav, y_nav), t_obs, track in zip(recordings, navs, positions, obs, ids,
                                                         strict=True):
         t_nav, x_nav, y_nav = _distinct_fixes(t_nav, x_nav, y_nav, rec.navigation,
-                                              observation.role)
-        x, y, before, after = _ownship_at(t_obs, t_nav, x_nav, y_nav,
-                                          options.nav.max_extrapolation_s)
+                                              observation.role, fixed=rec.platform is not None)
+        if t_nav.size == 1:  # a fixed platform (rec.platform named: a buoy, a station)
+            x, y = np.full(t_obs.size, x_nav[0]), np.full(t_obs.size, y_nav[0])
+            before = after = np.zeros(t_obs.size, dtype=bool)
+            notes.append(f"platform {rec.platform!r} has one fix: taken as fixed there (a "
+                         "buoy, a station)")
+        else:
+            x, y, before, after = _ownship_at(t_obs, t_nav, x_nav, y_nav,
+                                              options.nav.max_extrapolation_s)
         dropped["before_navigation"] += int(before.sum())
         dropped["after_navigation"] += int(after.sum())
         keep = ~(before | after)
@@ -136,6 +145,10 @@ def align(recordings: list[Recording], options, where: str) -> Aligned:
     platforms = [Platform(t - t0, x, y, track, values, rec)
                  for t, x, y, track, values, rec in per_nav if t.size]
     n_dropped = dropped["before_navigation"] + dropped["after_navigation"]
+    if len(platforms) > 1 and all(p.recording.platform for p in platforms):
+        notes.append("several platforms: " + ", ".join(
+            f"{p.recording.platform!r} ({p.t_s.size} {plural})" for p in platforms)
+            + "; range and bearing now are given from the first (reference_platform)")
     for gap in gaps:
         gap["from_s"], gap["to_s"] = gap["from_s"] - t0, gap["to_s"] - t0
     summary = {
@@ -314,9 +327,9 @@ def _one_platform(t, x, y, nav: Navigation, max_speed_m_s: float):
             f"{nav.source}: {jumps.sum()} of {jumps.size} steps between successive own-ship "
             f"fixes ({jumps.mean():.0%}) are faster than nav.max_speed_m_s = "
             f"{max_speed_m_s:g} m/s allows, up to {step[jumps].max() / 1000:.1f} km: own-ship "
-            "jumps between places, as when the rows are bearings taken by several platforms "
-            "(ships, buoys, stations); tma reads one own-ship per log: give each platform's "
-            "rows as a log of its own")
+            "jumps between places, as when the rows are values taken by several platforms "
+            "(ships, buoys, stations): name each row's platform in a column (platform, or "
+            "columns.platform=<column>), and each platform's positions are its own")
 
 
 def _on_track(t, x, y, nav: Navigation, index, options, dropped: Dropped) -> np.ndarray:
@@ -349,8 +362,9 @@ def _track_ids(tracks: list[np.ndarray]):
             for c, n in zip(codes, names, strict=True)], labels
 
 
-def _distinct_fixes(t, x, y, nav: Navigation, role: str):
-    """Fixes sorted by time; repeated times must repeat the position (then kept once)."""
+def _distinct_fixes(t, x, y, nav: Navigation, role: str, fixed: bool = False):
+    """Fixes sorted by time; repeated times must repeat the position (then kept once).
+    ``fixed``: one fix is enough (a named platform that does not move)."""
     order = np.argsort(t, kind="stable")
     t, x, y = t[order], x[order], y[order]
     same = t[1:] == t[:-1]
@@ -362,7 +376,7 @@ def _distinct_fixes(t, x, y, nav: Navigation, role: str):
                              f"({t[k]:.9g} s on the common clock)")
         keep = np.r_[True, ~same]
         t, x, y = t[keep], x[keep], y[keep]
-    if t.size < 2:
+    if t.size < 2 - fixed:
         raise InputError(f"{nav.source}: {t.size} own-ship fix(es): at least two are needed "
                          f"to place the own-ship at the {role} times")
     if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y)) and np.all(np.isfinite(t))):

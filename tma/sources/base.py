@@ -211,6 +211,7 @@ class Recording:
     metadata: dict = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)  # what was found automatically, for the log
     dropped: Dropped = field(default_factory=Dropped)
+    platform: str | None = None  # the platform's name, where the input names one per row
 
 
 

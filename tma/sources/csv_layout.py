@@ -15,7 +15,8 @@ import numpy as np
 from tma.errors import InputError
 from tma.sources.base import file_head
 
-DOCUMENTED = {"time": "time_s", "x": "own_x_m", "y": "own_y_m", "track": "track_id"}
+DOCUMENTED = {"time": "time_s", "x": "own_x_m", "y": "own_y_m", "track": "track_id",
+              "platform": "platform"}
 COMMON = {  # candidates per role, in order of preference (lower case)
     "time": ("time_s", "timestamp_utc", "timestamp", "time_utc", "utc", "datetime",
              "date_time", "time", "t_s", "t", "unix_time", "unix_time_s", "epoch_s",
@@ -29,6 +30,8 @@ COMMON = {  # candidates per role, in order of preference (lower case)
             "own_lon_deg", "own_longitude", "own_longitude_deg"),
     "track": ("track_id", "track", "track_label", "contact_id", "contact", "target_id",
               "target", "id"),
+    "platform": ("platform", "platform_id", "platform_name", "observer", "sensor_platform",
+                 "station"),
 }
 SNIFFED = (",", ";", "\t")
 SAMPLE_BYTES = 1 << 16
@@ -130,6 +133,9 @@ class CsvFile:
                 chosen[role] = name
         if navigation:
             chosen.update(self._position())
+        platform = self._find("platform", required=False)
+        if platform is not None:
+            chosen["platform"] = platform
         return chosen
 
     def _given(self, role):
@@ -201,6 +207,7 @@ class CsvFile:
 
         index = sorted({self.header.index(name) for name in cols.values()})
         track = self.header.index(cols["track"]) if "track" in cols else None
+        text = {self.header.index(cols[r]): str for r in ("track", "platform") if r in cols}
         try:
             with warnings.catch_warnings():  # a row longer than the header: refused
                 warnings.simplefilter("error", pd.errors.ParserWarning)
@@ -208,7 +215,7 @@ class CsvFile:
                                  skiprows=[1] if self.units is not None else None,
                                  index_col=False, skipinitialspace=True,
                                  encoding="utf-8-sig", low_memory=False,
-                                 dtype=None if track is None else {track: str})
+                                 dtype=text or None)
                 if track is not None and df.iloc[:, track].isna().any():
                     # pandas read a name such as NA or null as missing: the ids as written
                     df.iloc[:, track] = pd.read_csv(
@@ -297,6 +304,8 @@ class Frame(CsvFile):
                     series = series.dt.tz_localize("UTC")
                 else:
                     series = series.dt.tz_convert("UTC")
+            elif role == "platform":
+                series = series.astype(str).where(series.notna(), "").astype(object)
             elif role == "track":
                 if pd.api.types.is_float_dtype(series):  # 7 and 7.0 are one float there
                     self.id_hint = (f"; the frame's column {name} holds floats ({series.dtype}), "

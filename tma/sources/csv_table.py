@@ -37,7 +37,9 @@ COLUMN_DOCS = {  # what each column of a table holds (the observation's is the f
     "x": "own-ship's position east (m)", "y": "own-ship's position north (m)",
     "lat": "own-ship's latitude (deg, WGS84)", "lon": "own-ship's longitude (deg, WGS84)",
     "track": "the contact of each row (an integer id, or a label kept as written; a table "
-             "without one holds one contact)"}
+             "without one holds one contact)",
+    "platform": "the platform (ship, buoy, station) that took each row's value, where the "
+                "row's position is (text, as written; a table without one has one own-ship)"}
 FOUND = "; null: tma's name or a common one, found automatically (any case)"
 
 
@@ -113,7 +115,8 @@ def options(observation) -> dict:
                                  f"{role}.units)"}
     columns = make_dataclass("Columns", [(r, str | None, param(None, f"column of {docs[r]}"
                                                               f"{FOUND}"))
-                                         for r in (*POSITION_ROLES, role, "track")])
+                                         for r in (*POSITION_ROLES, role, "track",
+                                                   "platform")])
     columns.__doc__ = ("Table column names; None = tma's name or a common one found "
                        "automatically.")
     return {"columns": columns, "csv": CsvFormat, "time": TimeFormat}
@@ -123,10 +126,11 @@ def read_csv_table(path, options, *, navigation: bool, contacts: bool,
                    date_hint_ns: int | None = None) -> list[Recording]:
     """Read a CSV/TSV table with a family's reading ``options``. ``navigation``: own-ship
     positions are needed (from this file); ``contacts``: the contacts' values are needed.
-    Returns one Recording per own-ship: one, unless the rows of different tracks give
-    different own-ship positions at one time (then one per track, as each track had its own
-    own-ship). Rows with a missing or unreadable time, value, track id or own-ship position,
-    or a time not absolute among absolute ones, are left out and counted
+    Returns one Recording per own-ship: one per platform named in a platform column
+    (``columns.platform``), else one, unless the rows of different tracks give different
+    own-ship positions at one time (then one per track, as each track had its own
+    own-ship). Rows with a missing or unreadable time, value, track id, platform or own-ship
+    position, or a time not absolute among absolute ones, are left out and counted
     (``options.bad_rows``; under ``fail`` the first refuses the file)."""
     from tma.sources.table import read_table
 

@@ -72,6 +72,10 @@ def read_table(table, options, *, navigation: bool, contacts: bool) -> list[Reco
         if track_raw is not None:
             drop((track_raw == "").to_numpy(), "track id missing",
                  f"column {cols['track']} has missing track ids")
+    platform_raw = _track_text(df, cols.get("platform"))
+    if platform_raw is not None:
+        drop((platform_raw.str.strip() == "").to_numpy(), "platform missing",
+             f"column {cols['platform']} has missing platform names")
     geo = "lat" in cols
     if navigation:
         p0, p1 = (_number_column(df, cols[k], path) for k in (("lat", "lon") if geo else "xy"))
@@ -83,6 +87,15 @@ def read_table(table, options, *, navigation: bool, contacts: bool) -> list[Reco
     if not keep.all():
         line, t_raw = line[keep], t_raw[keep]
     t, epoch = table_seconds(t_raw, fmt, tcol, path, line)
+    if platform_raw is not None:
+        platform = platform_raw[keep].str.strip().to_numpy(dtype=object)
+        if len(set(platform)) > 1:  # one recording per platform, each read as one own-ship
+            return _per_platform(table, cols, options, df[keep].reset_index(drop=True), line,
+                                 platform, navigation=navigation, contacts=contacts,
+                                 notes=notes, dropped=rows)
+        return _named(read_table(_PlatformRows(table, cols, df[keep].reset_index(drop=True),
+                                               line), options, navigation=navigation,
+                                 contacts=contacts), platform[0], notes, rows)
     track = None
     if role in cols:
         b, stated = _values(b_raw[keep], cols[role], options, table, path, line, notes)
@@ -229,6 +242,57 @@ def _alike_ids(text: pd.Series, notes: list, where: str) -> None:
 def _codes(track: np.ndarray) -> np.ndarray:
     """Integer codes of the tracks (labels factorised: sorting numbers is faster)."""
     return pd.factorize(track)[0] if track.dtype == object else track
+
+
+class _PlatformRows:
+    """The rows of one platform of a table (``table``'s, already read: ``df``, their file
+    lines ``lines``), as ``read_table`` reads a table: the same columns but the platform's."""
+
+    def __init__(self, table, cols, df, lines):
+        self._table, self.notes = table, []
+        self._cols = {r: c for r, c in cols.items() if r != "platform"}
+        self._df, self._lines = df, lines
+
+    def __getattr__(self, name):  # the table's layout: path, units, id_hint
+        return getattr(self._table, name)
+
+    def columns(self, *, navigation: bool, contacts: bool) -> dict[str, str]:
+        return self._cols
+
+    def read(self, cols):
+        return self._df
+
+    def lines(self, n: int) -> np.ndarray:
+        return self._lines
+
+
+def _named(recordings, name, notes, dropped) -> list[Recording]:
+    """A table's recordings of one platform (``name``: its platform column's one value),
+    named by it where it is one own-ship; the notes and the rows left out so far go with
+    the first."""
+    for rec in recordings:
+        rec.platform = name if len(recordings) == 1 else None
+    first = recordings[0]
+    first.notes = list(dict.fromkeys([*notes, *first.notes]))
+    dropped.merge(first.dropped)
+    first.dropped = dropped
+    return recordings
+
+
+def _per_platform(table, cols, options, df, line, platform, *, navigation, contacts, notes,
+                  dropped) -> list[Recording]:
+    """One Recording per platform named in the rows (``platform``: each row's of ``df``, the
+    rows kept, ``line`` their lines), in the order they first appear (the first is the
+    reference range and bearing now are read from), each read from its own rows as a table
+    of one own-ship is and named by it; the rows left out so far (``dropped``) and the notes
+    go with the first."""
+    out = []
+    for name in dict.fromkeys(platform):
+        mine = platform == name
+        part = _PlatformRows(table, cols, df[mine].reset_index(drop=True), line[mine])
+        out += _named(read_table(part, options, navigation=navigation, contacts=contacts),
+                      name, [] if out else notes, options.dropped() if out else dropped)
+    return out
 
 
 def _check_increasing(t, track, col, path, line, hint="", zone=None, epoch_ns=None):

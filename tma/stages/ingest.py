@@ -103,7 +103,7 @@ def read_recordings(path: Path, fmt, navigation: Path | None, options, own=None)
                               f"truth.own_mmsi={own.own_mmsi}, not both: give one")
         found = _without_own_ship(path, kind, options, own.own_mmsi)
         nav = [ownship_recording(own, options, found, str(path))]
-        return [_with_navigation(found, nav, path, source_text(own), options)], kind, "ais"
+        return _with_navigation(found, nav, path, source_text(own), options), kind, "ais"
     if navigation is None:
         recordings = read_source(path, kind, options, navigation=True, contacts=True)
         for r in recordings:
@@ -113,7 +113,7 @@ def read_recordings(path: Path, fmt, navigation: Path | None, options, own=None)
     found = read_source(path, kind, options, navigation=False, contacts=True)
     nav = read_source(navigation, nav_kind, options, navigation=True, contacts=False,
                       date_hint_ns=_first_utc_ns(found))
-    return [_with_navigation(found, nav, path, navigation, options)], kind, nav_kind
+    return _with_navigation(found, nav, path, navigation, options), kind, nav_kind
 
 
 def _without_own_ship(path, kind, options, own_mmsi):
@@ -132,7 +132,11 @@ def _without_own_ship(path, kind, options, own_mmsi):
 
 
 def _with_navigation(found, nav, where, nav_where, options):
-    """The input's one recording with its own-ship from the navigation file's."""
+    """The input's recordings with their own-ship from the navigation file's: its one
+    recording, or, where both name platforms (a platform column), each platform's with that
+    platform's fixes."""
+    if len(found) > 1 or len(nav) > 1:
+        return _per_platform_navigation(found, nav, where, nav_where, options)
     if len(found) != 1 or found[0].contacts is None:
         raise InputError(f"{where}: no {options.observation.plural} found in the input")
     if len(nav) != 1 or nav[0].navigation is None:
@@ -144,7 +148,32 @@ def _with_navigation(found, nav, where, nav_where, options):
         notes.append(f"own-ship from navigation={nav_where}; the input's own-ship "
                      f"({rec.navigation.source}) is not used")
     rec.navigation, rec.notes = nav[0].navigation, notes
-    return rec
+    return [rec]
+
+
+def _per_platform_navigation(found, nav, where, nav_where, options):
+    """Each platform's recording of the input with its fixes from the navigation file, the
+    two matched by the platform names (``columns.platform``) of both."""
+    plural = options.observation.plural
+    unnamed = [w for w, recs in ((where, found), (nav_where, nav))
+               if any(r.platform is None for r in recs)]
+    if unnamed:
+        raise InputError(f"{unnamed[0]}: the {plural} and the own-ship fixes come from several "
+                         "platforms, but this file names no platform per row: give both files "
+                         "a platform column (columns.platform=<column>) naming the platform "
+                         "(ship, buoy, station) of each row")
+    fixes = {r.platform: r for r in nav}
+    missing = [r.platform for r in found if r.platform not in fixes]
+    if missing:
+        raise InputError(f"{nav_where}: no own-ship fixes of platform(s) "
+                         f"{', '.join(map(repr, missing))} whose {plural} {where} holds "
+                         f"(its platforms: {', '.join(map(repr, fixes))})")
+    for rec in found:
+        own = fixes[rec.platform]
+        rec.dropped.merge(own.dropped)
+        rec.notes = list(dict.fromkeys([*rec.notes, *own.notes]))
+        rec.navigation = own.navigation
+    return found
 
 
 def _first_utc_ns(recordings) -> int | None:
@@ -259,7 +288,7 @@ def read_frames(bearings, navigation=None, *, family: str, options=None, **setti
         found = read_frame(bearings, name, options, navigation=False, contacts=True)
         nav = read_frame(navigation, "navigation frame", options, navigation=True,
                          contacts=False)
-        recordings = [_with_navigation(found, nav, name, "navigation frame", options)]
+        recordings = _with_navigation(found, nav, name, "navigation frame", options)
     return _read(family, recordings, options, settings, {"format": "frame"},
                  {"input": {"path": name, "kind": "frame"}}, name)
 

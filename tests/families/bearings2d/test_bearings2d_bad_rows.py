@@ -154,20 +154,22 @@ def test_fixes_at_zero_zero_or_far_off_are_outliers(tmp_path):
 
 
 def test_bearings_of_two_platforms_in_one_log_are_refused(tmp_path):
-    """A navigation export of two vessels' bearings (``platform`` a column tma does not read),
-    rows alternating every 5 s between ships 6 km apart: one line saying own-ship jumps
-    between places, never a track of one own-ship jumping back and forth."""
+    """A navigation export of two vessels' bearings with no platform column tma finds
+    (``vessel``), rows alternating every 5 s between ships 6 km apart: one line saying
+    own-ship jumps between places and naming ``columns.platform``, never a track of one
+    own-ship jumping back and forth."""
     t = np.arange(0.0, 1200.0, 5.0)
     second = np.arange(t.size) % 2 == 1
     east = np.where(second, 6000.0, 0.0) + 4.0 * t
     lat, lon = latlon(east, np.zeros(t.size))
-    frame = pd.DataFrame({"timestamp_utc": iso(t), "platform": np.where(second, "B", "A"),
+    frame = pd.DataFrame({"timestamp_utc": iso(t), "vessel": np.where(second, "B", "A"),
                           "latitude_deg": lat, "longitude_deg": lon, "contact": "T1",
                           "bearing_deg": 45.0})
     frame.to_csv(tmp_path / "two.csv", index=False)
     with pytest.raises(InputError, match=r"239 of 239 steps between successive own-ship fixes "
                        r"\(100%\) are faster than nav\.max_speed_m_s = .* up to 6\.0 km: "
-                       r"own-ship jumps between places.*several platforms.*a log of its own"
+                       r"own-ship jumps between places.*several platforms.*"
+                       r"columns\.platform=<column>"
                        ) as err:
         ingest(tmp_path / "two.csv", data_dir=tmp_path / "data")
     assert "\n" not in str(err.value)

@@ -110,10 +110,19 @@ def logs(aligned, settings: Settings, where: str):
     (``tma.sources.align``), checked; what the dataset's config and manifest record of the
     settings and of the contacts skipped for too few bearings."""
     skipped = _enough_bearings(aligned, settings, where)
-    out = []
-    for p in aligned.platforms:
-        sigma = nominal_sigma(p.recording.metadata, where)  # the input's record tma.sensor
-        out += _logs(p.t_s, p.own_x_m, p.own_y_m, p.track_id, p.values, sigma, where)
+    named = [p.recording.platform for p in aligned.platforms]
+    if len(named) > 1 and None not in named:  # several platforms: one track per contact
+        ps = aligned.platforms
+        platform = np.concatenate([np.full(p.t_s.size, k, np.int64) for k, p in enumerate(ps)])
+        out = _logs(*(np.concatenate([getattr(p, a) for p in ps])
+                      for a in ("t_s", "own_x_m", "own_y_m", "track_id", "values")),
+                    nominal_sigma(ps[0].recording.metadata, where), where, platform=platform,
+                    names=tuple(named))
+    else:
+        out = []
+        for p in aligned.platforms:
+            sigma = nominal_sigma(p.recording.metadata, where)  # the input's tma.sensor
+            out += _logs(p.t_s, p.own_x_m, p.own_y_m, p.track_id, p.values, sigma, where)
     for lg in out:
         lg.epoch_utc_ns = aligned.epoch_utc_ns
         lg.origin_deg = aligned.origin_deg
@@ -139,11 +148,15 @@ def logs(aligned, settings: Settings, where: str):
         "sigma_deg": out[0].sigma_deg, "skipped_contacts": skipped, "track_labels": labels}
 
 
-def _logs(t, x, y, track, bearing, sigma, where) -> list[BearingsLog]:
-    """One own-ship's bearings on its epoch grid; tracks split into several logs only when
-    the grid (tracks x epochs) would exceed MAX_CELLS."""
+def _logs(t, x, y, track, bearing, sigma, where, platform=None, names=None
+          ) -> list[BearingsLog]:
+    """One own-ship's bearings on its epoch grid (several platforms: ``platform``, each
+    value's index into ``names``, on one grid of (time, platform) epochs); tracks split into
+    several logs only when the grid (tracks x epochs) would exceed MAX_CELLS."""
     ids, counts = np.unique(track, return_counts=True)
     n_epochs = np.count_nonzero(np.diff(np.sort(t))) + 1
+    if platform is not None:  # (an upper bound: the distinct (time, platform) pairs)
+        n_epochs = t.size
     if ids.size * n_epochs <= MAX_CELLS:
         groups = [ids]
     else:  # bound each group's grid by (tracks in it) x (its bearings)
@@ -158,17 +171,30 @@ def _logs(t, x, y, track, bearing, sigma, where) -> list[BearingsLog]:
     for group in groups:
         rows = np.isin(track, group) if len(groups) > 1 else slice(None)
         logs.append(_grid(t[rows], x[rows], y[rows], track[rows], bearing[rows], group, sigma,
-                          where))
+                          where, None if platform is None else platform[rows], names))
     return logs
 
 
-def _grid(t, x, y, track, bearing, ids, sigma, where) -> BearingsLog:
-    """The (tracks x epochs) bearing array; own-ship at each epoch (equal at equal times)."""
-    t_s, col, first = epochs(t)
+def _grid(t, x, y, track, bearing, ids, sigma, where, platform=None, names=None
+          ) -> BearingsLog:
+    """The (tracks x epochs) bearing array; own-ship at each epoch (equal at equal times).
+    Several platforms: an epoch per distinct (time, platform), ordered by time then
+    platform, each at its platform's position."""
+    if platform is None:
+        t_s, col, first = epochs(t)
+    else:
+        order = np.lexsort((platform, t))
+        new = np.r_[True, (np.diff(t[order]) != 0) | (np.diff(platform[order]) != 0)]
+        col = np.empty(t.size, dtype=np.int64)
+        col[order] = np.cumsum(new) - 1
+        first = order[new]
+        t_s = t[first]
     _, grid = scatter(track, col, bearing, t_s.size, where, "bearings", t_s.__getitem__,
                       track_id=ids)
     return BearingsLog(t_s=t_s, own_x_m=x[first], own_y_m=y[first], track_id=ids,
-                       bearing_deg=grid, sigma_deg=sigma)
+                       bearing_deg=grid, sigma_deg=sigma,
+                       platform=None if platform is None else platform[first],
+                       platforms=None if platform is None else names)
 
 
 def contacts(logs: list[BearingsLog]):

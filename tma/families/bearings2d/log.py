@@ -188,7 +188,7 @@ class BearingsLog:
         if np.any(bad):
             k = int(np.argmax(bad))
             kind = "duplicate" if dt[k] == 0 else "non-increasing"
-            raise InputError(f"{where}: {kind} time stamps at t = {self.t_s[k + 1]!r} s")
+            raise InputError(f"{where}: {kind} time stamps at t = {float(self.t_s[k + 1])!r} s")
         if not (np.all(np.isfinite(self.own_x_m)) and np.all(np.isfinite(self.own_y_m))):
             raise InputError(f"{where}: non-finite own-ship position")
         b = self.bearing_deg[np.isfinite(self.bearing_deg)]

@@ -1,0 +1,209 @@
+"""Bearings of one contact from several platforms (issue 39): the log format, the readers
+(a platform column in a table or a DataFrame, a navigation file per platform, a platform
+fixed at one fix), the estimators (each bearing from its own platform, range and bearing now
+from the reference platform) and the refusals."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import tma
+from tma.errors import ConfigError, InputError
+from tma.families import build_estimator
+from tma.families.bearings2d.log import BearingsLog, read_bearings_log, write_bearings_log
+from tma.families.bearings2d.platforms import observer_now, position_at
+
+START = pd.Timestamp("2026-05-01T10:00:00Z")
+ORIGIN = (50.7, -1.2)
+SHIP = ("ship A", 0.0, (0.0, 0.0, 4.0, 0.0))  # name, time offset (s), x, y (m), vx, vy (m/s)
+BUOY = ("buoy 7", 5.0, (9000.0, -4000.0, 0.0, 0.0))
+CONTACTS = {"C0": (3000.0, 9000.0, -3.0, 2.0), "C1": (12000.0, 7000.0, 2.0, -4.0)}
+
+
+def _export(seed=2, platforms=(SHIP, BUOY), span_s=1800.0) -> pd.DataFrame:
+    """A navigation export of bearings taken every 10 s by each platform (the second 5 s
+    after the first: asynchronous), each row where its platform was: ``timestamp_utc,
+    platform, latitude_deg, longitude_deg, contact, bearing_deg`` (0.5 deg noise); the
+    contacts and the ship hold course (the ship alone cannot range them)."""
+    from tma.maths.geo import local_to_geodetic
+
+    rng = np.random.default_rng(seed)
+    rows = []
+    for name, offset, (px, py, vx, vy) in platforms:
+        t = np.arange(0.0, span_s, 10.0) + offset
+        ox, oy = px + vx * t, py + vy * t
+        lat, lon = local_to_geodetic(ox, oy, ORIGIN)
+        for label, (x0, y0, cvx, cvy) in CONTACTS.items():
+            b = np.rad2deg(np.arctan2(x0 + cvx * t - ox, y0 + cvy * t - oy))
+            b = (b + rng.normal(0.0, 0.5, t.size)) % 360.0
+            rows += [(START + pd.Timedelta(seconds=float(s)), name, la, lo, label, v)
+                     for s, la, lo, v in zip(t, lat, lon, b, strict=True)]
+    frame = pd.DataFrame(rows, columns=["timestamp_utc", "platform", "latitude_deg",
+                                        "longitude_deg", "contact", "bearing_deg"])
+    frame = frame.sort_values("timestamp_utc", kind="stable").reset_index(drop=True)
+    frame["timestamp_utc"] = frame["timestamp_utc"].dt.strftime("%Y-%m-%dT%H:%M:%SZ")
+    return frame
+
+
+def _truth_now(label, t_now, observer=(4.0, 0.0)):
+    """True range (m) and bearing (deg) of a contact at ``t_now`` (s) from the ship."""
+    x0, y0, vx, vy = CONTACTS[label]
+    dx = x0 + vx * t_now - observer[0] * t_now
+    dy = y0 + vy * t_now - observer[1] * t_now
+    return np.hypot(dx, dy), np.rad2deg(np.arctan2(dx, dy)) % 360.0
+
+
+def test_a_log_of_several_platforms_round_trips_through_mcap(tmp_path):
+    """Platforms at their own times (two at one time allowed), a contact missing at some
+    epochs: read back exactly; a log of one platform keeps today's topics."""
+    t = np.array([0.0, 0.0, 10.0, 20.0, 20.0, 30.0])
+    lg = BearingsLog(t_s=t, own_x_m=np.array([0.0, 5e3, 10.0, 20.0, 5e3, 5e3]),
+                     own_y_m=np.zeros(6), track_id=np.array([3, 7]),
+                     bearing_deg=np.random.default_rng(0).uniform(0, 360, (2, 6)),
+                     sigma_deg=0.5, platform=np.array([0, 1, 0, 0, 1, 1]),
+                     platforms=("ship", "buoy"), origin_deg=(50.0, -1.0), epoch_utc_ns=10**18)
+    lg.bearing_deg[1, 2] = np.nan
+    write_bearings_log(tmp_path / "a.mcap", lg)
+    back = read_bearings_log(tmp_path / "a.mcap")
+    for name in ("t_s", "own_x_m", "own_y_m", "track_id", "bearing_deg", "platform"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(lg, name))
+    assert back.platforms == ("ship", "buoy")
+    from mcap.reader import make_reader
+
+    with open(tmp_path / "a.mcap", "rb") as f:
+        topics = {c.topic for c in make_reader(f).get_summary().channels.values()}
+    assert "/platforms/1/location_fix" in topics and "/ownship/navigation" not in topics
+    # one epoch per platform and time: the same platform twice at one time is refused
+    bad = BearingsLog(**{**lg.__dict__, "platform": np.array([0, 0, 0, 0, 1, 1])})
+    with pytest.raises(InputError, match="duplicate time stamps at t = 0.0 s"):
+        bad.validate("x")
+
+
+def test_the_reference_platform_is_placed_between_and_beyond_its_epochs():
+    """``position_at`` interpolates a platform's own epochs and extends its end segments; a
+    platform of one place stays there (checked against the straight line it was on)."""
+    t = np.array([0.0, 5.0, 10.0, 15.0, 20.0])
+    platform = np.array([0, 1, 0, 1, 0])
+    x = np.where(platform == 0, 3.0 * t, 700.0)
+    y = np.where(platform == 0, -2.0 * t, 50.0)
+    px, py = position_at(t, x, y, platform, 0, np.array([5.0, 25.0, -5.0]))
+    np.testing.assert_allclose(px, 3.0 * np.array([5.0, 25.0, -5.0]))
+    np.testing.assert_allclose(py, -2.0 * np.array([5.0, 25.0, -5.0]))
+    bx, by = position_at(t, x, y, platform, 1, np.array([0.0, 99.0]))
+    np.testing.assert_array_equal(bx, [700.0, 700.0])
+    np.testing.assert_array_equal(by, [50.0, 50.0])
+    nx, _ = observer_now(t, x, y, None, 0, np.array([4, 1]))  # one own-ship: as it is
+    np.testing.assert_array_equal(nx, x[[4, 1]])
+
+
+def test_a_platform_column_makes_one_track_per_contact_and_ranges_it(tmp_path):
+    """The export of a steady ship and a buoy: one dataset log of both platforms, each
+    contact one track; lm ranges both (the ship alone cannot) and its answers hold the truth
+    within a few stated sd, from the ship (the first platform) at the last bearing."""
+    _export().to_csv(tmp_path / "two.csv", index=False)
+    rec = tma.read_log(tmp_path / "two.csv")
+    (lg,) = rec.logs
+    assert lg.platforms == ("ship A", "buoy 7")
+    assert set(rec.bearings["platform"]) == {"ship A", "buoy 7"}
+    assert lg.n_tracks == 2 and np.isfinite(lg.bearing_deg).sum() == 4 * 180
+    res = tma.estimate(rec).set_index("label")
+    t_now = 1795.0
+    for label in CONTACTS:
+        row = res.loc[label]
+        assert row["status"] in ("ok", "position_only")
+        true_range, true_bearing = _truth_now(label, t_now)
+        assert abs(row["range_now_m"] - true_range) < 4 * row["range_sd_m"]
+        assert row["range_sd_m"] < 0.1 * true_range
+        off = (row["bearing_now_deg"] - true_bearing + 180) % 360 - 180
+        assert abs(off) < 4 * row["bearing_sd_deg"]
+    # the same ship alone: no range (it holds course)
+    alone = _export(platforms=(SHIP,))
+    alone.to_csv(tmp_path / "one.csv", index=False)
+    assert set(tma.estimate(tma.read_log(tmp_path / "one.csv"))["status"]) <= {
+        "unobservable", "manoeuvring", "poor_fit"}
+
+
+def test_a_navigation_file_per_platform_and_a_buoy_of_one_fix(tmp_path):
+    """Bearings with a platform column and no positions, the positions in a navigation file
+    with a platform column where the buoy is one row: the same answers as the export that
+    gives every row's position."""
+    frame = _export()
+    frame.to_csv(tmp_path / "two.csv", index=False)
+    frame[["timestamp_utc", "platform", "contact", "bearing_deg"]].to_csv(
+        tmp_path / "bearings.csv", index=False)
+    fixes = frame[["timestamp_utc", "platform", "latitude_deg", "longitude_deg"]]
+    ship = fixes[fixes["platform"] == "ship A"].drop_duplicates("timestamp_utc")
+    pd.concat([ship, fixes[fixes["platform"] == "buoy 7"].iloc[:1]]).to_csv(
+        tmp_path / "nav.csv", index=False)
+    both = tma.estimate(tma.read_log(tmp_path / "two.csv"))
+    rec = tma.read_log(tmp_path / "bearings.csv", navigation=tmp_path / "nav.csv")
+    assert any("'buoy 7' has one fix: taken as fixed there" in n for n in rec.notes)
+    split = tma.estimate(rec)
+    for col in ("range_now_m", "range_sd_m", "bearing_now_deg", "course_deg", "status"):
+        if split[col].dtype.kind == "f":
+            np.testing.assert_allclose(split[col], both[col], rtol=1e-6)
+        else:
+            assert list(split[col]) == list(both[col])
+    # a navigation file naming no platform, for bearings of several: refused in one line
+    ship.drop(columns="platform").to_csv(tmp_path / "nav1.csv", index=False)
+    with pytest.raises(InputError, match=r"nav1\.csv: .*several platforms.*columns\.platform"):
+        tma.read_log(tmp_path / "bearings.csv", navigation=tmp_path / "nav1.csv")
+    # a platform whose fixes the navigation file lacks: named
+    ship.to_csv(tmp_path / "nav2.csv", index=False)
+    with pytest.raises(InputError, match=r"no own-ship fixes of platform\(s\) 'buoy 7'"):
+        tma.read_log(tmp_path / "bearings.csv", navigation=tmp_path / "nav2.csv")
+
+
+def test_frames_take_a_platform_column_and_the_reference_is_named(tmp_path):
+    """``Recording.from_frames`` reads the same export; ``reference_platform`` gives range
+    and bearing now from the buoy instead (its own geometry, the truth within a few sd); an
+    unknown name, or mpekf on a log of two platforms, is one line."""
+    frame = _export()
+    frame["timestamp_utc"] = pd.to_datetime(frame["timestamp_utc"], utc=True)
+    rec = tma.Recording.from_frames(frame)
+    res = tma.estimate(rec, reference_platform="buoy 7").set_index("label")
+    buoy = np.array(BUOY[2][:2])
+    for label, (x0, y0, vx, vy) in CONTACTS.items():
+        t_now = 1795.0
+        true_range = np.hypot(x0 + vx * t_now - buoy[0], y0 + vy * t_now - buoy[1])
+        row = res.loc[label]
+        assert abs(row["range_now_m"] - true_range) < 4 * row["range_sd_m"]
+    with pytest.raises(ConfigError, match="reference_platform=tug is no platform of the log; "
+                       "its platforms are ship A, buoy 7"):
+        tma.estimate(rec, reference_platform="tug")
+    with pytest.raises(InputError, match="mpekf: the log's bearings come from 2 platforms"):
+        tma.estimate(rec, estimator="mpekf", sigma_deg=0.5)
+
+
+@pytest.mark.parametrize("name", ["lm", "last_leg", "iv", "nbearings"])
+def test_every_estimator_takes_each_bearing_from_its_own_platform(name):
+    """On 40 steady targets seen from a steady ship and a buoy (the ship alone could not
+    range them), each estimator's answers lie near the truth: the median range error under
+    5 % (nbearings, from three bearings, under 25 %); lm's ``ok`` ones within 2 sd on 80 %
+    or more."""
+    rng = np.random.default_rng(5)
+    t1, t2 = np.arange(0.0, 1200.0, 10.0), np.arange(5.0, 1200.0, 10.0)
+    t = np.r_[t1, t2]
+    p = np.r_[np.zeros(t1.size, np.int64), np.ones(t2.size, np.int64)]
+    order = np.lexsort((p, t))
+    t, p = t[order], p[order]
+    ox, oy = np.where(p == 0, 5.0 * t, 8000.0), np.where(p == 0, 0.0, -3000.0)
+    n = 40
+    x0, y0 = rng.uniform(-5e3, 15e3, n), rng.uniform(8e3, 15e3, n)
+    vx, vy = rng.uniform(-5, 5, n), rng.uniform(-5, 5, n)
+    b = np.rad2deg(np.arctan2(x0[:, None] + vx[:, None] * t - ox,
+                              y0[:, None] + vy[:, None] * t - oy))
+    b = (b + rng.normal(0.0, 0.5, b.shape)) % 360.0
+    lg = BearingsLog(t_s=t, own_x_m=ox, own_y_m=oy, track_id=np.arange(n), bearing_deg=b,
+                     sigma_deg=0.5, platform=p, platforms=("ship", "buoy"),
+                     accel_psd_m2_s3=0.0)
+    cols = build_estimator({"name": name}).estimate(lg).columns
+    true = np.hypot(x0 + vx * t[-1] - 5.0 * t[-1], y0 + vy * t[-1])
+    np.testing.assert_allclose(cols["own_x_last_m"], 5.0 * t[-1])
+    err = np.abs(cols["range_now_m"] - true) / true
+    assert np.median(err) < (0.25 if name == "nbearings" else 0.05)
+    if name == "lm":
+        ok = cols["status"] == "ok"
+        assert ok.mean() > 0.9
+        z = (cols["range_now_m"] - true)[ok] / cols["range_sd_m"][ok]
+        assert np.mean(np.abs(z) < 2) >= 0.8
