@@ -295,6 +295,7 @@ class LogWriter:
 # -- the records every log may carry -----------------------------------------------------------
 
 GEO = "tma.geo"  # {origin_lat_deg, origin_lon_deg, epoch_utc_ns}: the local plane's origin
+PLATFORMS = "tma.platforms"  # {"names": [...]}: a log of several platforms, in index order
 TRACKS = "tma.tracks"  # {"track_id": [...], "label": [...]}: the contacts' text labels
 
 
@@ -320,3 +321,20 @@ def track_labels(metadata: dict, track_id: np.ndarray, where: str) -> np.ndarray
         raise InputError(f"{where}: the metadata record {TRACKS} has no label for track(s) "
                          f"{', '.join(map(str, missing[:10]))}")
     return np.array([labels[int(i)] for i in track_id], dtype=object)
+
+
+def platform_namespace(k: int) -> str:
+    """The namespace of platform ``k``'s topics in a log of several (``/platforms/<k>``)."""
+    return f"/platforms/{k}"
+
+
+def platform_names(metadata: dict, where: str) -> tuple[str, ...] | None:
+    """The platforms' names of a log of several (``tma.platforms``); None for one."""
+    if PLATFORMS not in metadata:
+        return None
+    with schema_errors(where, f"the metadata record {PLATFORMS}"):
+        names = read_json_record(metadata, PLATFORMS, where)["names"]
+        if not isinstance(names, list) or not names or not all(
+                isinstance(n, str) and n for n in names) or len(set(names)) != len(names):
+            raise TypeError("names is not a list of distinct texts")
+    return tuple(names)

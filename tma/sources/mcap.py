@@ -90,8 +90,26 @@ class ContactSource:
 class OwnshipSource:
     """Where the own-ship's fixes are in an MCAP log (``ownship.*``)."""
 
-    topic: str | None = param(None, "MCAP topic of the own-ship's fixes; null: found by its "
-                              "schema (NavSatFix, LocationFix, Odometry, PoseStamped...)")
+    topic: Any = param(None, "MCAP topic of the own-ship's fixes; a list or a pattern "
+                       "(fnmatch: /*/gps/fix): several platforms (ships, buoys, stations), "
+                       "each its own topic, whose values are the topics in its namespace "
+                       "(/ship_a/...); null: found by its schema (NavSatFix, LocationFix, "
+                       "Odometry, PoseStamped...)", form=TOPICS)
+
+    def rules(self):
+        """A topic's number is its text; a list of one is that topic."""
+        if isinstance(self.topic, list | tuple):
+            self.topic = [str(e) for e in self.topic]
+            if len(self.topic) == 1:
+                self.topic = self.topic[0]
+        elif self.topic is not None:
+            self.topic = str(self.topic)
+
+    @property
+    def several(self) -> bool:
+        """Several platforms' topics named: a list or a pattern."""
+        return isinstance(self.topic, list) or (
+            self.topic is not None and any(c in self.topic for c in "*?["))
 
 
 
@@ -132,7 +150,9 @@ def read(path, options, *, navigation: bool, contacts: bool,
          date_hint_ns: int | None = None) -> list[Recording]:
     """``read_mcap`` as a reader (``Reader.read``)."""
     need = (("navigation",) if navigation else ()) + (("contacts",) if contacts else ())
-    return [read_mcap(path, options, need=need, navigation=navigation)]
+    from tma.sources.mcap_topics import read_platforms
+
+    return read_platforms(path, options, need, navigation)
 
 
 READER = Reader(kind="mcap", name="an MCAP log", extensions=(".mcap",), read=read,

@@ -4,6 +4,7 @@ contacts by field path, stamps and the time base (``read_recorded``).
 """
 
 import fnmatch
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -11,6 +12,7 @@ from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
 from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
 
 from tma.errors import InputError
+from tma.io.mcap_log import PLATFORMS, platform_names, platform_namespace
 from tma.io.mcap_read import McapFile, TmaDecoderFactory
 from tma.io.mcap_values import schema_errors
 from tma.sources import foxglove, ros2, tma_log
@@ -252,14 +254,115 @@ def read_recorded(path, options, need: tuple[str, ...] = (),
                   navigation: bool = True) -> Recording:
     """``tma.sources.mcap.read_mcap`` (its arguments, its Recording)."""
     file = RecordedLog(path, options.dropped())
-    role = options.observation.role
     nav_topic = _select_navigation(file, options)
     if not navigation:
         if nav_topic is not None:
             file.notes.append(f"{file.where}: own-ship from the navigation file; {nav_topic} "
                               "is not read")
         nav_topic = None
-    contact_topics = _select_contacts(file, options)
+    return _recording(file, options, need, navigation, nav_topic,
+                      _select_contacts(file, options))
+
+
+def read_platforms(path, options, need: tuple[str, ...] = (),
+                   navigation: bool = True) -> list[Recording]:
+    """The MCAP reader's recordings: one (``read_recorded``), or one per platform where the
+    log holds several (``_platforms``: ``ownship.topic`` a list or a pattern, or tma's own
+    log of several, ``tma.platforms``), each named by it, with its own-ship topic and the
+    values of the topics in its namespace."""
+    probe = RecordedLog(path, options.dropped())
+    platforms = _platforms(probe, options) if navigation else None
+    if platforms is None:
+        return [read_recorded(path, options, need, navigation)]
+    out = []
+    for k, (name, nav_topic, contact_topics) in enumerate(platforms):
+        file = probe if k == 0 else RecordedLog(path, options.dropped())
+        rec = _recording(file, options, need, navigation, nav_topic, contact_topics)
+        rec.platform = name
+        out.append(rec)
+    return out
+
+
+def _namespace(topic: str) -> tuple[str, ...]:
+    """A topic's namespace: its path but the last name (``/ship_a/gps/fix`` -> ship_a, gps)."""
+    return tuple(p for p in topic.split("/") if p)[:-1]
+
+
+def _platforms(file: RecordedLog, options):
+    """``[(name, own-ship topic, value topics), ...]`` of a log of several platforms, or None
+    for a log of one: own-ship topics ``ownship.topic`` names as a list or pattern (named by
+    their namespace), or tma's own log of several (``tma.platforms``: its names). Each value
+    topic (``<role>.topic``, else every topic of the observation's schema) goes with the
+    own-ship topic whose namespace shares most of its own; none, or a tie, is refused."""
+    observation, role = options.observation, options.observation.role
+    names = None
+    if options.ownship.several:
+        given = options.ownship.topic
+        given = given if isinstance(given, list) else [given]
+        nav = []
+        for entry in given:
+            if not any(c in entry for c in "*?["):
+                nav.append(file.topic(entry, "ownship.topic").name)
+                continue
+            matched = sorted(t.name for t in file.topics.values()
+                             if fnmatch.fnmatchcase(t.name, entry) and t.count != 0
+                             and t.schema in NAVIGATION)
+            if not matched:
+                raise InputError(f"{file.where}: ownship.topic={entry}: no own-ship topic "
+                                 f"matches; {file.describe()}")
+            nav += matched
+        nav = list(dict.fromkeys(nav))
+        for topic in nav:
+            if file.topics[topic].schema not in NAVIGATION:
+                raise InputError(f"{file.where}: ownship.topic={topic} has schema "
+                                 f"'{file.topics[topic].schema}'; own-ship is read from "
+                                 f"{', '.join(NAVIGATION)}")
+    elif PLATFORMS in file.metadata:  # tma's own log of several (its names, in order)
+        names = platform_names(file.metadata, file.where)
+        nav = [next((t.name for t in file.topics.values() if t.schema == tma_log.OWNSHIP
+                     and _namespace(t.name) == _namespace(platform_namespace(k) + "/_")),
+                    f"{platform_namespace(k)}/navigation") for k in range(len(names))]
+        for topic in nav:
+            file.topic(topic, "the record tma.platforms: the own-ship of")
+    else:
+        return None
+    if options.contact.topics is not None:
+        values = _select_contacts(file, options)
+    else:
+        values = sorted(t.name for t in file.topics.values()
+                        if t.schema == observation.schema and t.count != 0)
+    spaces = [_namespace(t) for t in nav]
+    owned = {t: [] for t in nav}
+    for topic in values:
+        ns = _namespace(topic)
+        shared = [len(os.path.commonprefix([ns, s])) for s in spaces]
+        best = max(shared)
+        if best == 0 or shared.count(best) > 1:
+            raise InputError(f"{file.where}: {role}s on {topic}: no one own-ship topic shares "
+                             f"its namespace ({', '.join(nav)}): each platform's topics go "
+                             "under its own (/ship_a/gps/fix, /ship_a/sonar/bearings), or name "
+                             f"them with {role}.topic=<topic>")
+        owned[nav[shared.index(best)]].append(topic)
+    idle = [t for t, v in owned.items() if not v]
+    if idle:
+        raise InputError(f"{file.where}: no {observation.plural} under the namespace of the "
+                         f"own-ship topic {idle[0]} (ownship.topic): each platform's "
+                         f"{observation.plural} go under its own namespace")
+    if names is None:
+        names = ["/" + "/".join(os.path.commonprefix([s, *map(_namespace, owned[t])]))
+                 for s, t in zip(spaces, nav, strict=True)]
+        names = [n if n != "/" and names.count(n) == 1 else t for n, t in zip(names, nav,
+                                                                              strict=True)]
+    file.notes.append(f"{len(nav)} platforms: " + "; ".join(
+        f"{n!r}: {t} and {', '.join(owned[t])}" for n, t in zip(names, nav, strict=True)))
+    return [(n, t, owned[t]) for n, t in zip(names, nav, strict=True)]
+
+
+def _recording(file: RecordedLog, options, need, navigation, nav_topic, contact_topics
+               ) -> Recording:
+    """One own-ship's Recording: its topics ``nav_topic`` (None: none) and
+    ``contact_topics`` decoded and checked."""
+    role = options.observation.role
     hint = {"navigation": ("no own-ship navigation: own-ship is read from a topic of schema "
                            f"{', '.join(NAVIGATION)}; set ownship.topic=<topic> or give "
                            "navigation=FILE"),

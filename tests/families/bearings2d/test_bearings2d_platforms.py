@@ -207,3 +207,49 @@ def test_every_estimator_takes_each_bearing_from_its_own_platform(name):
         assert ok.mean() > 0.9
         z = (cols["range_now_m"] - true)[ok] / cols["range_sd_m"][ok]
         assert np.mean(np.abs(z) < 2) >= 0.8
+
+
+def test_mcap_logs_of_several_platforms(tmp_path):
+    """tma's own log of several platforms is read back as such (``tma.platforms``: the same
+    answers); another tool's log with each platform's topics under its own namespace is read
+    with ``ownship.topic`` a pattern, each platform named by its namespace; a value topic
+    under no platform's namespace is refused in one line."""
+    from tma.families.bearings2d.log import SCHEMAS
+    from tma.io.mcap_log import Channel, LogWriter
+
+    _export().to_csv(tmp_path / "two.csv", index=False)
+    rec = tma.read_log(tmp_path / "two.csv")
+    write_bearings_log(tmp_path / "two.mcap", rec.logs[0])
+    back = tma.read_log(tmp_path / "two.mcap")
+    assert back.logs[0].platforms == ("ship A", "buoy 7")
+    np.testing.assert_allclose(tma.estimate(back)["range_now_m"],
+                               tma.estimate(rec)["range_now_m"], rtol=1e-9)
+
+    lg = rec.logs[0]
+    spaces = {0: "/ship_a", 1: "/buoy"}
+
+    def write(path, bearing_topic=lambda k: f"{spaces[k]}/sonar/bearings"):
+        chans = [Channel(f"{spaces[k]}/nav", SCHEMAS["/ownship/navigation"], {},
+                         encoding="json") for k in spaces]
+        chans += [Channel(bearing_topic(k), SCHEMAS["/sonar/bearings"], {}, encoding="json")
+                  for k in spaces]
+        with LogWriter(path, chans, epoch_utc_ns=lg.epoch_utc_ns) as w:
+            for e in range(lg.t_s.size):
+                k, t = int(lg.platform[e]), float(lg.t_s[e])
+                w.write(f"{spaces[k]}/nav", t, {"t_s": t, "x_m": float(lg.own_x_m[e]),
+                                                "y_m": float(lg.own_y_m[e])})
+                has = np.isfinite(lg.bearing_deg[:, e])
+                w.write(bearing_topic(k), t, {"t_s": t, "track_id": lg.track_id[has].tolist(),
+                                              "bearing_deg": lg.bearing_deg[has, e].tolist()})
+
+    write(tmp_path / "ns.mcap")
+    other = tma.read_log(tmp_path / "ns.mcap", ownship={"topic": "/*/nav"},
+                         origin={"lat": ORIGIN[0], "lon": ORIGIN[1]})
+    assert other.logs[0].platforms == ("/buoy", "/ship_a")  # in topic order
+    res = tma.estimate(other, reference_platform="/ship_a")
+    np.testing.assert_allclose(res["range_now_m"], tma.estimate(rec)["range_now_m"],
+                               rtol=1e-6)
+    write(tmp_path / "bad.mcap", lambda k: f"/sonar{k}/bearings")
+    with pytest.raises(InputError, match=r"bearings on /sonar0/bearings: no one own-ship "
+                       r"topic shares its namespace"):
+        tma.read_log(tmp_path / "bad.mcap", ownship={"topic": "/*/nav"})

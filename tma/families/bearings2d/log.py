@@ -38,10 +38,13 @@ from tma.families.bearings2d.manoeuvre_prior import ManoeuvrePrior
 from tma.io.mcap_log import (
     COMPRESSION,
     GEO,
+    PLATFORMS,
     TRACKS,
     Channel,
     LogWriter,
     geo_origin,
+    platform_names,
+    platform_namespace,
     read_epoch,
     track_labels,
 )
@@ -65,7 +68,6 @@ SENSOR = "tma.sensor"  # metadata record: {"sigma_deg": nominal bearing noise}, 
 TARGET = "tma.target"  # metadata record: {"accel_psd_m2_s3": the targets' motion}, when known
 OWNSHIP_FIX_TOPIC = "/ownship/location_fix"  # foxglove.LocationFix, only with an origin
 OWNSHIP_FRAME = "ownship"
-PLATFORMS = "tma.platforms"  # metadata record: {"names": [...]}, a log of several platforms
 BLOCK_BEARINGS = 1 << 16  # bearings encoded at once: bounds the memory a long log takes
 SCHEMAS = {OWNSHIP_TOPIC: "tma.OwnshipNavigation", BEARINGS_TOPIC: "tma.BearingBatch"}
 
@@ -75,8 +77,8 @@ def platform_topics(k: int | None) -> tuple[str, str, str]:
     own-ship of a log of one platform)."""
     if k is None:
         return OWNSHIP_TOPIC, BEARINGS_TOPIC, OWNSHIP_FIX_TOPIC
-    return (f"/platforms/{k}/navigation", f"/platforms/{k}/bearings",
-            f"/platforms/{k}/location_fix")
+    space = platform_namespace(k)
+    return f"{space}/navigation", f"{space}/bearings", f"{space}/location_fix"
 
 
 def channels(encoding: str = "protobuf", platform: int | None = None) -> list[Channel]:
@@ -326,18 +328,6 @@ def declared_motion(metadata: dict, where: str) -> tuple[float | None, Manoeuvre
         return q, ManoeuvrePrior(number(m["rate_per_h"]), number(m["dv_m_s"]),
                                  tuple(number(d) for d in m["durations_s"]),
                                  number(m["step_s"]))
-
-
-def platform_names(metadata: dict, where: str) -> tuple[str, ...] | None:
-    """The platforms' names of a log of several (``tma.platforms``); None for one."""
-    if PLATFORMS not in metadata:
-        return None
-    with schema_errors(where, f"the metadata record {PLATFORMS}"):
-        names = read_json_record(metadata, PLATFORMS, where)["names"]
-        if not isinstance(names, list) or not names or not all(isinstance(n, str)
-                                                               for n in names):
-            raise TypeError("names is not a list of texts")
-    return tuple(names)
 
 
 def _expected_topics(metadata: dict, where: str) -> dict:
