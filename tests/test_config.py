@@ -259,7 +259,8 @@ def _option_schemas():
 
 
 # a value not of its form, for each option declared with a form (a new one comes with its own)
-NOT_OF_THE_FORM = {"bearing.topic": [], "ownship.topic": [], "csv.delimiter": "::", "time.start_utc": "yesterday",
+NOT_OF_THE_FORM = {"bearing.topic": [], "ownship.topic": [], "csv.delimiter": "::",
+                   "time.start_utc": "yesterday",
                    "nmea.date": "1.6.2025", "address": "tcp://localhost", "match": "T1",
                    "time.format": "bogus", "time.zone": "Mars/Olympus"}
 WRONG_TYPE = {bool: "maybe", int: "abc", float: "abc", str: ["a", "b"]}

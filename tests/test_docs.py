@@ -155,6 +155,22 @@ def write_logs(d: Path) -> Path:
                *[(f"/sonar/contact/{c}", "std_msgs/msg/Float64",
                   float64_messages(one.bearings)) for c in "ab"])  # one topic per contact
     write_foxglove(d / "foxglove.mcap", one)
+    from tests.families.bearings2d.test_bearings2d_platforms import (
+        two_platform_export,
+        write_namespaced,
+    )
+    from tma import read_log
+
+    two = two_platform_export()  # a ship and a buoy: platform column, asynchronous
+    two.to_csv(d / "two_ships.csv", index=False)
+    two[["timestamp_utc", "platform", "contact", "bearing_deg"]].to_csv(
+        d / "platform_bearings.csv", index=False)
+    fixes = two[["timestamp_utc", "platform", "latitude_deg", "longitude_deg"]]
+    pd.concat([fixes[fixes["platform"] == "ship A"].drop_duplicates("timestamp_utc"),
+               fixes[fixes["platform"] == "buoy 7"].iloc[:1]]).to_csv(d / "platforms.csv",
+                                                                      index=False)
+    write_namespaced(d / "platforms.mcap", read_log(d / "two_ships.csv").logs[0],
+                     ("/ship_a", "/buoy"))
     from tests.families.bearings2d.ais_trial import write_trial
 
     write_trial(d)  # trial.csv and its AIS: trial_ais.csv, trial_ais.nmea

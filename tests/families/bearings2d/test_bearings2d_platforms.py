@@ -20,7 +20,7 @@ BUOY = ("buoy 7", 5.0, (9000.0, -4000.0, 0.0, 0.0))
 CONTACTS = {"C0": (3000.0, 9000.0, -3.0, 2.0), "C1": (12000.0, 7000.0, 2.0, -4.0)}
 
 
-def _export(seed=2, platforms=(SHIP, BUOY), span_s=1800.0) -> pd.DataFrame:
+def two_platform_export(seed=2, platforms=(SHIP, BUOY), span_s=1800.0) -> pd.DataFrame:
     """A navigation export of bearings taken every 10 s by each platform (the second 5 s
     after the first: asynchronous), each row where its platform was: ``timestamp_utc,
     platform, latitude_deg, longitude_deg, contact, bearing_deg`` (0.5 deg noise); the
@@ -43,6 +43,29 @@ def _export(seed=2, platforms=(SHIP, BUOY), span_s=1800.0) -> pd.DataFrame:
     frame = frame.sort_values("timestamp_utc", kind="stable").reset_index(drop=True)
     frame["timestamp_utc"] = frame["timestamp_utc"].dt.strftime("%Y-%m-%dT%H:%M:%SZ")
     return frame
+
+
+def write_namespaced(path, lg, spaces, bearing_topic=None):
+    """A log of several platforms as another tool may write it: each platform's own-ship
+    (``tma.OwnshipNavigation``) on ``<space>/navigation`` and its bearings on
+    ``bearing_topic(k)`` (default ``<space>/sonar/bearings``), JSON, with no record saying
+    which platforms there are."""
+    from tma.families.bearings2d.log import SCHEMAS
+    from tma.io.mcap_log import Channel, LogWriter
+
+    bearing_topic = bearing_topic or (lambda k: f"{spaces[k]}/sonar/bearings")
+    chans = [Channel(f"{s}/navigation", SCHEMAS["/ownship/navigation"], {}, encoding="json")
+             for s in spaces]
+    chans += [Channel(bearing_topic(k), SCHEMAS["/sonar/bearings"], {}, encoding="json")
+              for k in range(len(spaces))]
+    with LogWriter(path, chans, epoch_utc_ns=lg.epoch_utc_ns) as w:
+        for e in range(lg.t_s.size):
+            k, t = int(lg.platform[e]), float(lg.t_s[e])
+            w.write(f"{spaces[k]}/navigation", t, {"t_s": t, "x_m": float(lg.own_x_m[e]),
+                                                   "y_m": float(lg.own_y_m[e])})
+            has = np.isfinite(lg.bearing_deg[:, e])
+            w.write(bearing_topic(k), t, {"t_s": t, "track_id": lg.track_id[has].tolist(),
+                                          "bearing_deg": lg.bearing_deg[has, e].tolist()})
 
 
 def _truth_now(label, t_now, observer=(4.0, 0.0)):
@@ -100,7 +123,7 @@ def test_a_platform_column_makes_one_track_per_contact_and_ranges_it(tmp_path):
     """The export of a steady ship and a buoy: one dataset log of both platforms, each
     contact one track; lm ranges both (the ship alone cannot) and its answers hold the truth
     within a few stated sd, from the ship (the first platform) at the last bearing."""
-    _export().to_csv(tmp_path / "two.csv", index=False)
+    two_platform_export().to_csv(tmp_path / "two.csv", index=False)
     rec = tma.read_log(tmp_path / "two.csv")
     (lg,) = rec.logs
     assert lg.platforms == ("ship A", "buoy 7")
@@ -117,7 +140,7 @@ def test_a_platform_column_makes_one_track_per_contact_and_ranges_it(tmp_path):
         off = (row["bearing_now_deg"] - true_bearing + 180) % 360 - 180
         assert abs(off) < 4 * row["bearing_sd_deg"]
     # the same ship alone: no range (it holds course)
-    alone = _export(platforms=(SHIP,))
+    alone = two_platform_export(platforms=(SHIP,))
     alone.to_csv(tmp_path / "one.csv", index=False)
     assert set(tma.estimate(tma.read_log(tmp_path / "one.csv"))["status"]) <= {
         "unobservable", "manoeuvring", "poor_fit"}
@@ -127,7 +150,7 @@ def test_a_navigation_file_per_platform_and_a_buoy_of_one_fix(tmp_path):
     """Bearings with a platform column and no positions, the positions in a navigation file
     with a platform column where the buoy is one row: the same answers as the export that
     gives every row's position."""
-    frame = _export()
+    frame = two_platform_export()
     frame.to_csv(tmp_path / "two.csv", index=False)
     frame[["timestamp_utc", "platform", "contact", "bearing_deg"]].to_csv(
         tmp_path / "bearings.csv", index=False)
@@ -158,7 +181,7 @@ def test_frames_take_a_platform_column_and_the_reference_is_named(tmp_path):
     """``Recording.from_frames`` reads the same export; ``reference_platform`` gives range
     and bearing now from the buoy instead (its own geometry, the truth within a few sd); an
     unknown name, or mpekf on a log of two platforms, is one line."""
-    frame = _export()
+    frame = two_platform_export()
     frame["timestamp_utc"] = pd.to_datetime(frame["timestamp_utc"], utc=True)
     rec = tma.Recording.from_frames(frame)
     res = tma.estimate(rec, reference_platform="buoy 7").set_index("label")
@@ -214,10 +237,7 @@ def test_mcap_logs_of_several_platforms(tmp_path):
     answers); another tool's log with each platform's topics under its own namespace is read
     with ``ownship.topic`` a pattern, each platform named by its namespace; a value topic
     under no platform's namespace is refused in one line."""
-    from tma.families.bearings2d.log import SCHEMAS
-    from tma.io.mcap_log import Channel, LogWriter
-
-    _export().to_csv(tmp_path / "two.csv", index=False)
+    two_platform_export().to_csv(tmp_path / "two.csv", index=False)
     rec = tma.read_log(tmp_path / "two.csv")
     write_bearings_log(tmp_path / "two.mcap", rec.logs[0])
     back = tma.read_log(tmp_path / "two.mcap")
@@ -226,24 +246,13 @@ def test_mcap_logs_of_several_platforms(tmp_path):
                                tma.estimate(rec)["range_now_m"], rtol=1e-9)
 
     lg = rec.logs[0]
-    spaces = {0: "/ship_a", 1: "/buoy"}
+    spaces = ("/ship_a", "/buoy")
 
     def write(path, bearing_topic=lambda k: f"{spaces[k]}/sonar/bearings"):
-        chans = [Channel(f"{spaces[k]}/nav", SCHEMAS["/ownship/navigation"], {},
-                         encoding="json") for k in spaces]
-        chans += [Channel(bearing_topic(k), SCHEMAS["/sonar/bearings"], {}, encoding="json")
-                  for k in spaces]
-        with LogWriter(path, chans, epoch_utc_ns=lg.epoch_utc_ns) as w:
-            for e in range(lg.t_s.size):
-                k, t = int(lg.platform[e]), float(lg.t_s[e])
-                w.write(f"{spaces[k]}/nav", t, {"t_s": t, "x_m": float(lg.own_x_m[e]),
-                                                "y_m": float(lg.own_y_m[e])})
-                has = np.isfinite(lg.bearing_deg[:, e])
-                w.write(bearing_topic(k), t, {"t_s": t, "track_id": lg.track_id[has].tolist(),
-                                              "bearing_deg": lg.bearing_deg[has, e].tolist()})
+        write_namespaced(path, lg, spaces, bearing_topic)
 
     write(tmp_path / "ns.mcap")
-    other = tma.read_log(tmp_path / "ns.mcap", ownship={"topic": "/*/nav"},
+    other = tma.read_log(tmp_path / "ns.mcap", ownship={"topic": "/*/navigation"},
                          origin={"lat": ORIGIN[0], "lon": ORIGIN[1]})
     assert other.logs[0].platforms == ("/buoy", "/ship_a")  # in topic order
     res = tma.estimate(other, reference_platform="/ship_a")
@@ -252,4 +261,4 @@ def test_mcap_logs_of_several_platforms(tmp_path):
     write(tmp_path / "bad.mcap", lambda k: f"/sonar{k}/bearings")
     with pytest.raises(InputError, match=r"bearings on /sonar0/bearings: no one own-ship "
                        r"topic shares its namespace"):
-        tma.read_log(tmp_path / "bad.mcap", ownship={"topic": "/*/nav"})
+        tma.read_log(tmp_path / "bad.mcap", ownship={"topic": "/*/navigation"})

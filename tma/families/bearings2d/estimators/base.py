@@ -369,8 +369,15 @@ class BearingsEstimator(Estimator):
         mine = valid & (b.platform == b.reference)[None, :]
         has = mine.sum(axis=1) >= 2
         last_mine = mine.shape[1] - 1 - np.argmax(mine[:, ::-1], axis=1)
-        out = end_bearing(b.t, b.measured, mine, last_mine, sigma_rad, at_s=b.t[b.last])
-        return {k: np.where(has, v, np.nan) for k, v in out.items()}
+        rows = np.flatnonzero(has)
+        out = {k: np.full(has.size, np.nan) for k in ("end_bearing_deg", "end_bearing_sd_deg")}
+        if rows.size:
+            part = end_bearing(b.t, b.measured[rows], mine[rows], last_mine[rows],
+                               np.broadcast_to(sigma_rad, has.shape)[rows],
+                               at_s=b.t[b.last[rows]])
+            for k, v in part.items():
+                out[k][rows] = v
+        return out
 
     @staticmethod
     def _leg_start(t, start, solution: Solution):
