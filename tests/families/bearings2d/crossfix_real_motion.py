@@ -124,7 +124,8 @@ def _judged(out: dict, d: int, truth: dict) -> dict:
     return {"status": str(get["status"]), "range_m": truth["range_m"],
             "range_error": errors["range"] / truth["range_m"],
             "course_error_deg": errors["course"], "speed_error_m_s": errors["speed"],
-            "max_cross_deg": truth["max_cross_deg"], **zs}
+            "max_cross_deg": truth["max_cross_deg"], "sigma_used_deg": get["sigma_used_deg"],
+            "motion_p_value": get["motion_p_value"], **zs}
 
 
 def crossfix_figures(results: pd.DataFrame) -> dict:
