@@ -131,10 +131,14 @@ def test_two_platforms_are_honest_on_real_motion(results):
     assert two["ok"] >= one["ok"] + 0.30, (_shown(two), _shown(one))
 
 
+# Issue 39's 80 % is not reached (figures of 2026-11-28: ok on 55 % of this subset, 53 % of
+# all 113 triples x 3 draws; 77 % with sigma declared). Strict: the day it holds, this fails
+# until the mark goes.
 @pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "ok on 52 % of the targets from two platforms (figures of 2026-11-28), not 80 %: 92 % of "
-    "the triples' targets manoeuvre in the window (flagged manoeuvring on a quarter of "
-    "them) and a fifth are position_only (their course too wide to state)"))
+    "ok on 55 % from two platforms, not 80 %: sigma estimated from the no-manoeuvre fit "
+    "(manoeuvres.mixture), which two crossing lines of sight cannot hold to a manoeuvring "
+    "target: 2.3 deg (median) for 0.5 on the quarter flagged manoeuvring (ok with sigma "
+    "declared); a fifth position_only (course sd above 30 deg: weaker crossings, farther)"))
 def test_two_platforms_answer_80_percent_of_targets(results):
     """Issue 39: ok on at least 80 % of the targets from two platforms."""
     f = crossfix_figures(results[results.platforms == 2])
