@@ -47,10 +47,18 @@
     targets 5-15 km away at 3-6 m/s), each the least-squares slope of log(cost) on
     log(size), beside the smoother's.
     ``--manoeuvre-tracks N`` (50) tracks per point (fewer for the long logs).
+(l) Two platforms on real ship motion (issue 39, ``--only crossfix_real_motion``,
+    ``tests/families/bearings2d/crossfix_real_motion.py``): a target and two other vessels of
+    the AIS recordings that take its bearings, their lines of sight crossing, ``--draws``
+    noise draws each; ``lm`` as the README runs a recording (sigma estimated) and with sigma
+    declared, from both platforms against the baseline, the first platform alone, on the
+    same targets and noise: the share ok, of the ok each of range, course and speed within 3
+    sd, beyond 5 sd (95 % intervals clustered by target vessel), and the ratio of ok shares.
 
 Options: ``--tracks N`` (2000), ``--sigma DEG`` (0.5), ``--runs N`` (30), ``--skip-tables``,
 ``--skip-first-table``, ``--only SECTION`` (lm, tables, ranges2d, filters3d, cmnf, compile,
-real_motion, cluster, io, trace, first_table, manoeuvres), ``--first-table EXPERIMENTS``
+real_motion, crossfix_real_motion, cluster, io, trace, first_table, manoeuvres),
+``--first-table EXPERIMENTS``
 (comma-separated; bearings2d_table,ranges2d_table,radar2d_table), ``--first-table-repeat N``
 (1), ``--paths3d N`` (2500), ``--cmnf-paths N`` (100000), ``--repeat N`` (3),
 ``--manoeuvre-tracks N`` (50), ``--draws N`` (5).
@@ -84,8 +92,8 @@ from tma.runtime.forkserver import keep_freed_memory
 
 REPO = Path(__file__).resolve().parents[1]
 THETA = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")
-SECTIONS = ("lm", "tables", "ranges2d", "filters3d", "cmnf", "compile", "real_motion", "cluster",
-            "io", "trace", "first_table", "manoeuvres")
+SECTIONS = ("lm", "tables", "ranges2d", "filters3d", "cmnf", "compile", "real_motion",
+            "crossfix_real_motion", "cluster", "io", "trace", "first_table", "manoeuvres")
 FIRST_TABLES = ("bearings2d_table", "ranges2d_table", "radar2d_table")  # as issue 32 measured
 
 
@@ -438,6 +446,56 @@ class MessageWriter:
         self._writer.finish()
 
 
+def bench_crossfix_real_motion(draws: int):
+    """Issue 39, item 4: ``lm`` from two platforms on real ship motion (the AIS triples of
+    ``tests/families/bearings2d/crossfix_real_motion.py``) against the baseline, the first
+    platform alone, on the same targets and noise: ``draws`` noise draws per triple."""
+    import logging
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    import pandas as pd
+
+    from tests.families.bearings2d.crossfix_real_motion import (
+        CRITERIA,
+        RECORDINGS,
+        crossfix_figures,
+        describe,
+        run_triples,
+        triples,
+    )
+
+    logging.disable(logging.WARNING)  # each non-ok track's note
+    counts = ", ".join(f"{r} {len(triples(r))}" for r in RECORDINGS)
+    print(f"(l) two platforms on real ship motion (issue 39): AIS triples ({counts}): a target "
+          "and two vessels 1-15 km away, lines of sight crossing at 40-89 deg, bearings every "
+          f"10 s from each (0.5 deg noise), {draws} noise draws per triple; issue 39's targets: "
+          f"ok >= {CRITERIA['ok']:.0%} with two platforms, of the ok each of range, course, "
+          f"speed within 3 sd >= {CRITERIA['within_3_sd']:.0%}, none beyond 5 sd")
+    runs = [("lm as the README runs it (sigma estimated)", None),
+            ("lm, sigma declared 0.5 deg", 0.5)]
+    with tempfile.TemporaryDirectory() as workdir:
+        for label, sigma in runs:
+            start = time.perf_counter()
+            results = pd.concat([run_triples(Path(workdir) / r, {"name": "lm"}, sigma,
+                                             recording=r, draws=draws) for r in RECORDINGS])
+            wall = time.perf_counter() - start
+            print(f"    {label} ({wall:.0f} s wall, both numbers of platforms):")
+            ok = {}
+            for platforms, name in ((2, "two platforms"), (1, "baseline: the first alone")):
+                rows = results[results.platforms == platforms]
+                f = crossfix_figures(rows)
+                ok[platforms] = f["ok"]
+                kinds = ", ".join(f"{k} {(rows[rows.kind == k].status == 'ok').mean():.0%} of "
+                                  f"{(rows.kind == k).sum()}" for k in ("steady", "manoeuvring"))
+                statuses = ", ".join(f"{k} {v}" for k, v in rows.status.value_counts().items())
+                print(f"      {name}: {statuses}; ok by target class: {kinds}; median sigma "
+                      f"used {rows.sigma_used_deg.median():.2f} deg")
+                for line in describe(f):
+                    print(f"        {line}")
+            print(f"      ok share, two platforms / one: {ok[2] / ok[1]:.1f}x" if ok[1] > 0
+                  else "      the first platform alone is never ok")
+
+
 def _best(function, repeat):
     return min(timed(function)[2] for _ in range(repeat))
 
@@ -673,7 +731,8 @@ def main():
                         help="(b), (h), (k): the best of this many runs")
     parser.add_argument("--only", choices=SECTIONS, default=None, help="one section")
     parser.add_argument("--draws", type=int, default=5,
-                        help="real_motion: noise draws per real pair (issue 36, item 5)")
+                        help="real_motion, crossfix_real_motion: noise draws per real pair "
+                        "or triple")
     parser.add_argument("--manoeuvre-tracks", type=int, default=50,
                         help="(k): tracks per point (fewer for the long logs)")
     parser.add_argument("--paths3d", type=int, default=2500, help="3D filter benchmark paths")
@@ -702,6 +761,8 @@ def main():
         bench_compile()
     if wanted("real_motion"):
         bench_real_motion(args.draws)
+    if wanted("crossfix_real_motion"):
+        bench_crossfix_real_motion(args.draws)
     if wanted("cluster"):
         from cluster import bench_cluster  # bench/cluster.py (run as a script); tma[dask]
 

@@ -34,7 +34,8 @@ def _component_noise(t, lo, hi, q, taus, durations, burst, cells, count, Q):
         for m in range(count):
             c, d = cells[m] // D, cells[m] % D
             extra += burst[d] * max(min(tb, taus[c] + durations[d]) - max(ta, taus[c]), 0.0)
-        white_step(q + extra / (tb - ta), tb - ta, Q[k])
+        # two platforms' bearings at one time: a step of no time, no noise (not 0 / 0)
+        white_step(q + extra / (tb - ta) if tb > ta else q, tb - ta, Q[k])
 
 
 @njit(error_model="numpy", depends=(_filter,))
