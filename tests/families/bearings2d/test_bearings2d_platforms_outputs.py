@@ -281,3 +281,31 @@ def test_a_recording_with_bearings_at_the_same_time_has_an_answer():
 
     out = build_estimator({"name": "lm"}).estimate(two_platform_log(accel_psd_m2_s3=None))
     assert np.isfinite(out["x0_m"]).all()
+
+
+def test_the_api_draws_a_log_of_several_platforms_whichever_the_reference(tmp_path):
+    """``tma.plot_contact`` and ``tma.write_map``'s hooks take the results of a log of several
+    platforms, range and bearing now from the buoy (``reference_platform``) while the ship
+    took the last bearings; a log whose buoy lay elsewhere is refused."""
+    import dataclasses
+
+    from tma.families import build_estimator
+    from tma.families.bearings2d.aggregate import plot_contact, write_map
+
+    log = two_platform_log()
+    # T1 alone: the buoy took none of T2's (end_bearing warns of an all-NaN median there)
+    log = dataclasses.replace(log, track_id=log.track_id[:1], bearing_deg=log.bearing_deg[:1],
+                              track_label=log.track_label[:1])
+    out = build_estimator({"name": "lm", "reference_platform": "buoy"}).estimate(log)
+    estimates = pd.DataFrame({"track_id": log.track_id, **out.columns})
+    np.testing.assert_allclose(estimates[["own_x_last_m", "own_y_last_m"]].to_numpy(),
+                               [BUOY_XY], rtol=0, atol=1e-9)
+    assert log.platform[np.flatnonzero(np.isfinite(log.bearing_deg[0]))[-1]] == 0  # the ship
+    report = contact_report(estimates, [log], "api")
+    assert "buoy (fixed)" in _lines(plot_contact(report, estimates, [log], "T1"))
+    schemas, _, _ = _decoded(write_map(tmp_path / "api.mcap", report, estimates, [log]))
+    assert {"/platforms/0/location_fix", "/platforms/1/location_fix"} <= set(schemas)
+    moved = dataclasses.replace(log, own_x_m=np.where(log.platform == 1, log.own_x_m + 10.0,
+                                                      log.own_x_m))
+    with pytest.raises(ValueError, match="not estimated from this recording"):
+        plot_contact(report, estimates, [moved], "T1")
