@@ -17,6 +17,7 @@ from tma.families.bearings2d import (
     real_motion_table,
 )
 from tma.families.bearings2d.contact_plots import contact_figure
+from tma.families.bearings2d.drawn_tracks import platform_now
 from tma.families.bearings2d.map_mcap import write_map_mcap
 from tma.families.bearings2d.metrics import THETA, summary_row, track_metrics
 from tma.families.bearings2d.status import heading_undetermined
@@ -122,8 +123,7 @@ def check_logs(report: pd.DataFrame, estimates: pd.DataFrame, logs):
             last = np.flatnonzero(np.isfinite(lg.bearing_deg[row]))[-1]
             why = ""
             if not (abs(lg.t_s[last] - e.t_last_s) <= SAME_TIME_S
-                    and abs(lg.own_x_m[last] - e.own_x_last_m) <= SAME_PLACE_M
-                    and abs(lg.own_y_m[last] - e.own_y_last_m) <= SAME_PLACE_M):
+                    and _observed_from(lg, last, e.own_x_last_m, e.own_y_last_m)):
                 why = "its last bearing is at another time or own-ship position here"
             elif isinstance(r.time_now_utc, str) and epoch is not None and (
                     r.time_now_utc != format_utc(epoch + round(r.t_now_s * 1e9))):
@@ -131,6 +131,18 @@ def check_logs(report: pd.DataFrame, estimates: pd.DataFrame, logs):
         if why:
             raise ValueError(f"these results were not estimated from this recording (contact "
                              f"{r.label!r}: {why}); pass the recording given to tma.estimate")
+
+
+def _observed_from(lg, last: int, x_m: float, y_m: float) -> bool:
+    """Whether the results' observer at a contact's last bearing (epoch ``last``), ``x_m``,
+    ``y_m``, is the log's: own-ship there, or in a log of several platforms one of them
+    then (the reference platform range and bearing now are read from, the estimator's
+    ``reference_platform``, which the results do not name)."""
+    if lg.platform is None:
+        return abs(lg.own_x_m[last] - x_m) <= SAME_PLACE_M and abs(
+            lg.own_y_m[last] - y_m) <= SAME_PLACE_M
+    return any(np.hypot(*(platform_now(lg, k, lg.t_s[last]) - (x_m, y_m))) <= SAME_PLACE_M
+               for k in range(lg.n_platforms))
 
 
 def plot_contact(report: pd.DataFrame, estimates: pd.DataFrame, logs, label,

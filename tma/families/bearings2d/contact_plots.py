@@ -2,7 +2,8 @@
 ``drawn_tracks`` says: ``tables/<name>-<label>.png``: own-ship path, every k-th bearing line
 from own-ship, the estimated track (along a kept trajectory with the 95 % ellipses of a few of
 its positions) and the 95 % ellipse at its last bearing, in km east/north, the status in the
-title.
+title. A log of several platforms draws each platform's track in its colour (one that never
+moved as a triangle), named, and each one's bearing lines from it in that colour.
 
 ``<label>`` is the contact's shown label (``tma.sources.labels``: safe for file names,
 Markdown and topics, long ones shortened with a hash); the table's CSV keeps the id as
@@ -21,12 +22,20 @@ import pandas as pd  # noqa: E402
 
 from tma.families.bearings2d.drawn_tracks import (  # noqa: E402
     BAND_ELLIPSES,
+    NOMINAL_REACH_M,
+    drawn_bearings,
     drawn_path,
     ellipse_points,
+    is_fixed,
     now_only,
     path_rows,
+    platform_colour,
+    platform_epochs,
+    platform_now,
     position_covariance,
     shown_estimates,
+    sight_ends,
+    sight_reach,
 )
 from tma.families.bearings2d.log import BearingsLog  # noqa: E402
 from tma.sources.labels import file_part, fit_file_name, shown_labels  # noqa: E402
@@ -36,8 +45,6 @@ log = logging.getLogger(__name__)
 
 MAX_PLOTS = 100  # PNGs per table: a log of thousands of contacts gets the first 100
 LISTED = 20  # contacts named in a message
-BEARING_LINES = 40  # at most about this many bearing lines per plot (every k-th bearing)
-NOMINAL_REACH_M = 20_000.0  # bearing lines of a contact without an estimate to reach
 
 
 class _TrackPlots:
@@ -58,6 +65,7 @@ class _TrackPlots:
                              label="95 % position (last bearing)")
         self.band, = ax.plot([], [], color="tab:red", lw=0.6, ls=":",
                              label="along the track: 95 % positions")
+        self.platforms = []  # per platform of a log of several: (path, now, lines), as needed
         ax.set_aspect("equal", adjustable="box")
         ax.set_xlabel("east (km)")
         ax.set_ylabel("north (km)")
@@ -92,18 +100,23 @@ class _TrackPlots:
             track = theta[:2] + np.outer(lg.t_s[held], theta[2:])  # estimated positions then
             seen_from = own[held]
         finite = np.isfinite(track).all()
-        reach = (np.hypot(*(track - seen_from).T).max() * 1.3 if finite
-                 else NOMINAL_REACH_M)
-        step = max(1, int(np.ceil(valid.size / BEARING_LINES)))
-        b = np.deg2rad(lg.bearing_deg[row, valid[::step]])
-        start = own[valid[::step]]
-        end = start + reach * np.column_stack([np.sin(b), np.cos(b)])
-        lines = np.stack([start, end, np.full_like(start, np.nan)], axis=1).reshape(-1, 2) / 1e3
-
-        self.lines.set_data(lines.T)
-        self.lines.set_label("bearings" + (f" (every {step}th)" if step > 1 else ""))
-        self.own.set_data(own.T / 1e3)
-        self.own_now.set_data(own[valid[-1], :, None] / 1e3)
+        several = lg.platform is not None
+        if several:  # each platform's lines of sight from it, in its colour
+            platform_handles, end = self._draw_platforms(lg, row, valid, track)
+            for artist in (self.lines, self.own, self.own_now):
+                artist.set_data([], [])
+        else:
+            reach = (np.hypot(*(track - seen_from).T).max() * 1.3 if finite
+                     else NOMINAL_REACH_M)
+            ((_, drawn_at, step),) = drawn_bearings(lg, valid)
+            start, end = sight_ends(lg, row, drawn_at, reach)
+            self.lines.set_data(_segments(start, end).T)
+            self.lines.set_label("bearings" + (f" (every {step}th)" if step > 1 else ""))
+            self.own.set_data(own.T / 1e3)
+            self.own_now.set_data(own[valid[-1], :, None] / 1e3)
+            for artists in self.platforms:  # a log of several drawn before
+                for artist in artists:
+                    artist.set_data([], [])
         shown = [own]
         ring = np.empty((0, 2))
         if finite:
@@ -132,14 +145,60 @@ class _TrackPlots:
         mid, half = (lo + hi) / 2, 0.54 * (hi - lo).max() + 0.1
         self.ax.set_xlim(mid[0] - half, mid[0] + half)
         self.ax.set_ylim(mid[1] - half, mid[1] + half)
-        drawn = [self.lines, self.own] + ([self.track] if finite else []) + (
-            [self.ring] if ring.size else []) + ([self.band] if band.size else [])
+        drawn = (platform_handles if several else [self.lines, self.own]) + (
+            [self.track] if finite else []) + ([self.ring] if ring.size else []) + (
+            [self.band] if band.size else [])
         self.ax.legend(handles=drawn, loc="best", fontsize=8)
         self.ax.set_title(title, fontsize=10)
         return self.fig
 
+    def _draw_platforms(self, lg: BearingsLog, row: int, valid, track):
+        """A log of several platforms: each platform's track (a point where it never moved),
+        named, its position at the contact's last bearing and its own lines of sight (every
+        k-th of its bearings of the contact), in its colour. Returns the legend's handles
+        (their lines of sight, then the tracks) and the lines' ends (m)."""
+        while len(self.platforms) < lg.n_platforms:
+            colour = platform_colour(len(self.platforms))
+            path, = self.ax.plot([], [], color=colour)
+            now, = self.ax.plot([], [], "o", color=colour, ms=4)
+            lines, = self.ax.plot([], [], color=colour, lw=0.5, alpha=0.7, zorder=1.5)
+            self.platforms.append((path, now, lines))
+        drawn = {k: (at, step) for k, at, step in drawn_bearings(lg, valid)}
+        t_last = lg.t_s[valid[-1]]
+        at_all = np.concatenate([at for at, _ in drawn.values()])
+        reach = sight_reach(np.column_stack([lg.own_x_m[at_all], lg.own_y_m[at_all]]), track)
+        sights, paths, ends = [], [], []
+        for k, epochs in enumerate(platform_epochs(lg)):
+            path, now, lines = self.platforms[k]
+            name, fixed = lg.platforms[k], is_fixed(lg, epochs)
+            path.set_data(np.stack([lg.own_x_m[epochs], lg.own_y_m[epochs]]) / 1e3)
+            path.set_linestyle("None" if fixed else "-")
+            path.set_marker("^" if fixed else "None")
+            path.set_label(f"{name} (fixed)" if fixed else name)
+            now.set_data(([], []) if fixed else platform_now(lg, k, t_last)[:, None] / 1e3)
+            paths.append(path)
+            if k in drawn:
+                at, step = drawn[k]
+                start, end = sight_ends(lg, row, at, reach)
+                lines.set_data(_segments(start, end).T)
+                lines.set_label(f"{name}'s bearings" + (f" (every {step}th)" if step > 1
+                                                        else ""))
+                sights.append(lines)
+                ends.append(end)
+            else:  # it took none of this contact's bearings
+                lines.set_data([], [])
+        for artists in self.platforms[lg.n_platforms:]:  # a log of more platforms drawn before
+            for artist in artists:
+                artist.set_data([], [])
+        return sights + paths, np.concatenate(ends)
+
     def close(self):
         plt.close(self.fig)
+
+
+def _segments(start, end) -> np.ndarray:
+    """Line segments from ``start`` to ``end`` (k, 2, m) as one polyline in km, NaN between."""
+    return np.stack([start, end, np.full_like(start, np.nan)], axis=1).reshape(-1, 2) / 1e3
 
 
 def write_track_plots(report: pd.DataFrame, estimates: pd.DataFrame, logs, tables_dir,

@@ -12,6 +12,11 @@ estimator stored them (``jtj_ij``, ``sigma_used_deg``): the position at time t i
 p(t) = p0 + v t, its covariance A(t) Sigma A(t)^T with A(t) = [I, t I]. The answer now's
 covariance is always the latter (the report's). A 95 % ellipse is
 {p : (p - p(t))^T C^-1 (p - p(t)) <= chi-square(2) 95 % point}.
+
+Both draw the lines of sight from the platform that took each bearing: a log of one own-ship
+every k-th bearing from it; a log of several platforms (``BearingsLog.platforms``: ships,
+buoys, shore stations) each platform's own, every k-th of them, in its colour
+(``PLATFORM_COLOURS``), and each platform's track (one that never moved as a point).
 """
 
 import numpy as np
@@ -20,6 +25,7 @@ import pandas as pd
 from tma.errors import InputError
 from tma.families.bearings2d.log import BearingsLog, read_bearings_log
 from tma.families.bearings2d.metrics import THETA, jtj_matrices
+from tma.families.bearings2d.platforms import position_at
 from tma.families.bearings2d.status import heading_undetermined
 from tma.maths.linalg import scaled_inverse
 
@@ -113,6 +119,71 @@ def ellipse_points(center, cov, n=90) -> np.ndarray:
     s = np.linspace(0.0, 2 * np.pi, n)
     unit = np.stack([np.cos(s), np.sin(s)])
     return np.asarray(center) + (V @ (np.sqrt(np.maximum(w, 0) * CHI2_2_P95)[:, None] * unit)).T
+
+
+# -- the platforms and their lines of sight ------------------------------------------------
+
+BEARING_LINES = 40  # at most about this many lines of sight per contact and platform
+NOMINAL_REACH_M = 20_000.0  # lines of sight of a contact without an estimate to reach
+SIGHT_REACH = 1.3  # lines of sight reach this many times the farthest the track is from them
+# one colour per platform of a log of several (the k-th platform's, cycled), none of them the
+# estimate's red or the grey of a single own-ship's lines of sight; hex, as GeoJSON styles
+PLATFORM_COLOURS = ("#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2",
+                    "#bcbd22", "#17becf")
+
+
+def platform_colour(k: int) -> str:
+    return PLATFORM_COLOURS[k % len(PLATFORM_COLOURS)]
+
+
+def platform_epochs(lg: BearingsLog) -> list[np.ndarray]:
+    """Per platform of a log of several the indices of its epochs (its own positions)."""
+    return [np.flatnonzero(lg.platform == k) for k in range(lg.n_platforms)]
+
+
+def is_fixed(lg: BearingsLog, epochs: np.ndarray) -> bool:
+    """Whether a platform stayed at one place at its ``epochs`` (a buoy, a shore station)."""
+    return bool(np.ptp(lg.own_x_m[epochs]) == 0 and np.ptp(lg.own_y_m[epochs]) == 0)
+
+
+def drawn_bearings(lg: BearingsLog, valid: np.ndarray) -> list[tuple[int | None, np.ndarray,
+                                                                     int]]:
+    """The lines of sight drawn of a contact whose bearings are at epochs ``valid``:
+    ``(platform, epochs, step)`` per platform that took any of them (None: the one own-ship
+    of a log of one), every ``step``-th of its bearings, about ``BEARING_LINES`` at most."""
+    groups = ([(None, valid)] if lg.platform is None else
+              [(k, valid[lg.platform[valid] == k]) for k in range(lg.n_platforms)])
+    out = []
+    for k, mine in groups:
+        if mine.size:
+            step = max(1, int(np.ceil(mine.size / BEARING_LINES)))
+            out.append((k, mine[::step], step))
+    return out
+
+
+def sight_ends(lg: BearingsLog, row: int, epochs: np.ndarray, reach) -> tuple[np.ndarray,
+                                                                             np.ndarray]:
+    """``(start, end)`` (k, 2) m of the lines of sight of track ``row`` at ``epochs``: from
+    the platform that took each bearing, ``reach`` m along it (clockwise from north)."""
+    b = np.deg2rad(lg.bearing_deg[row, epochs])
+    start = np.column_stack([lg.own_x_m[epochs], lg.own_y_m[epochs]])
+    return start, start + reach * np.column_stack([np.sin(b), np.cos(b)])
+
+
+def sight_reach(starts: np.ndarray, track: np.ndarray) -> float:
+    """How far lines of sight from ``starts`` (k, 2) reach to pass the drawn ``track`` (m,
+    2): ``SIGHT_REACH`` times the farthest a track point is from any of them;
+    ``NOMINAL_REACH_M`` without a finite track."""
+    if not track.size or not np.isfinite(track).all():
+        return NOMINAL_REACH_M
+    gap = np.hypot(*(track[None, :, :] - starts[:, None, :]).transpose(2, 0, 1))
+    return float(gap.max() * SIGHT_REACH)
+
+
+def platform_now(lg: BearingsLog, k: int, t_s: float) -> np.ndarray:
+    """Platform ``k``'s position (x, y m) at ``t_s`` (``platforms.position_at``)."""
+    x, y = position_at(lg.t_s, lg.own_x_m, lg.own_y_m, lg.platform, k, [t_s])
+    return np.array([x[0], y[0]])
 
 
 # -- the dataset's logs ----------------------------------------------------------------------

@@ -4,20 +4,34 @@ says: ``tables/<name>.mcap`` (only with a geographic origin and UTC times), per 
 kept trajectory's points, else its bearing epochs; estimated position, position covariance in
 ENU m^2, type KNOWN), own-ship on ``/ownship/location_fix``, the contact's ship from its AIS
 on ``/tma/truth/<label>`` where the log has a truth; log times UTC, for Foxglove's Map panel.
+
+A log of several platforms (ships, buoys, shore stations) has each platform's track instead
+of own-ship's, on ``/platforms/<k>/location_fix`` at its own epochs, and per contact its lines
+of sight as ``foxglove.GeoJSON`` on ``/tma/lines_of_sight/<label>``: at each drawn bearing
+(every k-th of each platform's, ``drawn_tracks.drawn_bearings``) each platform's latest line
+of sight so far, from where it was, so that at any time of the playback the map shows the
+lines whose crossing fixes the contact.
 """
 
+import json
 import logging
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from foxglove_schemas_protobuf.GeoJSON_pb2 import GeoJSON
 
 from tma.families.bearings2d.drawn_tracks import (
+    drawn_bearings,
     drawn_path,
     now_only,
     path_rows,
+    platform_colour,
+    platform_epochs,
     position_covariance,
     shown_estimates,
+    sight_ends,
+    sight_reach,
 )
 from tma.families.bearings2d.log import GEO, OWNSHIP_FIX_TOPIC, OWNSHIP_FRAME
 from tma.io.mcap_log import Channel, LogWriter
@@ -30,6 +44,7 @@ log = logging.getLogger(__name__)
 
 ESTIMATE_TOPIC = "/tma/estimate/{label}"
 TRUTH_TOPIC = "/tma/truth/{label}"  # the contact's ship, from its AIS (ingest truth=FILE)
+SIGHTS_TOPIC = "/tma/lines_of_sight/{label}"  # a log of several platforms: foxglove.GeoJSON
 
 
 def write_map_mcap(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, epoch_utc_ns,
@@ -45,14 +60,13 @@ def write_map_mcap(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, ep
     headless = now_only(report)
     kept = path_rows(paths)
     where = {int(i): (k, row) for k, lg in enumerate(logs) for row, i in enumerate(lg.track_id)}
-    own_topics = ([OWNSHIP_FIX_TOPIC] if len(logs) == 1
-                  else [f"/ownship/{k}/location_fix" for k in range(len(logs))])
-    channels = [Channel.protobuf(topic, LocationFix, {"frame": "own-ship, sea level"})
-                for topic in own_topics]
-    parts = []  # per topic: (t_s, lat, lon, covariance or None, frame_id)
-    for lg in logs:
-        lat, lon = local_to_geodetic(lg.own_x_m, lg.own_y_m, origin_deg)
-        parts.append((lg.t_s, lat.tolist(), lon.tolist(), None, OWNSHIP_FRAME))
+    # per topic: (t_s, lat, lon, covariance or None, frame_id) of location fixes, or
+    # (t_s, payloads) of messages encoded already (lines of sight)
+    channels, parts = [], []
+    for s, lg in enumerate(logs):
+        for channel, part in _platform_parts(lg, s, len(logs), origin_deg):
+            channels.append(channel)
+            parts.append(part)
     skipped, used = [], set()
     shown = shown_labels(report["label"])
     for n, r in enumerate(report.itertuples(index=False)):
@@ -93,6 +107,12 @@ def write_map_mcap(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, ep
         channels.append(Channel.protobuf(topic, LocationFix, {
             "track_id": str(r.track_id), "status": r.status, "estimate": what}))
         parts.append((t, lat.tolist(), lon.tolist(), cov, f"contact {shown[n]}"))
+        if logs[k].platform is not None:  # each platform's lines of sight to it
+            sights = SIGHTS_TOPIC.format(label=topic.removeprefix(ESTIMATE_TOPIC.format(
+                label="")))
+            channels.append(Channel.protobuf(sights, GeoJSON, {
+                "track_id": str(r.track_id), "lines_of_sight": SIGHTS_TEXT}))
+            parts.append(_sight_part(logs[k], row, np.column_stack([x, y]), origin_deg))
     if truth_track is not None:
         for channel, part in truth_parts(report, truth_track):
             channels.append(channel)
@@ -103,16 +123,77 @@ def write_map_mcap(path, report: pd.DataFrame, estimates: pd.DataFrame, logs, ep
                     ", ".join(skipped))
     t_all = np.concatenate([p[0] for p in parts])
     which = np.repeat(np.arange(len(parts)), [p[0].size for p in parts])
-    order = np.lexsort((which, t_all))  # time order; own-ship first at equal times
+    order = np.lexsort((which, t_all))  # time order; platforms first at equal times
     metadata = {GEO: json_record({"origin_lat_deg": origin_deg[0],
                                   "origin_lon_deg": origin_deg[1], "epoch_utc_ns": epoch_utc_ns}),
                 "tma.run": json_record(run)}
     with LogWriter(path, channels, metadata, epoch_utc_ns=epoch_utc_ns) as w:
-        payloads = [p for t, lat, lon, cov, frame in parts
-                    for p in _fixes(w.log_times(t), frame, lat, lon, cov)]
+        payloads = [p for part in parts  # lines of sight come encoded
+                    for p in (part[1] if len(part) == 2 else
+                              _fixes(w.log_times(part[0]), part[4], *part[1:4]))]
         w.write_encoded([ch.topic for ch in channels], which[order], t_all[order],
                         Encoded.of([payloads[k] for k in order.tolist()]))
     return Path(path)
+
+
+SIGHTS_TEXT = ("at each drawn bearing (every k-th of each platform's), each platform's latest "
+               "line of sight so far, from where it was, as far as the estimated track")
+
+
+def _platform_parts(lg, s: int, n_logs: int, origin_deg) -> list:
+    """``(channel, part)`` of the platforms of log ``s`` of ``n_logs``: own-ship on
+    ``/ownship/location_fix`` (``/ownship/<s>/location_fix`` of several logs); a log of
+    several platforms each platform's own epochs on ``/platforms/<k>/location_fix``
+    (``/ownship/<s>/platforms/<k>/location_fix``), its name the ``frame_id``."""
+    lat, lon = local_to_geodetic(lg.own_x_m, lg.own_y_m, origin_deg)
+    if lg.platform is None:
+        topic = OWNSHIP_FIX_TOPIC if n_logs == 1 else f"/ownship/{s}/location_fix"
+        return [(Channel.protobuf(topic, LocationFix, {"frame": "own-ship, sea level"}),
+                 (lg.t_s, lat.tolist(), lon.tolist(), None, OWNSHIP_FRAME))]
+    out = []
+    for k, epochs in enumerate(platform_epochs(lg)):
+        topic = f"/platforms/{k}/location_fix" if n_logs == 1 else (
+            f"/ownship/{s}/platforms/{k}/location_fix")
+        out.append((Channel.protobuf(topic, LocationFix, {
+            "frame": "the platform, sea level", "platform": lg.platforms[k],
+            "colour": platform_colour(k)}),
+                    (lg.t_s[epochs], lat[epochs].tolist(), lon[epochs].tolist(), None,
+                     lg.platforms[k])))
+    return out
+
+
+def _sight_part(lg, row: int, track, origin_deg) -> tuple:
+    """``(t_s, payloads)`` of a contact's lines of sight (``SIGHTS_TOPIC``) in a log of
+    several platforms: at each drawn bearing a ``foxglove.GeoJSON`` FeatureCollection of each
+    platform's latest drawn line of sight so far (a LineString from the platform's position
+    then, lon/lat in degrees as GeoJSON orders them, as far as ``track`` (m, 2) is from
+    them), its properties ``name`` (platform and bearing), ``platform``, ``t_s``,
+    ``bearing_deg`` and a leaflet ``style`` in the platform's colour. A line whose end lies
+    beyond the map (``MAX_MAPPED_M``) is left out."""
+    valid = np.flatnonzero(np.isfinite(lg.bearing_deg[row]))
+    drawn = drawn_bearings(lg, valid)
+    at = np.sort(np.concatenate([epochs for _, epochs, _ in drawn]))
+    start, end = sight_ends(lg, row, at, sight_reach(
+        np.column_stack([lg.own_x_m[at], lg.own_y_m[at]]), track))
+    lat0, lon0 = local_to_geodetic(start[:, 0], start[:, 1], origin_deg)
+    lat1, lon1 = local_to_geodetic(end[:, 0], end[:, 1], origin_deg)
+    latest, payloads = {}, []
+    for j, e in enumerate(at.tolist()):
+        k = int(lg.platform[e])
+        name, b = lg.platforms[k], float(lg.bearing_deg[row, e])
+        if np.isfinite([lat0[j], lon0[j], lat1[j], lon1[j]]).all():
+            latest[k] = {"type": "Feature", "geometry": {
+                "type": "LineString", "coordinates": [[float(lon0[j]), float(lat0[j])],
+                                                      [float(lon1[j]), float(lat1[j])]]},
+                "properties": {"name": f"{name} {b:.1f} deg", "platform": name,
+                               "t_s": float(lg.t_s[e]), "bearing_deg": b,
+                               "style": {"color": platform_colour(k), "weight": 1}}}
+        else:
+            latest.pop(k, None)  # its line now would leave the map: none is drawn
+        text = json.dumps({"type": "FeatureCollection",
+                           "features": [latest[i] for i in sorted(latest)]})
+        payloads.append(GeoJSON(geojson=text).SerializeToString(deterministic=True))
+    return lg.t_s[at], payloads
 
 
 def _fixes(t_ns, frame: str, lat, lon, cov) -> list[bytes]:

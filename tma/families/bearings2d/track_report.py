@@ -4,7 +4,8 @@ errors from the Gauss-Newton covariance (J^T J)^-1 sigma^2 and each track's stat
 by the estimators, ``tma.families.bearings2d.status``) with a note that says why a track is
 not ok (``<name>.csv``, ``<name>.md``, ``report.parquet`` in the run), with its drawings: a
 PNG per contact (``contact_plots``) and, when the dataset has a geographic origin, the
-estimated tracks as an MCAP for Foxglove (``map_mcap``)."""
+estimated tracks as an MCAP for Foxglove (``map_mcap``). A log of several platforms (ships,
+buoys, shore stations) adds per track the ``platforms`` that took its bearings."""
 
 import logging
 from pathlib import Path
@@ -21,6 +22,7 @@ from tma.families.bearings2d.drawn_tracks import (
     theta_covariance,
 )
 from tma.families.bearings2d.map_mcap import write_map_mcap
+from tma.families.bearings2d.platforms import platforms_seen
 from tma.families.bearings2d.status import STATUSES, heading_undetermined, not_an_answer
 from tma.families.bearings2d.truth_report import (
     coverage_text,
@@ -211,10 +213,12 @@ def track_report(estimates: pd.DataFrame, epoch_utc_ns=None, origin_deg=None,
 
 
 def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str,
-                       geographic=None) -> list[Path]:
+                       geographic=None, reference_platform: str | None = None) -> list[Path]:
     """``<name>.csv`` (every column of ``report``) and ``<name>.md`` (its formatted cells; a
     blank estimate as ``-``); ``geographic``: the log has a geographic origin (a column of
-    latitude and longitude; None: where the report has any)."""
+    latitude and longitude; None: where the report has any). A report of a log of several
+    platforms (its column ``platforms``) shows them, and the intro says range and bearing
+    now are from ``reference_platform``."""
 
     headless = heading_undetermined(report["status"]) & report["range_now_m"].notna().to_numpy()
 
@@ -234,6 +238,7 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str,
 
     shown = pd.DataFrame({
         "track": shown_labels(report["label"]), "n": report["n_bearings"],
+        **({"platforms": report["platforms"]} if "platforms" in report else {}),
         "t now (s from start)": report["t_now_s"].map("{:.1f}".format),
         **({} if report["time_now_utc"].isna().all() else {"now (UTC)": report["time_now_utc"]}),
         **position(),
@@ -266,6 +271,11 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str,
              "holds the position now in local metres (x east, y north) with its one-sigma "
              f"errors; `{name}-<track>.png` shows each contact on a plan (the first "
              f"{MAX_PLOTS}).")
+    if "platforms" in report:
+        intro += (" 'platforms': those that took the track's bearings (the plan draws each "
+                  "one's lines of sight from it, in its colour); range and bearing now are "
+                  "from " + (f"`{reference_platform}`" if reference_platform else "the first")
+                  + ".")
     if scored:
         intro += (" AIS ship: the contact's ship and how well its AIS fits the bearings; z: "
                   "(estimate - truth) / one sigma; covered: the truth within the estimate's 95 % "
@@ -305,12 +315,24 @@ def warn_not_ok(report: pd.DataFrame, where: str):
 def contact_report(estimates: pd.DataFrame, logs, where: str, max_range_rel_sd=None,
                    recorded=True) -> pd.DataFrame:
     """``track_report`` of the estimates of ``logs`` (a recorded log's, one per own-ship, or
-    a simulated one's: not ``recorded``): their UTC epoch, origin and labels. What aggregate
-    writes, and ``tma.estimate`` returns (``max_range_rel_sd``: the estimator's)."""
+    a simulated one's: not ``recorded``): their UTC epoch, origin and labels; where a log
+    holds several platforms, per track the ``platforms`` that took its bearings
+    (``platforms.platforms_seen``, names joined by ``+``) after ``n_bearings``. What
+    aggregate writes, and ``tma.estimate`` returns (``max_range_rel_sd``: the
+    estimator's)."""
     epoch, origin, labels = reference(logs, where)
-    return track_report(estimates, epoch, origin, labels,
-                        sigma_known=any(lg.sigma_deg is not None for lg in logs),
-                        max_range_rel_sd=max_range_rel_sd, recorded=recorded)
+    report = track_report(estimates, epoch, origin, labels,
+                          sigma_known=any(lg.sigma_deg is not None for lg in logs),
+                          max_range_rel_sd=max_range_rel_sd, recorded=recorded)
+    if any(lg.platforms is not None for lg in logs):  # which platforms saw each contact
+        seen = {}
+        for lg in logs:
+            seen.update(zip(lg.track_id.tolist(), platforms_seen(
+                lg.platform, np.isfinite(lg.bearing_deg), lg.platforms or ("own-ship",)),
+                strict=True))
+        report.insert(report.columns.get_loc("n_bearings") + 1, "platforms",
+                      [seen[int(i)] for i in report["track_id"]])
+    return report
 
 
 def write_report_without_truth(entry, tables_dir, name: str, progress=None) -> list[Path]:
@@ -336,7 +358,8 @@ def write_report_without_truth(entry, tables_dir, name: str, progress=None) -> l
     written = write_track_report(report, tables_dir, name,
                                  m.get("input", {}).get("path", dataset.name)
                                  + (f"; own-ship: {own['ownship']}" if own else ""),
-                                 geographic=origin is not None)
+                                 geographic=origin is not None,
+                                 reference_platform=_reference_name(entry, logs))
     paths = kept_path_table(entry.run_root)
     written += write_track_plots(report, entry.estimates, logs, tables_dir, name, progress,
                                  paths)
@@ -355,6 +378,15 @@ def write_report_without_truth(entry, tables_dir, name: str, progress=None) -> l
                                        **own},
                                       truth_track=truth_track, paths=paths))
     return written
+
+
+def _reference_name(entry, logs) -> str | None:
+    """The platform range and bearing now are from (the estimator's ``reference_platform``,
+    else the first) in a log of several; None for one own-ship."""
+    names = next((lg.platforms for lg in logs if lg.platforms is not None), None)
+    if names is None:
+        return None
+    return entry.manifest["config"].get("reference_platform") or names[0]
 
 
 def kept_path_table(run_root) -> pd.DataFrame | None:
