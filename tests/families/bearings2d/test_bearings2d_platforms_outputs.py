@@ -272,11 +272,9 @@ def test_one_platform_outputs_name_no_platforms(tmp_path):
     assert not any("'s bearings" in k for k in lines)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 39: lm's manoeuvre search on a recording (the "
-                   "recorded prior, manoeuvres.mixture in _follow) gives NaN, not_converged, "
-                   "where two platforms' bearings share a time (dt = 0); with the buoy's "
-                   "times apart from the ship's T1 is ok")
 def test_a_recording_with_bearings_at_the_same_time_has_an_answer():
+    """On a recording (the manoeuvre search runs), bearings of two platforms at one time are
+    a step of no time: every track has an estimate (it was NaN, 0 / 0, before)."""
     from tma.families import build_estimator
 
     out = build_estimator({"name": "lm"}).estimate(two_platform_log(accel_psd_m2_s3=None))
