@@ -16,6 +16,7 @@ from tma.config import param, require
 from tma.errors import InputError
 from tma.estimator import Estimates, Estimator, EstimatorConfig
 from tma.families.bearings2d import estimated_path, manoeuvres, ncv
+from tma.families.bearings2d.bearing_noise import differenced_sigma
 from tma.families.bearings2d.contract import Bearings, JudgedFit, Solution, TargetMotion
 from tma.families.bearings2d.end_bearing import end_bearing
 from tma.families.bearings2d.log import BearingsLog
@@ -396,6 +397,11 @@ class BearingsEstimator(Estimator):
         ``path_cov``: with the covariances of its trajectory's positions (``path_cov_m2``)."""
         part = None if use is None else use[rows]
         sigma_rad = np.full(rows.size, np.nan) if sigma_unknown else np.sqrt(sigma2[rows])
+        if sigma_unknown and prior is not None:
+            # the mixture weighs manoeuvres against the noise: a noise measured by a fit
+            # without them would be inflated by every one it left out (bearing_noise)
+            sigma_rad = differenced_sigma(b.t, b.measured[rows],
+                                          None if part is None else part, b.platform)
 
         def fit_of(part):
             args = (b.t, b.own_x, b.own_y, b.measured[rows], part, first, b.last[rows],
