@@ -283,6 +283,12 @@ def describe(schema, prefix: str = "") -> list[tuple[str, str, str, str]]:
         if isinstance(default, list) and default and is_dataclass(default[0]):
             rows += describe(type(default[0]), f"{key}[i].")
             continue
+        listed = _listed(f.type)
+        element = typing.get_args(listed)[0] if listed is not None else None
+        if is_dataclass(element):  # a list of configs, empty by default: its element's keys
+            rows.append((key, "[]", "a list", f.metadata.get("doc", "")))
+            rows += describe(element, f"{key}[i].")
+            continue
         shown = []
         if "choices" in f.metadata:
             shown.append(" | ".join(map(_choice, f.metadata["choices"])))
