@@ -12,6 +12,7 @@ import pyarrow as pa
 
 from tma.families.bearings2d import (
     benchmark,
+    crossfix_table,
     manoeuvre_table,
     paper,
     real_motion_table,
@@ -27,10 +28,11 @@ from tma.io.atomic import write_parquet_atomic
 from tma.utc import format_utc
 
 # the other kinds of table of simulated runs an experiment may ask for (``table_kind=``): each
-# estimator against the Cramer-Rao bound, and targets that manoeuvre
+# estimator against the Cramer-Rao bound, targets that manoeuvre, one platform against two
 TABLE_KINDS = {"benchmark": benchmark.write_benchmark,
            "manoeuvre": manoeuvre_table.write_manoeuvre_table,
-           "real_motion": real_motion_table.write_real_motion_table}  # AIS own-ship, targets
+           "real_motion": real_motion_table.write_real_motion_table,  # AIS own-ship, targets
+           "crossfix": crossfix_table.write_crossfix_table}
 
 
 def aggregate_runs(entries, tables_dir, table_name, progress=None, table_kind=None
