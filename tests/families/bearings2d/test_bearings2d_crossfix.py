@@ -13,9 +13,11 @@ from scipy.stats import binomtest, kstest
 
 from pipeline._common import estimator_nodes, scenario_nodes
 from tests.conftest import compose_cfg, run_stage_here
+from tma.config import to_plain
 from tma.config_nodes import validate
 from tma.errors import ConfigError
-from tma.families.bearings2d import crossfix_table
+from tma.families import dataset_name
+from tma.families.bearings2d import crossfix_table, scenario
 from tma.families.bearings2d.log import read_bearings_log, write_bearings_log
 from tma.families.bearings2d.metrics import NEES_95
 from tma.families.bearings2d.scenario import Config, label, simulate_shard
@@ -135,6 +137,13 @@ def test_without_observers_every_byte_stays(shard):
     assert h.hexdigest() == BEFORE[shard]
     assert log.platform is None and log.platforms is None
     assert label(cfg) == "sigma0.3-n7"
+    # the config's hash too (computed on main before observers): the dataset's name, its
+    # manifest and the config_sha256 in each shard's metadata, so every byte of it, stay
+    assert dataset_name(scenario, cfg) == "bearings2d-sigma0.3-n7-daf6f3e813"
+    assert "observers" not in to_plain(cfg) and "observing" not in to_plain(cfg)
+    plain = to_plain(_config("ownship+buoy"))
+    assert plain["observing"] == "ownship+buoy" and len(plain["observers"]) == 3
+    assert validate(Config, plain, "scenario 'bearings2d'") == _config("ownship+buoy")
 
 
 def test_moving_targets_are_seen_by_every_platform():

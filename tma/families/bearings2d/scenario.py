@@ -164,12 +164,14 @@ class Config(ScenarioConfig):
                                  factory=TargetConfig)
     real: RealPairs = param(doc="own-ship and targets from an AIS recording instead "
                             "(real_motion.py)", factory=RealPairs)
+    # added with several platforms (issue 39): unhashed while unused, so that datasets
+    # without them keep their names and bytes
     observers: list[PlatformConfig] = param(
         doc="several platforms instead of the one observer (module docstring); empty: the "
-        "observer alone", factory=list)
+        "observer alone", factory=list, unhashed_default=True)
     observing: str | None = param(
         None, "the observers that take bearings, their names joined by + (the first the "
-        "reference); null: every one of observers")
+        "reference); null: every one of observers", unhashed_default=True)
 
     def __post_init__(self):
         super().__post_init__()
