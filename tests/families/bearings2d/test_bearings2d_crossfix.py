@@ -312,3 +312,21 @@ def test_the_experiment_composes():
         cfg_ = validate(Config, node, "scenario 'bearings2d'")
         buoy = next(o for o in cfg_.observers if o.name == "buoy")
         assert not buoy.legs  # fixed
+
+
+def test_a_contact_whose_last_bearing_is_the_buoys_is_drawn_from_its_recording():
+    """``tma.plot_contact`` checks the results against the log: range now is read from
+    own-ship (the reference) although the buoy took the last bearing (at t = 601 s); the
+    same results against another log still fail."""
+    import tma
+
+    own = {**OWN, "legs": [{"course_deg": 0.0, "duration_s": 601.0}]}
+    buoy = {**BUOY, "time_offset_s": 1.0}
+    data = tma.simulate(n_tracks=3, shard_size=3, observers=[own, buoy], observing="ownship+buoy")
+    assert data.logs[0].platform[-1] == 1 and data.logs[0].t_s[-1] == 601.0
+    results = tma.estimate(data, "lm")
+    assert np.allclose(results.tma.estimates["own_y_last_m"], 5.0 * 601.0)
+    assert tma.plot_contact(results, data, results["label"].iloc[0]) is not None
+    other = tma.simulate(n_tracks=3, shard_size=3, observers=[OWN, BUOY])
+    with pytest.raises(ValueError, match="not estimated from this recording"):
+        tma.plot_contact(results, other, results["label"].iloc[0])

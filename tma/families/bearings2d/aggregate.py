@@ -20,6 +20,7 @@ from tma.families.bearings2d import (
 from tma.families.bearings2d.contact_plots import contact_figure
 from tma.families.bearings2d.map_mcap import write_map_mcap
 from tma.families.bearings2d.metrics import THETA, summary_row, track_metrics
+from tma.families.bearings2d.platforms import position_at
 from tma.families.bearings2d.status import heading_undetermined
 from tma.families.bearings2d.success_table import write_success_table
 from tma.families.bearings2d.track_report import contact_report, write_report_without_truth
@@ -111,7 +112,8 @@ def check_logs(report: pd.DataFrame, estimates: pd.DataFrame, logs):
     """ValueError, naming the first contact that differs, unless ``logs`` are those the
     contacts of ``report`` (and their ``estimates``, row for row) were estimated from: each
     contact's track id in them, its last bearing at the same time from the same own-ship
-    position, and its UTC the same where both are dated."""
+    position (with several platforms: one of theirs then), and its UTC the same where both
+    are dated."""
     where = {int(i): (lg, row) for lg in logs for row, i in enumerate(lg.track_id)}
     epoch = logs[0].epoch_utc_ns
     for r, e in zip(report.itertuples(index=False), estimates.itertuples(index=False),
@@ -124,8 +126,9 @@ def check_logs(report: pd.DataFrame, estimates: pd.DataFrame, logs):
             last = np.flatnonzero(np.isfinite(lg.bearing_deg[row]))[-1]
             why = ""
             if not (abs(lg.t_s[last] - e.t_last_s) <= SAME_TIME_S
-                    and abs(lg.own_x_m[last] - e.own_x_last_m) <= SAME_PLACE_M
-                    and abs(lg.own_y_m[last] - e.own_y_last_m) <= SAME_PLACE_M):
+                    and any(abs(x - e.own_x_last_m) <= SAME_PLACE_M
+                            and abs(y - e.own_y_last_m) <= SAME_PLACE_M
+                            for x, y in _places_now(lg, last))):
                 why = "its last bearing is at another time or own-ship position here"
             elif isinstance(r.time_now_utc, str) and epoch is not None and (
                     r.time_now_utc != format_utc(epoch + round(r.t_now_s * 1e9))):
@@ -133,6 +136,18 @@ def check_logs(report: pd.DataFrame, estimates: pd.DataFrame, logs):
         if why:
             raise ValueError(f"these results were not estimated from this recording (contact "
                              f"{r.label!r}: {why}); pass the recording given to tma.estimate")
+
+
+def _places_now(lg, last: int) -> list[tuple[float, float]]:
+    """Where range and bearing now may have been read from at epoch ``last`` of log ``lg``:
+    own-ship there; with several platforms, each platform then (the estimator's
+    ``reference_platform`` is one of them)."""
+    if lg.platform is None:
+        return [(float(lg.own_x_m[last]), float(lg.own_y_m[last]))]
+    at = lg.t_s[last:last + 1]  # an array: position_at fails on a scalar time beyond the ends
+    return [tuple(float(v[0]) for v in position_at(lg.t_s, lg.own_x_m, lg.own_y_m, lg.platform,
+                                                   k, at))
+            for k in range(lg.n_platforms)]
 
 
 def plot_contact(report: pd.DataFrame, estimates: pd.DataFrame, logs, label,
