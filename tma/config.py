@@ -32,9 +32,14 @@ def message_at(where: str, text: str) -> str:
 
 
 def to_plain(obj):
-    """Plain JSON-able dict of a dataclass (or DictConfig) for manifests and hashes."""
+    """Plain JSON-able dict of a dataclass (or DictConfig) for manifests and hashes. A field
+    declared ``param(..., unhashed_default=True)`` is left out while it holds its default (an
+    option added later: configs that do not use it keep their hash, their dataset names and
+    every byte of their datasets; reading the plain dict back gives the default)."""
     if is_dataclass(obj):
-        return asdict(obj)
+        plain = asdict(obj)
+        _drop_unused(obj, plain)
+        return plain
     if isinstance(obj, DictConfig):
         return OmegaConf.to_container(obj, resolve=True)
     return obj
@@ -90,17 +95,34 @@ class Form:
     problem: Callable[[typing.Any], str | None]
 
 
+def _drop_unused(obj, plain: dict):
+    """Leave out of ``plain`` (``asdict(obj)``) the ``unhashed_default`` fields of ``obj``
+    and of its nested configs that hold their default."""
+    for f in fields(obj):
+        value = getattr(obj, f.name)
+        if f.metadata.get("unhashed_default"):
+            default = f.default_factory() if f.default_factory is not MISSING else f.default
+            if value == default:
+                del plain[f.name]
+                continue
+        if is_dataclass(value) and not isinstance(value, type):
+            _drop_unused(value, plain[f.name])
+
+
 def param(default=MISSING, doc: str = "", range: str | None = None, *, choices=None,
           each: str | None = None, form: Form | None = None, factory=None,
-          nonfinite: bool = False):
+          nonfinite: bool = False, unhashed_default: bool = False):
     """A config field, declared once: its ``default`` (or ``factory``, a default factory),
     its ``doc`` (meaning and units) and the values it allows: ``range``, an interval such as
     ``"[0, 90)"`` or ``"(0, inf)"``; ``choices``, the allowed values (None among them when
     null is one); ``each``, the interval of every element of a list; ``form``, the form of a
     text (``Form``). The field's type allows what it says (a whole number, a number, true or
     false, text, None where it is optional). ``nonfinite``: the value may be +-inf.
+    ``unhashed_default``: left out of ``to_plain`` (manifests, hashes) while at its default.
     ``check_params`` checks them all."""
     metadata = {"doc": doc, "nonfinite": nonfinite}
+    if unhashed_default:
+        metadata["unhashed_default"] = True
     if range is not None:
         metadata["range"] = Interval.parse(range)
     if each is not None:
@@ -282,6 +304,12 @@ def describe(schema, prefix: str = "") -> list[tuple[str, str, str, str]]:
             continue
         if isinstance(default, list) and default and is_dataclass(default[0]):
             rows += describe(type(default[0]), f"{key}[i].")
+            continue
+        listed = _listed(f.type)
+        element = typing.get_args(listed)[0] if listed is not None else None
+        if is_dataclass(element):  # a list of configs, empty by default: its element's keys
+            rows.append((key, "[]", "a list", f.metadata.get("doc", "")))
+            rows += describe(element, f"{key}[i].")
             continue
         shown = []
         if "choices" in f.metadata:

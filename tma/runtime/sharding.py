@@ -14,10 +14,13 @@ def shard_track_ids(cfg, shard_index: int) -> np.ndarray:
     return np.arange(first, min(first + cfg.shard_size, cfg.n_tracks), dtype=np.int64)
 
 
-def shard_rng(cfg, shard_index: int, stream: int | None = None) -> np.random.Generator:
+def shard_rng(cfg, shard_index: int, stream: int | tuple[int, ...] | None = None
+              ) -> np.random.Generator:
     """The shard's random stream, ``SeedSequence(seed, spawn_key=(shard,))``: a shard's draws
     depend neither on the other shards nor on the number of workers. ``stream``: one of the
     shard's further streams, ``spawn_key=(shard, stream)``, for draws added later (outliers,
-    manoeuvres) that must leave the first stream's draws as they were."""
-    key = (shard_index,) if stream is None else (shard_index, stream)
+    manoeuvres) that must leave the first stream's draws as they were; a tuple for a family
+    of them (``(stream, k)``: ``spawn_key=(shard, stream, k)``, e.g. one per platform)."""
+    key = ((shard_index,) if stream is None else (shard_index, *stream)
+           if isinstance(stream, tuple) else (shard_index, stream))
     return np.random.default_rng(np.random.SeedSequence(cfg.seed, spawn_key=key))

@@ -12,6 +12,7 @@ import pyarrow as pa
 
 from tma.families.bearings2d import (
     benchmark,
+    crossfix_table,
     manoeuvre_table,
     paper,
     real_motion_table,
@@ -28,10 +29,11 @@ from tma.io.atomic import write_parquet_atomic
 from tma.utc import format_utc
 
 # the other kinds of table of simulated runs an experiment may ask for (``table_kind=``): each
-# estimator against the Cramer-Rao bound, and targets that manoeuvre
+# estimator against the Cramer-Rao bound, targets that manoeuvre, one platform against two
 TABLE_KINDS = {"benchmark": benchmark.write_benchmark,
            "manoeuvre": manoeuvre_table.write_manoeuvre_table,
-           "real_motion": real_motion_table.write_real_motion_table}  # AIS own-ship, targets
+           "real_motion": real_motion_table.write_real_motion_table,  # AIS own-ship, targets
+           "crossfix": crossfix_table.write_crossfix_table}
 
 
 def aggregate_runs(entries, tables_dir, table_name, progress=None, table_kind=None
@@ -110,7 +112,8 @@ def check_logs(report: pd.DataFrame, estimates: pd.DataFrame, logs):
     """ValueError, naming the first contact that differs, unless ``logs`` are those the
     contacts of ``report`` (and their ``estimates``, row for row) were estimated from: each
     contact's track id in them, its last bearing at the same time from the same own-ship
-    position, and its UTC the same where both are dated."""
+    position (with several platforms: one of theirs then), and its UTC the same where both
+    are dated."""
     where = {int(i): (lg, row) for lg in logs for row, i in enumerate(lg.track_id)}
     epoch = logs[0].epoch_utc_ns
     for r, e in zip(report.itertuples(index=False), estimates.itertuples(index=False),

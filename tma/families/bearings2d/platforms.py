@@ -31,12 +31,13 @@ def reference_index(names: tuple[str, ...] | None, reference: str | None, where:
 def position_at(t_s, own_x_m, own_y_m, platform, k: int, times_s):
     """Platform ``k``'s position (x, y in m) at ``times_s`` (s), from its own epochs of the
     log (``t_s``, ``own_x_m``, ``own_y_m``, ``platform``): linear between them, the end
-    segments extended; a platform with a single epoch stays where it was."""
+    segments extended; a platform with a single epoch stays where it was. Arrays of
+    ``times_s``' shape (a scalar time: of one)."""
     mine = np.flatnonzero(platform == k)
     if mine.size == 0:
         raise ValueError(f"platform {k} took no bearing in the log: it has no position")
     t, x, y = t_s[mine], own_x_m[mine], own_y_m[mine]
-    times = np.asarray(times_s, dtype=float)
+    times = np.atleast_1d(np.asarray(times_s, dtype=float))
     if t.size == 1 or t[-1] == t[0]:
         return np.full(times.shape, x[0]), np.full(times.shape, y[0])
     out = []

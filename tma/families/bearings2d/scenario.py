@@ -24,14 +24,30 @@ are the straight line through it, ``course_deg``, ``speed_m_s`` their values the
 truth adds ``manoeuvring``, the last manoeuvre's ``manoeuvre_start_s``,
 ``manoeuvre_end_s``, ``course_change_deg`` (signed, > 0 right) and ``speed_change_rel``, and
 ``n_manoeuvres``, how many started within the observation.
+
+Several platforms (``observers``, issue 39): instead of the one own-ship (``observer``), a list
+of named platforms, each moving on its own legs or fixed (no legs: a buoy, a shore station at
+its start position), each taking bearings every ``sample_period_s`` from its
+``time_offset_s`` (asynchronous reports) to the end of its path (a fixed one: ``duration_s``,
+or the end of the longest path of the moving ones). ``observing`` picks which of them take
+bearings in a dataset (names joined by ``+``, the first the reference; null: all, in their
+order): the one axis along which datasets of one, two or more platforms are made from one
+declared geometry. The targets are those of the same seed without observers (the shard's
+first stream draws them, relative to the first declared observer at t = 0); each declared
+platform's noise comes from its own stream ``SeedSequence(seed, spawn_key=(shard,
+PLATFORM_STREAM, k))`` (k its index in ``observers``), so a platform's bearings are the same
+whichever others observe with it (common random numbers between one and two platforms).
+Several observing platforms write a log of several platforms (``BearingsLog.platform``), its
+epochs ordered by (time, platform); one writes a log of one own-ship.
 """
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
 
 from tma.ais.recording import RealPairs
-from tma.config import param, require
+from tma.config import Form, param, require
 from tma.families.bearings2d import real_motion, target_motion
 from tma.families.bearings2d.log import BearingsLog, read_bearings_log, write_bearings_log
 from tma.families.bearings2d.target_motion import TargetConfig
@@ -44,6 +60,8 @@ from tma.scenario import ScenarioConfig
 FAMILY = "bearings2d"
 OUTLIER_STREAM = 1  # spawn-key element of the outlier stream under the shard's (shard,)
 MANOEUVRE, WANDER = target_motion.MANOEUVRE_STREAM, target_motion.WANDER_STREAM
+PLATFORM_STREAM = 4  # spawn-key element of the platforms' noise: (shard, PLATFORM_STREAM, k)
+MAX_EPOCHS = 1e7  # bearing epochs of one log (every platform's)
 
 
 # a straight leg {course_deg, duration_s} or a turn {turn_to_deg, rate_deg_s, direction}
@@ -68,9 +86,38 @@ class ObserverConfig:
     legs: list[LegConfig] = param(doc="own-ship's legs (tma.maths.path)", factory=_default_legs)
 
 
+def _name_problem(value) -> str | None:
+    return None if re.fullmatch(r"[A-Za-z0-9_-]+", str(value)) else ""
+
+
+PLATFORM_NAME = Form("a name of letters, digits, _ and - (a buoy, ship2)", _name_problem)
+
+
+@dataclass
+class PlatformConfig:
+    """One of several platforms taking bearings (``Config.observers``): moving on its legs
+    from its start position, or fixed there (no legs: a buoy, a shore station)."""
+
+    name: str = param("platform", "the platform's name (in the log's tma.platforms and in "
+                      "observing)", form=PLATFORM_NAME)
+    start_x_m: float = param(0.0, "position x at t = 0 (m east)")
+    start_y_m: float = param(0.0, "position y at t = 0 (m north)")
+    speed_m_s: float = param(5.0, "speed on its legs (m/s)", "(0, 1e4)")
+    legs: list[LegConfig] = param(doc="its legs (tma.maths.path); none: fixed at its start "
+                                  "position", factory=list)
+    sample_period_s: float | None = param(None, "its bearings every ... s; null: the "
+                                          "scenario's sample_period_s", "(0, inf)")
+    time_offset_s: float = param(0.0, "its first bearing at this time (s): asynchronous "
+                                 "reports", "[0, 1e7)")
+    duration_s: float | None = param(None, "a fixed platform's bearings up to this time (s); "
+                                     "null: to the end of the longest moving platform's path",
+                                     "(0, 1e7)")
+
+
 @dataclass
 class PopulationConfig:
-    """Uniform population of true targets, relative to the observer at t = 0."""
+    """Uniform population of true targets, relative to the observer at t = 0 (the first of
+    ``observers`` when given)."""
 
     initial_bearing_deg: float = param(0.0, "every target's bearing from own-ship at t = 0 "
                                        "(deg)")
@@ -117,6 +164,14 @@ class Config(ScenarioConfig):
                                  factory=TargetConfig)
     real: RealPairs = param(doc="own-ship and targets from an AIS recording instead "
                             "(real_motion.py)", factory=RealPairs)
+    # added with several platforms (issue 39): unhashed while unused, so that datasets
+    # without them keep their names and bytes
+    observers: list[PlatformConfig] = param(
+        doc="several platforms instead of the one observer (module docstring); empty: the "
+        "observer alone", factory=list, unhashed_default=True)
+    observing: str | None = param(
+        None, "the observers that take bearings, their names joined by + (the first the "
+        "reference); null: every one of observers", unhashed_default=True)
 
     def __post_init__(self):
         super().__post_init__()
@@ -133,14 +188,76 @@ class Config(ScenarioConfig):
         require(p.course_min_deg <= p.course_max_deg, where,
                 "population.course_min_deg must not exceed course_max_deg")
         duration = sum(leg.duration_s or 0.0 for leg in self.observer.legs)
-        require(duration / self.sample_period_s < 1e7, where,
+        require(duration / self.sample_period_s < MAX_EPOCHS, where,
                 "the observer path holds more than 1e7 bearing epochs")
+        if self.observers or self.observing is not None:
+            check_observers(self)
+
+
+def check_observers(cfg: Config):
+    """What relates the observers' fields: distinct names, ``observing`` naming them,
+    ``observer`` and ``real`` left alone, every platform's bearing times known."""
+    where, names = cfg.where, [o.name for o in cfg.observers]
+    require(bool(names), where, "observing names observers, but observers is empty")
+    require(len(set(names)) == len(names), where,
+            f"observers' names must be distinct, got {', '.join(names)}")
+    require(cfg.real.file is None, where, "real.file gives own-ship from AIS; leave "
+            "observers empty")
+    require(cfg.observer == ObserverConfig(), where, "observer.* is the one own-ship of a "
+            "scenario without observers: give each observer its own position and legs")
+    used = observing(cfg)
+    unknown = [u for u in used if u not in names]
+    require(not unknown, where, f"observing={cfg.observing}: {', '.join(unknown)} is not "
+            f"among the observers ({', '.join(names)})")
+    require(len(set(used)) == len(used), where, f"observing={cfg.observing} names a platform "
+            "twice")
+    moving = [o for o in cfg.observers if o.legs]
+    for o in cfg.observers:
+        require(not (o.legs and o.duration_s is not None), where, f"observer {o.name}: "
+                "duration_s is for a fixed platform; a moving one's legs give its time")
+        require(bool(o.legs or moving or o.duration_s is not None), where,
+                f"observer {o.name} is fixed and no observer moves: give its duration_s")
+    end = observation_end_s(cfg)
+    n_epochs = 0.0
+    for o in cfg.observers:
+        stop = platform_end_s(o, end)
+        require(o.time_offset_s <= stop, where, f"observer {o.name}: time_offset_s "
+                f"{o.time_offset_s:g} s is after its last bearing time {stop:g} s")
+        n_epochs += (stop - o.time_offset_s) / (o.sample_period_s or cfg.sample_period_s)
+    require(n_epochs < MAX_EPOCHS, where, "the observers take more than 1e7 bearing epochs")
+
+
+def observing(cfg: Config) -> list[str]:
+    """The names of the observers that take bearings, the reference first."""
+    if cfg.observing is None:
+        return [o.name for o in cfg.observers]
+    return cfg.observing.split("+")
+
+
+def _path_of(o) -> LegPath:
+    return LegPath(o.start_x_m, o.start_y_m, o.speed_m_s, o.legs)
+
+
+def observation_end_s(cfg: Config) -> float | None:
+    """The end of the longest moving observer's path (s); None when every one is fixed."""
+    ends = [_path_of(o).duration_s for o in cfg.observers if o.legs]
+    return max(ends) if ends else None
+
+
+def platform_end_s(o: PlatformConfig, end_s: float | None) -> float:
+    """Platform ``o``'s last possible bearing time (s): its path's end, or a fixed one's
+    ``duration_s`` (None: ``end_s``, the longest path's)."""
+    if o.legs:
+        return _path_of(o).duration_s
+    return o.duration_s if o.duration_s is not None else end_s
 
 
 def label(cfg: Config) -> str:
     if cfg.real.file is not None:
         return real_motion.label(cfg)
     outliers = f"-out{cfg.outliers.prob:g}" if cfg.outliers.prob > 0 else ""
+    if cfg.observers:
+        outliers = f"-{'.'.join(observing(cfg))}{outliers}"  # a plain file name: no +
     target = cfg.target
     motion = "".join([f"-q{target.accel_psd_m2_s3:g}" if target.accel_psd_m2_s3 > 0 else "",
                       f"-man{target.manoeuvres.prob:g}" if target.manoeuvres.prob > 0 else "",
@@ -161,6 +278,42 @@ def epochs(cfg: Config, path: LegPath) -> np.ndarray:
     return np.arange(n) * cfg.sample_period_s
 
 
+def platform_epochs(cfg: Config):
+    """The bearing epochs of the observing platforms (``observing``), ordered by (time,
+    platform): ``(t_s, x_m, y_m, platform, declared)``, ``platform`` the index into
+    ``observing``, ``declared`` the index into ``observers`` of each platform (in
+    ``observing`` order)."""
+    end = observation_end_s(cfg)
+    index = {o.name: k for k, o in enumerate(cfg.observers)}
+    declared = [index[name] for name in observing(cfg)]
+    parts = []
+    for j, k in enumerate(declared):
+        o = cfg.observers[k]
+        period = o.sample_period_s or cfg.sample_period_s
+        stop = platform_end_s(o, end)
+        t = o.time_offset_s + np.arange(
+            int(np.floor((stop - o.time_offset_s) / period + 1e-9)) + 1) * period
+        if o.legs:
+            x, y = _path_of(o).position(np.minimum(t, stop))  # the last one may pass by 1e-9
+        else:
+            x, y = np.full(t.size, o.start_x_m), np.full(t.size, o.start_y_m)
+        parts.append((t, x, y, np.full(t.size, j, dtype=np.int64)))
+    t, x, y, platform = (np.concatenate(p) for p in zip(*parts, strict=True))
+    order = np.lexsort((platform, t))
+    return t[order], x[order], y[order], platform[order], declared
+
+
+def platform_noise(cfg: Config, shard_index: int, n: int, platform, declared) -> np.ndarray:
+    """Standard normal noise (n, n_epochs) of the epochs of ``platform``: each platform's from
+    its own stream (``PLATFORM_STREAM``, its index in ``observers``: module docstring)."""
+    noise = np.empty((n, platform.size))
+    for j, k in enumerate(declared):
+        mine = platform == j  # its epochs, in time order
+        noise[:, mine] = shard_rng(cfg, shard_index, (PLATFORM_STREAM, k)).standard_normal(
+            (n, int(mine.sum())))
+    return noise
+
+
 def simulate_shard(cfg: Config, shard_index: int):
     """Simulate one shard: ``(BearingsLog, truth pyarrow.Table)``."""
     if cfg.real.file is not None:  # real ship motion from AIS (real_motion.py)
@@ -168,24 +321,38 @@ def simulate_shard(cfg: Config, shard_index: int):
     track_id = shard_track_ids(cfg, shard_index)
     n = track_id.size
     rng = shard_rng(cfg, shard_index)
-    path = observer_path(cfg)
-    t = epochs(cfg, path)
-    own_x, own_y = path.position(t)
+    platform = names = None
+    if cfg.observers:  # several platforms (module docstring)
+        t, own_x, own_y, platform, declared = platform_epochs(cfg)
+        first = cfg.observers[0]
+        start = (first.start_x_m, first.start_y_m)
+        if len(declared) > 1:
+            names = tuple(cfg.observers[k].name for k in declared)
+    else:
+        path = observer_path(cfg)
+        t = epochs(cfg, path)
+        own_x, own_y = path.position(t)
+        start = (own_x[0], own_y[0])
 
     pop = cfg.population
     distance = rng.uniform(pop.distance_min_m, pop.distance_max_m, n)
     course = np.deg2rad(rng.uniform(pop.course_min_deg, pop.course_max_deg, n))
     speed = rng.uniform(pop.speed_min_m_s, pop.speed_max_m_s, n)
-    noise = rng.standard_normal((n, t.size))
+    noise = (platform_noise(cfg, shard_index, n, platform, declared) if cfg.observers
+             else rng.standard_normal((n, t.size)))
 
     p0 = np.deg2rad(pop.initial_bearing_deg)
-    x0, y0 = own_x[0] + distance * np.sin(p0), own_y[0] + distance * np.cos(p0)
+    x0, y0 = start[0] + distance * np.sin(p0), start[1] + distance * np.cos(p0)
     vx, vy = speed * np.sin(course), speed * np.cos(course)
     moving = cfg.target.moving
     if moving:
+        # the targets' paths on their own grid: from t = 0, one time per instant (several
+        # platforms may take bearings at one time, the first as late as its offset)
+        grid, at = (t, slice(None)) if platform is None else _time_grid(t)
         x, y, v_end, last = target_motion.target_paths(
-            cfg.target, x0, y0, course, speed, t, shard_rng(cfg, shard_index, MANOEUVRE),
+            cfg.target, x0, y0, course, speed, grid, shard_rng(cfg, shard_index, MANOEUVRE),
             shard_rng(cfg, shard_index, WANDER))
+        x, y = x[:, at], y[:, at]
         true_bearing = bearing_from_north(x - own_x, y - own_y)
     else:
         true_bearing = bearing_from_north(
@@ -203,6 +370,7 @@ def simulate_shard(cfg: Config, shard_index: int):
         origin_deg=None if origin.lat is None else (origin.lat, origin.lon),
         accel_psd_m2_s3=cfg.target.declared_psd(),
         manoeuvres=cfg.target.declared_manoeuvres(rms_speed(pop)),
+        platform=None if names is None else platform, platforms=names,
     )
     columns = {"track_id": track_id, "x0_m": x0, "y0_m": y0, "vx_m_s": vx, "vy_m_s": vy}
     if moving:  # the state at the last bearing, as the straight line through it
@@ -217,6 +385,12 @@ def simulate_shard(cfg: Config, shard_index: int):
         **({"manoeuvring": ~np.isnan(last["manoeuvre_start_s"]), **last} if moving else {}),
     })
     return log, truth
+
+
+def _time_grid(t):
+    """The distinct times of ``t`` from 0 (s), and where each of ``t`` is among them."""
+    grid = np.unique(np.concatenate([[0.0], t]))
+    return grid, np.searchsorted(grid, t)
 
 
 def rms_speed(pop: PopulationConfig) -> float:
