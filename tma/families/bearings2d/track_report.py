@@ -259,7 +259,7 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str,
              "each track's last "
              "bearing epoch, in seconds from the log's start (its first bearing) and in UTC "
              "when the log is dated; ± is one standard deviation (sigma as in column "
-             "sigma_used_deg of the CSV: nominal, or estimated from the residuals), which "
+             "sigma_used_deg of the CSV: nominal, or estimated from the bearings), which "
              "includes the "
              "target's own motion (accel_psd_m2_s3: a nearly-constant-velocity target) for "
              "`lm`; 'holds from' is the first bearing the solution rests on. "
