@@ -86,13 +86,7 @@ def _shown(f: dict) -> dict:
 # the ok answers are two to three times too wide on real ships (median largest |z| 0.38-0.64),
 # and two checks fail besides. Strict: the day they hold, these fail until the marks go.
 TOO_WIDE = "median largest |z| below 1.0: the ok answers' errors are wider than needed"
-KNOWN = {
-    ("solent", "pooled"): TOO_WIDE,
-    ("solent", "left out"): TOO_WIDE + "; one harbour vessel 2.2 km away beyond 5 sd",
-    ("nyharbor", "pooled"): TOO_WIDE + "; range within 2 sd on 89.9 % (two turning "
-                                       "targets answered 16-30 % too near)",
-    ("nyharbor", "left out"): TOO_WIDE,
-}
+KNOWN = {(r, p): TOO_WIDE for r in RECORDINGS for p in ("pooled", "left out")}
 
 
 @pytest.mark.parametrize("recording, prior", [
