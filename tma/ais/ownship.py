@@ -119,8 +119,11 @@ def _named(reading, role: str) -> bool:
 
 def ownship_of(manifest: dict) -> dict:
     """What a dataset's table and map say of its own-ship's source: ``{"ownship": text}``
-    when it is not the log itself (its AIS, a navigation file), else ``{}``."""
+    when it is not the log itself (its AIS, a navigation file or one per platform), else
+    ``{}``."""
     nav = manifest.get("navigation") or {}
+    if isinstance(nav, list):  # one file per platform
+        return {"ownship": ", ".join(n["path"] for n in nav)}
     if nav.get("kind") == "ais":
         return {"ownship": f"AIS of MMSI {nav.get('mmsi')} in {nav.get('path')}"}
     return {"ownship": f"{nav['path']}"} if nav.get("path") else {}

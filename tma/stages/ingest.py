@@ -56,6 +56,11 @@ def unknown_option_of(key: str, family: str) -> str | None:
     return unknown_option(key, family_named(family).ingest.OBSERVATION)
 
 
+def _several(navigation) -> bool:
+    """Whether ``navigation`` names several files (a list: one per platform)."""
+    return isinstance(navigation, list | tuple) or type(navigation).__name__ == "ListConfig"
+
+
 def _file(value, option) -> Path:
     """The path of an input file: a regular file (a pipe or a device cannot be read twice, as
     the readers do); MissingFileError when there is none, ConfigTypeError for a value that is
@@ -114,6 +119,35 @@ def read_recordings(path: Path, fmt, navigation: Path | None, options, own=None)
     nav = read_source(navigation, nav_kind, options, navigation=True, contacts=False,
                       date_hint_ns=_first_utc_ns(found))
     return _with_navigation(found, nav, path, navigation, options), kind, nav_kind
+
+
+def _platform_files(path: Path, fmt, navigation: list[Path], options, own=None):
+    """``read_recordings`` with one navigation file per platform (``navigation=[a.nmea,
+    b.csv]``): each file's fixes are the platform its stem names (``a``; a file with a
+    platform column, its own names), matched to the input's platforms by name."""
+    if own is not None:
+        raise ConfigError(f"own-ship comes from navigation={[str(p) for p in navigation]} or "
+                          f"from truth.own_mmsi={own.own_mmsi}, not both: give one")
+    kind = source_kind(path, fmt)
+    kinds = {path: kind, **{p: source_kind(p, "auto", option=None) for p in navigation}}
+    complaint = inapplicable(options, kinds)
+    if complaint:
+        raise ConfigError(complaint)
+    found = read_source(path, kind, options, navigation=False, contacts=True)
+    navs = []
+    for p in navigation:
+        recs = read_source(p, kinds[p], options, navigation=True, contacts=False,
+                           date_hint_ns=_first_utc_ns(found))
+        if len(recs) == 1 and recs[0].platform is None:
+            recs[0].platform = p.stem
+        navs += recs
+    where = ", ".join(str(p) for p in navigation)
+    if len(found) == 1 and found[0].platform is None:
+        raise InputError(f"{path}: one own-ship file per platform (navigation={where}), but "
+                         "the input names no platform per row: give it a platform column "
+                         "(columns.platform=<column>) whose names are the files' stems")
+    return _with_navigation(found, navs, path, where, options), kind, [kinds[p]
+                                                                       for p in navigation]
 
 
 def _without_own_ship(path, kind, options, own_mmsi):
@@ -235,11 +269,19 @@ def read_log(input_path, *, family: str, fmt="auto", navigation=None, options=No
 
     truth = truth_options(truth)
     path = _file(input_path, "input")
-    nav_path = None if navigation is None else _file(navigation, "navigation")
     own = truth if truth.own_mmsi is not None else None
-    recordings, kind, nav_kind = read_recordings(path, fmt, nav_path, options, own)
+    if _several(navigation):  # one file per platform
+        nav_paths = [_file(p, "navigation") for p in navigation]
+        recordings, kind, nav_kinds = _platform_files(path, fmt, nav_paths, options, own)
+        nav_path = None
+    else:
+        nav_path = None if navigation is None else _file(navigation, "navigation")
+        recordings, kind, nav_kind = read_recordings(path, fmt, nav_path, options, own)
     sources = {"input": {"path": str(path), "sha256": sha256_file(path), "kind": kind}}
-    if nav_path is not None:
+    if _several(navigation):
+        sources["navigation"] = [{"path": str(p), "sha256": sha256_file(p), "kind": k}
+                                 for p, k in zip(nav_paths, nav_kinds, strict=True)]
+    elif nav_path is not None:
         sources["navigation"] = {"path": str(nav_path), "sha256": sha256_file(nav_path),
                                  "kind": nav_kind}
     elif own is not None:  # own-ship from the AIS of the trial (tma.ais.ownship)

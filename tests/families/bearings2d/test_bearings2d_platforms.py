@@ -262,3 +262,36 @@ def test_mcap_logs_of_several_platforms(tmp_path):
     with pytest.raises(InputError, match=r"bearings on /sonar0/bearings: no one own-ship "
                        r"topic shares its namespace"):
         tma.read_log(tmp_path / "bad.mcap", ownship={"topic": "/*/navigation"})
+
+
+def test_one_navigation_file_per_platform(tmp_path):
+    """``navigation=[ship_a.nmea, buoy_7.csv]``: each file the platform its stem names (the
+    ship's NMEA 0183 fixes, the buoy one CSV row), matched to the bearings' platform column:
+    the answers of the export that gives every row's position; bearings that name no
+    platform are refused in one line."""
+    from tests.families.bearings2d.test_bearings2d_sources_nmea import write_nmea
+
+    frame = two_platform_export()
+    frame["platform"] = frame["platform"].map({"ship A": "ship_a", "buoy 7": "buoy_7"})
+    frame.to_csv(tmp_path / "two.csv", index=False)
+    frame[["timestamp_utc", "platform", "contact", "bearing_deg"]].to_csv(
+        tmp_path / "bearings.csv", index=False)
+    ship = frame[frame["platform"] == "ship_a"].drop_duplicates("timestamp_utc")
+    t_s = (pd.to_datetime(ship["timestamp_utc"]) - START).dt.total_seconds().to_numpy()
+    write_nmea(tmp_path / "ship_a.nmea", pd.DataFrame(
+        {"t_s": t_s, "lat": ship["latitude_deg"], "lon": ship["longitude_deg"]}),
+        start=START.value, garbage=False)
+    frame[frame["platform"] == "buoy_7"][["timestamp_utc", "latitude_deg", "longitude_deg"]
+                                         ].iloc[:1].to_csv(tmp_path / "buoy_7.csv", index=False)
+    files = [tmp_path / "ship_a.nmea", tmp_path / "buoy_7.csv"]
+    rec = tma.read_log(tmp_path / "bearings.csv", navigation=files)
+    assert rec.logs[0].platforms == ("ship_a", "buoy_7")
+    both = tma.estimate(tma.read_log(tmp_path / "two.csv"))
+    split = tma.estimate(rec)
+    # NMEA positions are written to 1e-4 minute (about 0.2 m): the answers agree to that
+    np.testing.assert_allclose(split["range_now_m"], both["range_now_m"], rtol=1e-3)
+    assert list(split["status"]) == list(both["status"])
+    frame.drop(columns="platform").to_csv(tmp_path / "unnamed.csv", index=False)
+    with pytest.raises(InputError, match=r"one own-ship file per platform .* names no "
+                       r"platform per row"):
+        tma.read_log(tmp_path / "unnamed.csv", navigation=files)
