@@ -35,6 +35,7 @@ import numpy as np
 
 from tma.config import param, require
 from tma.families.bearings2d import manoeuvres, ncv
+from tma.families.bearings2d.bearing_noise import differenced_sigma
 from tma.families.bearings2d.contract import Bearings, Solution, TargetMotion
 from tma.families.bearings2d.estimators.lm import Config as LmConfig
 from tma.families.bearings2d.estimators.lm import LevenbergMarquardt
@@ -77,7 +78,7 @@ class LastLeg(LevenbergMarquardt):
         rounds = np.zeros(n, dtype=np.int64)
         todo = np.arange(0) if self.config.motion_test == "off" else np.flatnonzero(
             self._drifting(t, own_x, own_y, measured_rad, present, out["theta"], q, sigma,
-                           prior))
+                           prior, bearings.platform))
         for _ in range(self.config.max_rounds):
             if todo.size == 0:
                 break
@@ -94,15 +95,18 @@ class LastLeg(LevenbergMarquardt):
             for key, value in leg.items():
                 out[key][todo] = value
             drifting = self._drifting(t, own_x, own_y, measured_rad[todo], used[todo],
-                                      out["theta"][todo], q, sigma, prior)
+                                      out["theta"][todo], q, sigma, prior, bearings.platform)
             todo = todo[drifting]
         out["converged"] = out["stop_reason"] == STOP_F_TOL
         out.update(n_rounds=rounds, bearings_used=used, leg_start_s=t[np.argmax(used, axis=1)])
         return self.solution(out)
 
-    def _drifting(self, t, own_x, own_y, measured, used, theta, q, sigma, prior=None):
+    def _drifting(self, t, own_x, own_y, measured, used, theta, q, sigma, prior=None,
+                  platform=None):
         """Tracks whose residual sequence fails the trend test, under the wander ``q`` and
-        the manoeuvres ``prior`` assumed (``sigma``: the nominal noise, deg; None: unknown).
+        the manoeuvres ``prior`` assumed (``sigma``: the nominal noise, deg; None: unknown:
+        with manoeuvres, the bearings' own, ``bearing_noise``, over each epoch's
+        ``platform``).
         With manoeuvres in the prior, the mixture already averages over when the target
         changed its motion (the Bayesian form of the change-time search below): a leg is
         sought only where the mixture's own innovations fail the test."""
@@ -115,6 +119,8 @@ class LastLeg(LevenbergMarquardt):
             fit = ncv.smooth(t, own_x, own_y, measured, used, first, last, theta, q, sigma_rad,
                              iterate=q > 0)
         else:
+            if sigma is None:  # as the base's motion fit weighs them (bearing_noise)
+                sigma_rad = differenced_sigma(t, measured, used, platform)
             fit = manoeuvres.mixture(t, own_x, own_y, measured, used, first, last, theta, q,
                                      prior, sigma_rad)
         with np.errstate(invalid="ignore"):
