@@ -54,10 +54,16 @@
     declared, from both platforms against the baseline, the first platform alone, on the
     same targets and noise: the share ok, of the ok each of range, course and speed within 3
     sd, beyond 5 sd (95 % intervals clustered by target vessel), and the ratio of ok shares.
+(m) Sharpness on targets that held course (issue 36, item 4, ``--only sharpness``): the
+    stated range sd of the manoeuvre-aware ``lm`` over the constant-velocity fit's (``lm``
+    with no wander, no manoeuvres) on the same tracks, median and quartiles over the targets
+    that made no manoeuvre and are ``ok`` in both: simulated (``--tracks`` targets of the
+    manoeuvre experiment's motion, wander 1e-4 and 3 manoeuvres an hour, declared) and real
+    (the AIS pairs' steady targets, one noise draw, sigma estimated).
 
 Options: ``--tracks N`` (2000), ``--sigma DEG`` (0.5), ``--runs N`` (30), ``--skip-tables``,
 ``--skip-first-table``, ``--only SECTION`` (lm, tables, ranges2d, filters3d, cmnf, compile,
-real_motion, crossfix_real_motion, cluster, io, trace, first_table, manoeuvres),
+real_motion, crossfix_real_motion, cluster, io, trace, first_table, manoeuvres, sharpness),
 ``--first-table EXPERIMENTS``
 (comma-separated; bearings2d_table,ranges2d_table,radar2d_table), ``--first-table-repeat N``
 (1), ``--paths3d N`` (2500), ``--cmnf-paths N`` (100000), ``--repeat N`` (3),
@@ -93,7 +99,8 @@ from tma.runtime.forkserver import keep_freed_memory
 REPO = Path(__file__).resolve().parents[1]
 THETA = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")
 SECTIONS = ("lm", "tables", "ranges2d", "filters3d", "cmnf", "compile", "real_motion",
-            "crossfix_real_motion", "cluster", "io", "trace", "first_table", "manoeuvres")
+            "crossfix_real_motion", "cluster", "io", "trace", "first_table", "manoeuvres",
+            "sharpness")
 FIRST_TABLES = ("bearings2d_table", "ranges2d_table", "radar2d_table")  # as issue 32 measured
 
 
@@ -715,6 +722,50 @@ def bench_manoeuvres(n_tracks: int, sigma_deg: float, repeat: int = 3):
               f"{aware:.2f}, NCV smoother {ncv:.2f} (issue 36's target <= 1)")
 
 
+CONSTANT_VELOCITY = {"accel_psd_m2_s3": 0.0, "manoeuvre_rate_per_h": 0.0, "motion_test": "off"}
+
+
+def _sd_ratio(aware, cv) -> str:
+    """Median (quartiles) of aware / cv, the stated range sds of one set of targets."""
+    r = np.asarray(aware, float) / np.asarray(cv, float)
+    q1, q2, q3 = np.percentile(r, [25, 50, 75])
+    return f"{q2:.2f} ({q1:.2f}-{q3:.2f}) over {r.size} targets"
+
+
+def bench_sharpness(n_tracks: int, sigma_deg: float):
+    """Issue 36, item 4: how much wider the manoeuvre-aware ``lm``'s stated range sd is than
+    the constant-velocity fit's on targets that held course (the price of allowing
+    manoeuvres that did not happen), simulated and on the real pairs' steady targets."""
+    import logging
+
+    import tma
+
+    sys.path.insert(0, str(REPO))
+    from tests.families.bearings2d.real_motion import run_cases
+
+    logging.disable(logging.WARNING)
+    print("(m) sharpness on targets that held course: stated range sd / range of the "
+          "manoeuvre-aware lm over the constant-velocity fit's, median (quartiles), targets ok "
+          "in both")
+    ds = tma.simulate("bearings2d", n_tracks=n_tracks, sigma_deg=sigma_deg, seed=7,
+                      target={"accel_psd_m2_s3": 1e-4, "manoeuvres": {"rate_per_h": 3.0}})
+    aware, cv = tma.estimate(ds), tma.estimate(ds, **CONSTANT_VELOCITY)
+    held = ds.truth.set_index("track_id").loc[aware.track_id, "n_manoeuvres"].to_numpy() == 0
+    both = held & (aware.status.to_numpy() == "ok") & (cv.status.to_numpy() == "ok")
+    print(f"    simulated (wander 1e-4, 3 manoeuvres/h, declared; {held.sum()} of {n_tracks} "
+          f"made none): {_sd_ratio(aware.range_sd_m[both], cv.range_sd_m[both])}")
+    for recording in ("solent", "nyharbor"):
+        with tempfile.TemporaryDirectory() as workdir:
+            a = run_cases(Path(workdir) / "a", {"name": "lm"}, None, recording)
+            c = run_cases(Path(workdir) / "c", {"name": "lm", **CONSTANT_VELOCITY}, None,
+                          recording)
+        steady = (a.kind.to_numpy() == "steady") & (a.status.to_numpy() == "ok") & (
+            c.status.to_numpy() == "ok")
+        ratio = a.range_sd[steady].to_numpy() / c.range_sd[steady].to_numpy()
+        print(f"    real, {recording} steady pairs (sigma estimated, one draw): "
+              f"{_sd_ratio(ratio, np.ones(ratio.size)) if ratio.size else 'none ok in both'}")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--tracks", type=int, default=2000)
@@ -775,6 +826,8 @@ def main():
         bench_first_table(args.first_table.split(","), args.first_table_repeat)
     if wanted("manoeuvres"):
         bench_manoeuvres(args.manoeuvre_tracks, args.sigma, args.repeat)
+    if wanted("sharpness"):
+        bench_sharpness(min(args.tracks, 1000), args.sigma)
 
 
 if __name__ == "__main__":
