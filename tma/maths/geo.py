@@ -69,6 +69,22 @@ def local_to_geodetic(x_m, y_m, origin_deg) -> tuple[np.ndarray, np.ndarray]:
     return lat, lon
 
 
+def north_on_plane_deg(lat_deg, lon_deg, origin_deg) -> np.ndarray:
+    """The direction (deg, clockwise from the plane's north) of true north at the points
+    ``lat_deg``, ``lon_deg`` (WGS84) on the tangent plane at ``origin_deg``: the meridian
+    convergence, about -(lon - lon0) sin(lat) (east of the origin in the north, true north
+    leans west: -0.0156 deg per km east at 60 deg N). A direction measured from true north at
+    a point (a sensor's bearing) is that plus this on the plane; vectorised."""
+    lat, lon = np.deg2rad(np.asarray(lat_deg, float)), np.deg2rad(np.asarray(lon_deg, float))
+    lat0, lon0 = np.deg2rad(origin_deg[0]), np.deg2rad(origin_deg[1])
+    # true north at the point, in earth-centred axes, onto the origin's east and north
+    nx, ny, nz = -np.sin(lat) * np.cos(lon), -np.sin(lat) * np.sin(lon), np.cos(lat)
+    east = -np.sin(lon0) * nx + np.cos(lon0) * ny
+    north = (-np.sin(lat0) * np.cos(lon0) * nx - np.sin(lat0) * np.sin(lon0) * ny
+             + np.cos(lat0) * nz)
+    return np.rad2deg(np.arctan2(east, north))
+
+
 UNKNOWN, KNOWN = (LocationFix.PositionCovarianceType.Value(k) for k in ("UNKNOWN", "KNOWN"))
 NO_COVARIANCE = [0.0] * 9
 

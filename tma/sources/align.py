@@ -6,9 +6,12 @@
   value kept; ``epoch_utc_ns`` is the UTC time of that t = 0 (None for relative times).
 - One plane: latitude/longitude go to east/north metres (``tma.maths.geo.geodetic_to_local``, WGS84,
   h = 0) at the origin ``origin.lat``/``origin.lon`` or the first own-ship fix. The plane is
-  tangent at the origin, so bearings (clockwise from its north) stay true to within the
-  meridian convergence, about 0.015 deg per km east-west at 60 deg latitude. Own-ship given
-  in metres stays as it is (``origin.*`` then states where its 0, 0 lies).
+  tangent at the origin, and its north leans from true north away from it by the meridian
+  convergence (0.0156 deg per km east-west at 60 deg latitude: 1.2 deg between shore stations
+  80 km apart), so a direction taken from true north where its platform was (a bearing) is
+  turned onto the plane's north there (``north_on_plane_deg``; tma's own logs, whose
+  bearings are from their plane's north, from that plane's). Own-ship given in metres stays
+  as it is, and so do its directions (``origin.*`` then states where its 0, 0 lies).
 - Own-ship at each value: linear interpolation between fixes; a value up to
   ``nav.max_extrapolation_s`` outside the fixes' span is extrapolated from the end segment,
   one further out is dropped and counted. Gaps between fixes longer than ``nav.max_gap_s``
@@ -35,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.errors import ConfigError, InputError
-from tma.maths.geo import geodetic_to_local
+from tma.maths.geo import geodetic_to_local, local_to_geodetic, north_on_plane_deg
 from tma.sources.base import Dropped, Navigation, Recording
 from tma.sources.labels import shown_labels
 from tma.utc import format_utc, stamp_text
@@ -119,8 +122,12 @@ def align(recordings: list[Recording], options, where: str) -> Aligned:
         dropped["after_navigation"] += int(after.sum())
         keep = ~(before | after)
         gaps += _gaps(t_nav, t_obs[keep], options.nav.max_gap_s, rec.navigation.source, plural)
-        per_nav.append((t_obs[keep], x[keep], y[keep], track[keep], rec.contacts.values[keep],
-                        rec))
+        values = rec.contacts.values[keep]
+        if observation.direction and origin is not None and rec.navigation.geographic:
+            values = values + _onto_plane(x[keep], y[keep], origin,
+                                          rec.contacts.plane_origin_deg)
+            values = np.where(np.abs(values) >= 360.0, np.fmod(values, 360.0), values)
+        per_nav.append((t_obs[keep], x[keep], y[keep], track[keep], values, rec))
     if not any(p[0].size for p in per_nav):
         r = recordings[0]
         hours = hours_apart(obs[0], navs[0])
@@ -168,6 +175,17 @@ def align(recordings: list[Recording], options, where: str) -> Aligned:
         "notes": [*dict.fromkeys(n for r in recordings for n in r.notes), *notes_time, *notes],
     }
     return Aligned(platforms, epoch, origin, labels, summary, bad)
+
+
+def _onto_plane(x, y, origin, plane_origin=None) -> np.ndarray:
+    """What turns directions taken at (``x``, ``y``) on the plane at ``origin`` onto its
+    north (deg): from true north there (a sensor's bearing) the meridian convergence, from
+    another plane's north (tma's own log at ``plane_origin``) the difference of the two."""
+    lat, lon = local_to_geodetic(x, y, origin)
+    turn = north_on_plane_deg(lat, lon, origin)
+    if plane_origin is not None:
+        turn -= north_on_plane_deg(lat, lon, plane_origin)
+    return turn
 
 
 def _time_reference(recordings, options):

@@ -60,7 +60,9 @@ class Observation:
     (``atan2(x, y)``); ``topic`` and ``schema``: the topic
     and tma schema of the family's own logs (messages ``{t_s, track_id, <column>}``);
     ``guard(recordings, options, where)``: a check of the values of all the recordings once
-    read, before they are aligned (None: none)."""
+    read, before they are aligned (None: none); ``direction``: the value is a direction
+    clockwise from north (deg), which ``align`` turns from true north where it was taken onto
+    its plane's north (``tma.maths.geo.north_on_plane_deg``)."""
 
     role: str
     plural: str
@@ -73,6 +75,7 @@ class Observation:
     topic: str | None = None
     schema: str | None = None
     guard: Callable | None = None
+    direction: bool = False
 
     def unit(self, name: str) -> Unit:
         return next(u for u in self.units if u.name == name)
@@ -199,6 +202,10 @@ class Contacts:
     # True when the units were stated (an option, or a name or units row naming a unit other
     # than the first): a family's guard then trusts them
     units_stated: bool = False
+    # directions (an Observation.direction) from the north of the tangent plane at this
+    # (lat, lon), as tma's own logs hold them; None: from true north where they were taken,
+    # as a sensor measures them (align turns both onto its plane)
+    plane_origin_deg: tuple[float, float] | None = None
 
 
 @dataclass

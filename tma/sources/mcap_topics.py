@@ -12,7 +12,7 @@ from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
 from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
 
 from tma.errors import InputError
-from tma.io.mcap_log import PLATFORMS, platform_names, platform_namespace
+from tma.io.mcap_log import PLATFORMS, geo_origin, platform_names, platform_namespace
 from tma.io.mcap_read import McapFile, TmaDecoderFactory
 from tma.io.mcap_values import schema_errors
 from tma.sources import foxglove, ros2, tma_log
@@ -402,7 +402,11 @@ def _recording(file: RecordedLog, options, need, navigation, nav_topic, contact_
                                 topic=nav_topic)
     if contact_topics:
         t_ns, track, values, stated = _together([parts[t] for t in contact_topics])
+        # tma's own schema holds directions from its plane's north (its tma.geo origin)
+        own = any(file.topics[t].schema == options.observation.schema for t in contact_topics)
         contacts = Contacts(seconds(t_ns), epoch, track, values,
                             "; ".join(file.source(t) for t in contact_topics),
-                            units_stated=stated)
+                            units_stated=stated,
+                            plane_origin_deg=geo_origin(file.metadata, file.where) if own
+                            else None)
     return Recording(navigation, contacts, file.metadata, file.notes, file.dropped)

@@ -295,3 +295,35 @@ def test_one_navigation_file_per_platform(tmp_path):
     with pytest.raises(InputError, match=r"one own-ship file per platform .* names no "
                        r"platform per row"):
         tma.read_log(tmp_path / "unnamed.csv", navigation=files)
+
+
+@pytest.mark.parametrize("lat, apart_km", [(50.0, 10.0), (60.0, 80.0)])
+def test_shore_stations_far_apart_read_bearings_from_true_north(lat, apart_km):
+    """Two stations ``apart_km`` east-west, their bearings true azimuths where they stand
+    (pymap3d's geodesic ``geodetic2aer``, 0.5 deg noise), a contact 15 km north of their
+    middle: the bearings are turned onto the plane's north at each station (1.2 deg between
+    stations 80 km apart at 60 deg N, which read as plane bearings put the answer 8 sd off),
+    so range and bearing now from either station hold the geodesic truth within 3 sd."""
+    import pymap3d
+
+    rng = np.random.default_rng(3)
+    dlon = np.rad2deg(apart_km * 1e3 / (6378137.0 * np.cos(np.deg2rad(lat))))
+    stations = {"west": (lat, 0.0), "east": (lat, dlon)}
+    t = np.arange(0.0, 1800.01, 6.0)
+    east, north = 5.0 * np.sin(np.deg2rad(120.0)) * t, 15e3 + 5.0 * np.cos(np.deg2rad(120.0)) * t
+    tlat, tlon, _ = pymap3d.enu2geodetic(east, north, 0 * t, lat, dlon / 2, 0.0)
+    rows = []
+    for name, (la, lo) in stations.items():
+        az, _, _ = pymap3d.geodetic2aer(tlat, tlon, 0 * t, la, lo, 0.0)
+        rows += [(START + pd.Timedelta(seconds=float(s)), name, la, lo, "C1", b % 360.0)
+                 for s, b in zip(t, az + rng.normal(0.0, 0.5, t.size), strict=True)]
+    frame = pd.DataFrame(rows, columns=["timestamp_utc", "platform", "latitude_deg",
+                                        "longitude_deg", "contact", "bearing_deg"])
+    frame = frame.sort_values(["timestamp_utc", "platform"], kind="stable")
+    for name, (la, lo) in stations.items():
+        row = tma.estimate(frame, reference_platform=name, sigma_deg=0.5).iloc[0]
+        az, _, true_range = pymap3d.geodetic2aer(tlat[-1], tlon[-1], 0.0, la, lo, 0.0)
+        assert row["status"] == "ok"
+        assert abs(row["range_now_m"] - true_range) < 3 * row["range_sd_m"]
+        off = (row["bearing_now_deg"] - az + 180.0) % 360.0 - 180.0
+        assert abs(off) < 3 * row["bearing_sd_deg"], (name, off, row["bearing_sd_deg"])

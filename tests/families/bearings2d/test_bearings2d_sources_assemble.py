@@ -69,8 +69,16 @@ def test_own_ship_at_every_bearing_in_the_plane_of_the_first_fix():
     np.testing.assert_array_equal(lg.track_id, [0, 1])
     assert list(lg.track_label) == ["T1", "T2"] and summary["track_labels"] == {"0": "T1",
                                                                                "1": "T2"}
+    # bearings from true north at own-ship turned onto the plane's north there: by the
+    # direction of a point 100 m true north of own-ship, on the plane (pymap3d's geodesic)
+    n_lat, n_lon, _ = pymap3d.aer2geodetic(0.0, 0.0, 100.0, lat, lon, 0.0)
+    ne, nn, _ = pymap3d.geodetic2enu(n_lat, n_lon, 0.0, ORIGIN[0], ORIGIN[1], 0.0)
+    pe, pn, _ = pymap3d.geodetic2enu(lat, lon, 0.0, ORIGIN[0], ORIGIN[1], 0.0)
+    north = np.rad2deg(np.arctan2(ne - pe, nn - pn))
+    assert 0.01 < np.abs(north).max() < 0.2  # own-ship a few km east and west of the origin
     for i, label in enumerate(("T1", "T2")):
-        np.testing.assert_array_equal(lg.bearing_deg[i], b[b.track == label].bearing_deg)
+        np.testing.assert_allclose(lg.bearing_deg[i], b[b.track == label].bearing_deg + north,
+                                   rtol=0, atol=1e-5)
     assert lg.epoch_utc_ns == summary["epoch_utc_ns"] == EPOCH_NS + 500_000_000
     assert summary["start_utc"] == "2025-06-01T08:00:00.5Z"
     assert summary["notes"][0] == "found" and "origin" in summary["notes"][-1]

@@ -92,7 +92,7 @@ def results(run) -> tuple[pd.DataFrame, dict]:
                             run.recorded)
     blank = ~np.isfinite(report["range_now_m"].to_numpy(float))
     if run.truth is not None and run.recorded:  # the AIS of its trial
-        report = with_truth(report, est, run.truth)
+        report = with_truth(report, est, run.truth, run.logs[0].origin_deg)
     elif run.truth is not None:  # a simulation
         metrics = track_metrics(est, run.truth)
         metrics.loc[blank, SIMULATED_ERRORS] = np.nan

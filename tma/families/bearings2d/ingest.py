@@ -54,7 +54,7 @@ OBSERVATION = Observation(
            Unit("rad", "radians", ("rad", "radian", "radians"), np.rad2deg, 2 * np.pi,
                 "[-2 pi, 2 pi]")),
     from_vector=_from_vector, vector_rule="atan2(x, y)",
-    topic=BEARINGS_TOPIC, schema=SCHEMAS[BEARINGS_TOPIC], guard=radians_guard)
+    topic=BEARINGS_TOPIC, schema=SCHEMAS[BEARINGS_TOPIC], guard=radians_guard, direction=True)
 
 
 @dataclass
