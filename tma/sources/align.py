@@ -155,7 +155,8 @@ def align(recordings: list[Recording], options, where: str) -> Aligned:
     if len(platforms) > 1 and all(p.recording.platform for p in platforms):
         notes.append("several platforms: " + ", ".join(
             f"{p.recording.platform!r} ({p.t_s.size} {plural})" for p in platforms)
-            + "; range and bearing now are given from the first (reference_platform)")
+            + "; range and bearing now are given from the first unless the estimator's "
+            "reference_platform names another")
     for gap in gaps:
         gap["from_s"], gap["to_s"] = gap["from_s"] - t0, gap["to_s"] - t0
     summary = {

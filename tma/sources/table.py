@@ -94,14 +94,19 @@ def read_table(table, options, *, navigation: bool, contacts: bool) -> list[Reco
                                  platform, navigation=navigation, contacts=contacts,
                                  notes=notes, dropped=rows)
         return _named(read_table(_PlatformRows(table, cols, df[keep].reset_index(drop=True),
-                                               line), options, navigation=navigation,
+                                               line, platform[0], False), options,
+                                 navigation=navigation,
                                  contacts=contacts), platform[0], notes, rows)
     track = None
     if role in cols:
         b, stated = _values(b_raw[keep], cols[role], options, table, path, line, notes)
         track = _tracks(None if track_raw is None else track_raw[keep], len(t), notes,
                         f"{path}: {cols.get('track')}")
-        _check_increasing(t, track, tcol, path, line, table.id_hint, options.time.zone, epoch)
+        several = "" if "platform" in cols or isinstance(table, _PlatformRows) else (
+            "; rows of several platforms (ships, buoys, stations) at one time? name each "
+            "row's platform in a column (platform, or columns.platform=<column>)")
+        _check_increasing(t, track, tcol, path, line, table.id_hint or several,
+                          options.time.zone, epoch)
     if not navigation:
         return [Recording(None, Contacts(t, epoch, track, b, str(path), stated), notes=notes,
                           dropped=rows)]
@@ -112,7 +117,15 @@ def read_table(table, options, *, navigation: bool, contacts: bool) -> list[Reco
     if not consistent.all() and not contacts:
         row = nav_rows[int(np.flatnonzero(~consistent)[0])]
         raise InputError(f"{path}: two different own-ship positions at the time of line "
-                         f"{line[row]} ({tcol}): one fix per time")
+                         f"{line[row]} ({tcol}): one fix per time" + (
+                             "" if isinstance(table, _PlatformRows) else
+                             "; fixes of several platforms? name each row's platform in a "
+                             "column (platform, or columns.platform=<column>)"))
+    if not consistent.all() and getattr(table, "one_of_several", False):
+        row = nav_rows[int(np.flatnonzero(~consistent)[0])]
+        raise InputError(f"{path}: platform {table.name!r} has two different positions at the "
+                         f"time of line {line[row]} ({tcol}): one position per platform and "
+                         "time (a bad fix? leave the row out)")
     if not contacts:
         return [Recording(_navigation(t, epoch, pos, nav_rows, geo, path, line), None,
                           notes=notes, dropped=rows)]
@@ -248,8 +261,9 @@ class _PlatformRows:
     """The rows of one platform of a table (``table``'s, already read: ``df``, their file
     lines ``lines``), as ``read_table`` reads a table: the same columns but the platform's."""
 
-    def __init__(self, table, cols, df, lines):
+    def __init__(self, table, cols, df, lines, name: str, one_of_several: bool):
         self._table, self.notes = table, []
+        self.name, self.one_of_several = name, one_of_several
         self._cols = {r: c for r, c in cols.items() if r != "platform"}
         self._df, self._lines = df, lines
 
@@ -289,7 +303,8 @@ def _per_platform(table, cols, options, df, line, platform, *, navigation, conta
     out = []
     for name in dict.fromkeys(platform):
         mine = platform == name
-        part = _PlatformRows(table, cols, df[mine].reset_index(drop=True), line[mine])
+        part = _PlatformRows(table, cols, df[mine].reset_index(drop=True), line[mine], name,
+                             True)
         out += _named(read_table(part, options, navigation=navigation, contacts=contacts),
                       name, [] if out else notes, options.dropped() if out else dropped)
     return out

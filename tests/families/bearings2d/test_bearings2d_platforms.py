@@ -327,3 +327,29 @@ def test_shore_stations_far_apart_read_bearings_from_true_north(lat, apart_km):
         assert abs(row["range_now_m"] - true_range) < 3 * row["range_sd_m"]
         off = (row["bearing_now_deg"] - az + 180.0) % 360.0 - 180.0
         assert abs(off) < 3 * row["bearing_sd_deg"], (name, off, row["bearing_sd_deg"])
+
+
+def test_refusals_of_several_platforms_name_the_platform_column(tmp_path):
+    """A two-platform export without a platform column whose reports coincide, or its
+    navigation without one: the refusal says rows of several platforms and names
+    ``columns.platform``; one bad fix of a platform among several: named with its line; a
+    track whose estimate is no answer is never ``ok``."""
+    frame = two_platform_export(platforms=(SHIP, ("buoy 7", 0.0, BUOY[2])))  # same times
+    frame.drop(columns="platform").to_csv(tmp_path / "noplat.csv", index=False)
+    with pytest.raises(InputError, match=r"duplicate timestamp_utc .*several platforms.*"
+                       r"columns\.platform=<column>"):
+        tma.read_log(tmp_path / "noplat.csv")
+    frame[["timestamp_utc", "platform", "contact", "bearing_deg"]].to_csv(
+        tmp_path / "bearings.csv", index=False)
+    frame[["timestamp_utc", "latitude_deg", "longitude_deg"]].drop_duplicates().to_csv(
+        tmp_path / "nav.csv", index=False)
+    with pytest.raises(InputError, match=r"nav\.csv: two different own-ship positions .*"
+                       r"several platforms.*columns\.platform"):
+        tma.read_log(tmp_path / "bearings.csv", navigation=tmp_path / "nav.csv")
+    bad = frame.copy()
+    k = int(np.flatnonzero(bad["platform"] == "ship A")[7])
+    bad.loc[k, "latitude_deg"] += 0.3
+    bad.to_csv(tmp_path / "bad.csv", index=False)
+    with pytest.raises(InputError, match=rf"platform 'ship A' has two different positions at "
+                       rf"the time of line ({k + 1}|{k + 2}) "):
+        tma.read_log(tmp_path / "bad.csv")

@@ -127,7 +127,8 @@ def blank_non_answers(report: pd.DataFrame, max_range_rel_sd=None, recorded=True
     (``status.not_an_answer``: diverged, collapsed, without a one-sigma error, or off where
     its last bearings point: ``end_bearing``, the estimate stage's ``END_BEARING_COLUMNS``,
     None: not checked), in place, and add why to their note; their status stays (the
-    cause). Returns the mask."""
+    cause), but an ``ok`` or ``position_only`` one, which promises an answer, becomes
+    ``not_converged`` (the fit ran to no answer). Returns the mask."""
     bearings = None if end_bearing is None else {
         "bearing_now_deg": report["bearing_now_deg"], "bearing_sd_deg": report["bearing_sd_deg"],
         **end_bearing}
@@ -136,6 +137,8 @@ def blank_non_answers(report: pd.DataFrame, max_range_rel_sd=None, recorded=True
                         recorded=recorded, bearings=bearings)
     blank = why != ""
     if blank.any():
+        promised = blank & report["status"].isin(["ok", "position_only"]).to_numpy()
+        report.loc[promised, "status"] = "not_converged"
         for column in ESTIMATE_COLUMNS:
             report[column] = report[column].astype(float).mask(blank)
         report["note"] = [
@@ -255,7 +258,8 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str,
 
     shown = pd.DataFrame({
         "track": shown_labels(report["label"]), "n": report["n_bearings"],
-        **({"platforms": report["platforms"]} if "platforms" in report else {}),
+        **({"platforms": ["+".join(shown_labels(seen.split("+")))
+                          for seen in report["platforms"]]} if "platforms" in report else {}),
         "t now (s from start)": report["t_now_s"].map("{:.1f}".format),
         **({} if report["time_now_utc"].isna().all() else {"now (UTC)": report["time_now_utc"]}),
         **position(),
@@ -291,7 +295,8 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str,
     if "platforms" in report:
         intro += (" 'platforms': those that took the track's bearings (the plan draws each "
                   "one's lines of sight from it, in its colour); range and bearing now are "
-                  "from " + (f"`{reference_platform}`" if reference_platform else "the first")
+                  "from " + (f"`{shown_labels([reference_platform])[0]}`" if reference_platform
+                             else "the first")
                   + ".")
     if scored:
         intro += (" AIS ship: the contact's ship and how well its AIS fits the bearings; z: "
