@@ -85,6 +85,14 @@ def north_on_plane_deg(lat_deg, lon_deg, origin_deg) -> np.ndarray:
     return np.rad2deg(np.arctan2(east, north))
 
 
+def north_at_local(x_m, y_m, origin_deg) -> np.ndarray:
+    """``north_on_plane_deg`` at the plane points (``x_m``, ``y_m``) of the plane at
+    ``origin_deg`` (0 where a point is not mapped): what a direction on the plane there
+    loses to be read from true north, as a chart reads it."""
+    lat, lon = local_to_geodetic(np.asarray(x_m, float), np.asarray(y_m, float), origin_deg)
+    return np.nan_to_num(north_on_plane_deg(lat, lon, origin_deg))
+
+
 UNKNOWN, KNOWN = (LocationFix.PositionCovarianceType.Value(k) for k in ("UNKNOWN", "KNOWN"))
 NO_COVARIANCE = [0.0] * 9
 

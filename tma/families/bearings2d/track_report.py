@@ -32,7 +32,7 @@ from tma.families.bearings2d.truth_report import (
 )
 from tma.io import arrow
 from tma.io.atomic import write_parquet_atomic
-from tma.maths.geo import local_to_geodetic, north_on_plane_deg
+from tma.maths.geo import local_to_geodetic, north_at_local
 from tma.sources.labels import shown_labels
 from tma.tables.write import write_table
 from tma.utc import format_utc
@@ -213,23 +213,12 @@ def track_report(estimates: pd.DataFrame, epoch_utc_ns=None, origin_deg=None,
                       if all(c in e for c in END_BEARING_COLUMNS) else None)
     blank_headings(report)
     if origin_deg is not None:  # directions from true north where they are read
-        to_obs, to_target = plane_norths(e["own_x_last_m"], e["own_y_last_m"], x_now, y_now,
-                                         origin_deg)
-        report["bearing_now_deg"] = (report["bearing_now_deg"] - to_obs) % 360.0
-        report["course_deg"] = (report["course_deg"] - to_target) % 360.0
+        # the estimates stay on the plane (0.0156 deg per km east-west of the origin at 60 N)
+        report["bearing_now_deg"] = (report["bearing_now_deg"] - north_at_local(
+            e["own_x_last_m"], e["own_y_last_m"], origin_deg)) % 360.0
+        report["course_deg"] = (report["course_deg"]
+                                - north_at_local(x_now, y_now, origin_deg)) % 360.0
     return report
-
-
-def plane_norths(x_obs_m, y_obs_m, x_target_m, y_target_m, origin_deg):
-    """The direction (deg) of true north on the plane at ``origin_deg``, at the observer now
-    and at the target now (``tma.maths.geo.north_on_plane_deg``): what a bearing now and a
-    course on the plane lose to be read from true north there, as a chart reads them (the
-    estimates stay on the plane: 0.0156 deg per km east-west of the origin at 60 deg N)."""
-    out = []
-    for x, y in ((x_obs_m, y_obs_m), (x_target_m, y_target_m)):
-        lat, lon = local_to_geodetic(np.asarray(x, float), np.asarray(y, float), origin_deg)
-        out.append(np.nan_to_num(north_on_plane_deg(lat, lon, origin_deg)))
-    return out
 
 
 def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str,

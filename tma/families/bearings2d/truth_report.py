@@ -22,6 +22,7 @@ from tma.families.bearings2d.drawn_tracks import theta_covariance
 from tma.families.bearings2d.metrics import NEES_95, THETA, normalised_error
 from tma.families.bearings2d.status import kinematics_now
 from tma.maths.angles import wrap_to_180
+from tma.maths.geo import north_at_local
 from tma.maths.stats import wilson_interval
 
 # quantity: (the report's estimate, its one-sigma error, the unit of the columns' names)
@@ -51,8 +52,8 @@ def with_truth(report: pd.DataFrame, estimates: pd.DataFrame, truth: pd.DataFram
                origin_deg=None) -> pd.DataFrame:
     """``report`` (``report.track_report``, one row per track of ``estimates``) with the truth
     columns (module docstring); blank for tracks the truth lacks. ``origin_deg``: the local
-    plane's, whose report reads bearing and course from true north (``plane_norths``): the
-    truth's are read alike."""
+    plane's, whose report reads bearing and course from true north (``north_at_local``):
+    the truth's are read alike."""
     own = [c for c in TRUTH_SD if c in truth]  # the truth's own uncertainty (sparse AIS)
     df = estimates.merge(truth[["track_id", "mmsi", "match", "rms_deg", *THETA, *own]],
                          on="track_id", how="left", suffixes=("", "_true"), validate="one_to_one")
@@ -64,14 +65,11 @@ def with_truth(report: pd.DataFrame, estimates: pd.DataFrame, truth: pd.DataFram
     true = {"range": rng, "bearing": np.rad2deg(brg) % 360.0, "course": np.rad2deg(crs) % 360.0,
             "speed": spd}
     t = at[0]
-    if origin_deg is not None:
-        from tma.families.bearings2d.track_report import plane_norths
-
-        to_obs, to_target = plane_norths(
-            at[1], at[2], (df["x0_m_true"] + df["vx_m_s_true"] * t).to_numpy(float),
-            (df["y0_m_true"] + df["vy_m_s_true"] * t).to_numpy(float), origin_deg)
-        true["bearing"] = (true["bearing"] - to_obs) % 360.0
-        true["course"] = (true["course"] - to_target) % 360.0
+    if origin_deg is not None:  # read from true north, as the report reads the estimates
+        true["bearing"] = (true["bearing"] - north_at_local(at[1], at[2], origin_deg)) % 360.0
+        true["course"] = (true["course"] - north_at_local(
+            (df["x0_m_true"] + df["vx_m_s_true"] * t).to_numpy(float),
+            (df["y0_m_true"] + df["vy_m_s_true"] * t).to_numpy(float), origin_deg)) % 360.0
     out = report.copy()
     out["truth_mmsi"] = pd.array([int(m) if h else pd.NA for m, h in zip(
         df["mmsi"].to_numpy(), has, strict=True)], dtype="Int64")
