@@ -25,6 +25,7 @@ from tma.families.bearings2d.model import BearingTerms
 from tma.families.bearings2d.ncv import RECORDED_ACCEL_PSD
 from tma.families.bearings2d.platforms import observer_now, reference_index
 from tma.families.bearings2d.status import (
+    MIN_RANGE_M,
     assess,
     noise_fit,
     range_rel_sd,
@@ -325,6 +326,12 @@ class BearingsEstimator(Estimator):
             fit.undetermined = ~(range_rel_sd(fit.theta, jtj_cv, fit.sigma2, t[last],
                                               b.now_x, b.now_y, cfg.singular_rcond)
                                  <= cfg.max_range_rel_sd)
+            if log.accel_psd_m2_s3 is None:  # a recording: an answer collapsed onto own-ship
+                # (a target riding with it fits a straight own-ship's bearings) determines
+                # no range, and its trend test nothing (status.not_an_answer's MIN_RANGE_M)
+                now = fit.theta[:, :2] + fit.theta[:, 2:] * t[last][:, None]
+                fit.undetermined |= np.hypot(now[:, 0] - b.now_x,
+                                             now[:, 1] - b.now_y) < MIN_RANGE_M
             # there no one-sigma error can be given (the prior's would pretend one): the
             # estimate is no answer (status.not_an_answer)
             fit.jtj = np.where(fit.undetermined[:, None, None], np.nan, fit.jtj)
