@@ -212,7 +212,10 @@ def _within(seconds, fn, *args, **kwargs):
                "0.5 s: not a Dask scheduler"),
     ("http", "not a Dask scheduler"),
     ("garbage", "something there answers, but not in Dask's protocol: not a Dask scheduler"),
-    ("closes", "accepts connections but closes them without a Dask handshake"),
+    # (distributed's connect retries a closed connection until the timeout: on a loaded
+    # machine the probe may see the timeout first, which names no scheduler as well)
+    ("closes", ("accepts connections but closes them without a Dask handshake",
+                "accepts connections but sends no Dask handshake within 5 s")),
     ("refused", "(connection refused) after 0.5 s (parallel.connect_timeout)"),
     ("worker", "that is a Dask worker, not the scheduler"),
     ("foo://bar:1", "unknown scheme 'foo://'"),
@@ -233,7 +236,8 @@ def test_a_scheduler_address_where_no_scheduler_answers_is_one_line(tmp_path, cl
                        "parallel=dask", f"parallel.address='{address}'", *timeout, check=False)
     assert proc.returncode == 2, proc.stderr
     assert proc.stderr.startswith(f"error: parallel.address={address}: ")
-    assert proc.stderr.count("\n") == 1 and message in proc.stderr
+    messages = message if isinstance(message, tuple) else (message,)
+    assert proc.stderr.count("\n") == 1 and any(m in proc.stderr for m in messages)
     assert time.monotonic() - t0 < 15
 
 
