@@ -10,13 +10,21 @@ import numpy as np
 from tma.errors import InputError
 
 
-def epochs(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def epochs(t: np.ndarray, platform: np.ndarray | None = None
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(t_s, col, first)`` of the times ``t`` of the values: the epochs (the distinct times,
     increasing), each value's epoch, and each epoch's first value (in the values' order:
-    where a row of a table, say, gives the own-ship of its epoch)."""
+    where a row of a table, say, gives the own-ship of its epoch). ``platform``: each value's
+    platform (ints) of a log of several: an epoch per distinct (time, platform), ordered by
+    time then platform."""
     t = np.asarray(t)
-    order = np.argsort(t, kind="stable")
-    new = np.r_[True, t[order][1:] != t[order][:-1]]
+    if platform is None:
+        order = np.argsort(t, kind="stable")
+        new = np.r_[True, t[order][1:] != t[order][:-1]]
+    else:
+        order = np.lexsort((platform, t))
+        new = np.r_[True, (t[order][1:] != t[order][:-1])
+                    | (platform[order][1:] != platform[order][:-1])]
     col = np.empty(t.size, dtype=np.int64)
     col[order] = np.cumsum(new) - 1
     first = order[new]

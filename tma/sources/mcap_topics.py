@@ -319,9 +319,10 @@ def _platforms(file: RecordedLog, options):
                                  f"{', '.join(NAVIGATION)}")
     elif PLATFORMS in file.metadata:  # tma's own log of several (its names, in order)
         names = platform_names(file.metadata, file.where)
-        nav = [next((t.name for t in file.topics.values() if t.schema == tma_log.OWNSHIP
-                     and _namespace(t.name) == _namespace(platform_namespace(k) + "/_")),
-                    f"{platform_namespace(k)}/navigation") for k in range(len(names))]
+        own = {_namespace(t.name): t.name for t in file.topics.values()
+               if t.schema == tma_log.OWNSHIP}  # by namespace: /platforms/<k>
+        nav = [own.get(tuple(platform_namespace(k).strip("/").split("/")),
+                       f"{platform_namespace(k)}/navigation") for k in range(len(names))]
         for topic in nav:
             file.topic(topic, "the record tma.platforms: the own-ship of")
     else:

@@ -88,66 +88,51 @@ def _file(value, option) -> Path:
     return path
 
 
-def read_recordings(path: Path, fmt, navigation: Path | None, options, own=None):
+def read_recordings(path: Path, fmt, navigation, options, own=None):
     """The input's (and the navigation file's) recordings, each with own-ship and contacts.
-    An option set that neither file's kind reads is refused (``bearing.topic`` on a CSV).
-    ``own``: the truth options when own-ship comes from the AIS (``truth.own_mmsi``,
-    ``tma.ais.ownship``)."""
+    ``navigation``: None, a file, or a list of them, one per platform (each the platform its
+    stem names, unless the file names its own in a platform column), matched to the input's
+    platforms by name. An option set that no file's kind reads is refused (``bearing.topic``
+    on a CSV). ``own``: the truth options when own-ship comes from the AIS
+    (``truth.own_mmsi``, ``tma.ais.ownship``). Returns ``(recordings, kind, navigation's
+    kind or kinds)``."""
+    per_platform = isinstance(navigation, list)
+    navs = navigation if per_platform else [] if navigation is None else [navigation]
     kind = source_kind(path, fmt)
-    kinds = {path: kind}
-    if navigation is not None:
-        kinds[navigation] = source_kind(navigation, "auto", option=None)
+    kinds = {path: kind, **{p: source_kind(p, "auto", option=None) for p in navs}}
     complaint = inapplicable(options, kinds)
     if complaint:
         raise ConfigError(complaint)
     if own is not None:
         from tma.ais.ownship import ownship_recording, source_text
 
-        if navigation is not None:
+        if navs:
             raise ConfigError(f"own-ship comes from navigation={navigation} or from "
                               f"truth.own_mmsi={own.own_mmsi}, not both: give one")
         found = _without_own_ship(path, kind, options, own.own_mmsi)
         nav = [ownship_recording(own, options, found, str(path))]
         return _with_navigation(found, nav, path, source_text(own), options), kind, "ais"
-    if navigation is None:
+    if not navs:
         recordings = read_source(path, kind, options, navigation=True, contacts=True)
         for r in recordings:
             _require(r, path, kind, options)
         return recordings, kind, None
-    nav_kind = kinds[navigation]
     found = read_source(path, kind, options, navigation=False, contacts=True)
-    nav = read_source(navigation, nav_kind, options, navigation=True, contacts=False,
-                      date_hint_ns=_first_utc_ns(found))
-    return _with_navigation(found, nav, path, navigation, options), kind, nav_kind
-
-
-def _platform_files(path: Path, fmt, navigation: list[Path], options, own=None):
-    """``read_recordings`` with one navigation file per platform (``navigation=[a.nmea,
-    b.csv]``): each file's fixes are the platform its stem names (``a``; a file with a
-    platform column, its own names), matched to the input's platforms by name."""
-    if own is not None:
-        raise ConfigError(f"own-ship comes from navigation={[str(p) for p in navigation]} or "
-                          f"from truth.own_mmsi={own.own_mmsi}, not both: give one")
-    kind = source_kind(path, fmt)
-    kinds = {path: kind, **{p: source_kind(p, "auto", option=None) for p in navigation}}
-    complaint = inapplicable(options, kinds)
-    if complaint:
-        raise ConfigError(complaint)
-    found = read_source(path, kind, options, navigation=False, contacts=True)
-    navs = []
-    for p in navigation:
+    nav = []
+    for p in navs:
         recs = read_source(p, kinds[p], options, navigation=True, contacts=False,
                            date_hint_ns=_first_utc_ns(found))
-        if len(recs) == 1 and recs[0].platform is None:
+        if per_platform and len(recs) == 1 and recs[0].platform is None:
             recs[0].platform = p.stem
-        navs += recs
-    where = ", ".join(str(p) for p in navigation)
-    if len(found) == 1 and found[0].platform is None:
+        nav += recs
+    where = ", ".join(str(p) for p in navs)
+    if per_platform and len(found) == 1 and found[0].platform is None:
         raise InputError(f"{path}: one own-ship file per platform (navigation={where}), but "
                          "the input names no platform per row: give it a platform column "
                          "(columns.platform=<column>) whose names are the files' stems")
-    return _with_navigation(found, navs, path, where, options), kind, [kinds[p]
-                                                                       for p in navigation]
+    nav_kinds = [kinds[p] for p in navs]
+    return (_with_navigation(found, nav, path, where, options), kind,
+            nav_kinds if per_platform else nav_kinds[0])
 
 
 def _without_own_ship(path, kind, options, own_mmsi):
@@ -271,18 +256,16 @@ def read_log(input_path, *, family: str, fmt="auto", navigation=None, options=No
     path = _file(input_path, "input")
     own = truth if truth.own_mmsi is not None else None
     if _several(navigation):  # one file per platform
-        nav_paths = [_file(p, "navigation") for p in navigation]
-        recordings, kind, nav_kinds = _platform_files(path, fmt, nav_paths, options, own)
-        nav_path = None
-    else:
-        nav_path = None if navigation is None else _file(navigation, "navigation")
-        recordings, kind, nav_kind = read_recordings(path, fmt, nav_path, options, own)
+        navigation = [_file(p, "navigation") for p in navigation]
+    elif navigation is not None:
+        navigation = _file(navigation, "navigation")
+    recordings, kind, nav_kind = read_recordings(path, fmt, navigation, options, own)
     sources = {"input": {"path": str(path), "sha256": sha256_file(path), "kind": kind}}
-    if _several(navigation):
+    if isinstance(navigation, list):
         sources["navigation"] = [{"path": str(p), "sha256": sha256_file(p), "kind": k}
-                                 for p, k in zip(nav_paths, nav_kinds, strict=True)]
-    elif nav_path is not None:
-        sources["navigation"] = {"path": str(nav_path), "sha256": sha256_file(nav_path),
+                                 for p, k in zip(navigation, nav_kind, strict=True)]
+    elif navigation is not None:
+        sources["navigation"] = {"path": str(navigation), "sha256": sha256_file(navigation),
                                  "kind": nav_kind}
     elif own is not None:  # own-ship from the AIS of the trial (tma.ais.ownship)
         sources["navigation"] = {"path": str(own.file), "sha256": sha256_file(own.file),

@@ -180,15 +180,7 @@ def _grid(t, x, y, track, bearing, ids, sigma, where, platform=None, names=None
     """The (tracks x epochs) bearing array; own-ship at each epoch (equal at equal times).
     Several platforms: an epoch per distinct (time, platform), ordered by time then
     platform, each at its platform's position."""
-    if platform is None:
-        t_s, col, first = epochs(t)
-    else:
-        order = np.lexsort((platform, t))
-        new = np.r_[True, (np.diff(t[order]) != 0) | (np.diff(platform[order]) != 0)]
-        col = np.empty(t.size, dtype=np.int64)
-        col[order] = np.cumsum(new) - 1
-        first = order[new]
-        t_s = t[first]
+    t_s, col, first = epochs(t, platform)
     _, grid = scatter(track, col, bearing, t_s.size, where, "bearings", t_s.__getitem__,
                       track_id=ids)
     return BearingsLog(t_s=t_s, own_x_m=x[first], own_y_m=y[first], track_id=ids,

@@ -374,16 +374,15 @@ def _on_one_grid(parts):
     grid of epochs ordered by time, then platform; the tracks the union of theirs."""
     track_id = np.unique(np.concatenate([p[3] for p in parts]))
     platform = np.concatenate([np.full(p[0].size, k, np.int64) for k, p in enumerate(parts)])
-    t = np.concatenate([p[0] for p in parts])
-    order = np.lexsort((platform, t))
+    t, col, first = epochs(np.concatenate([p[0] for p in parts]), platform)
     grid = np.full((track_id.size, t.size), np.nan)
     start = 0
-    for p in parts:
-        grid[np.searchsorted(track_id, p[3]), start:start + p[0].size] = p[4]
+    for p in parts:  # (a platform's epochs are distinct: one column each)
+        grid[np.searchsorted(track_id, p[3])[:, None], col[start:start + p[0].size]] = p[4]
         start += p[0].size
-    own_x = np.concatenate([p[1] for p in parts])
-    own_y = np.concatenate([p[2] for p in parts])
-    return t[order], own_x[order], own_y[order], track_id, grid[:, order], platform[order]
+    own_x = np.concatenate([p[1] for p in parts])[first]
+    own_y = np.concatenate([p[2] for p in parts])[first]
+    return t, own_x, own_y, track_id, grid, platform[first]
 
 
 def _platform_part(messages: dict, k: int | None, where: str):
