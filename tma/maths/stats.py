@@ -16,6 +16,14 @@ def wilson_interval(successes, n, confidence=0.95):
     return centre - half, centre + half
 
 
+def rate_columns(successes: int, n: int, name: str) -> dict:
+    """A table's rate columns: ``name`` (successes / n; NaN for n = 0) and its 95 % Wilson
+    interval ``<name>_lo``, ``<name>_hi``."""
+    lo, hi = wilson_interval(successes, n)
+    return {name: successes / n if n else np.nan, f"{name}_lo": float(lo),
+            f"{name}_hi": float(hi)}
+
+
 def chi2_mean_interval(n, dof, confidence=0.95):
     """The central ``confidence`` interval of the mean of ``n`` independent chi-square(``dof``)
     draws: their sum is chi-square(n dof), so (chi2.ppf(a, n dof), chi2.ppf(1 - a, n dof)) / n

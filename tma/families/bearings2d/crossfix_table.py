@@ -39,7 +39,7 @@ from tma.families.bearings2d.metrics import (
 )
 from tma.families.bearings2d.platforms import observer_now, position_at
 from tma.maths.angles import bearing_from_north, wrap_to_pi
-from tma.maths.stats import wilson_interval
+from tma.maths.stats import rate_columns
 from tma.tables.write import write_table
 
 COLUMNS = [
@@ -65,11 +65,6 @@ Cramer-Rao bound (RMSE / CRLB: 1 for an efficient estimator; the bound is that o
 constant-velocity target, which wander raises) and the median bound over every track (inf:
 range unobservable from that geometry). 95 % Wilson intervals. Every number is read from the
 run and dataset files under `data/`."""
-
-
-def _rate(k, n, name) -> dict:
-    lo, hi = wilson_interval(k, n)
-    return {name: k / n if n else np.nan, f"{name}_lo": float(lo), f"{name}_hi": float(hi)}
 
 
 def crossing_angles(log, truth: pd.DataFrame) -> np.ndarray:
@@ -137,10 +132,10 @@ def crossfix_row(label, platforms, motion, sigma, estimates, truth, bounds,
            "n_tracks": n,
            "crossing_deg": float(np.nanmedian(crossings)) if np.isfinite(crossings).any()
            else np.nan,
-           **_rate(int(ok.sum()), n, "ok"),
-           **_rate(int((nees <= NEES_95).sum()), int(nees.notna().sum()), "consistent")}
+           **rate_columns(int(ok.sum()), n, "ok"),
+           **rate_columns(int((nees <= NEES_95).sum()), int(nees.notna().sum()), "consistent")}
     for region in REGIONS:
-        row.update(_rate(int(metrics[region].sum()), n, region))
+        row.update(rate_columns(int(metrics[region].sum()), n, region))
     err = errors_now(estimates, truth)
     bound = err[["track_id"]].merge(bounds, on="track_id", how="left",
                                     validate="one_to_one")["crlb_range_m"].to_numpy()

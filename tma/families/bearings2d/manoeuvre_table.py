@@ -42,7 +42,7 @@ from tma.families.bearings2d.metrics import (  # noqa: E402
     errors_now,
     track_metrics,
 )
-from tma.maths.stats import wilson_interval  # noqa: E402
+from tma.maths.stats import rate_columns  # noqa: E402
 from tma.tables.write import (  # noqa: E402
     fixed_layout,
     markdown_table,
@@ -100,11 +100,6 @@ def flagged(estimates: pd.DataFrame) -> np.ndarray:
     return found
 
 
-def _rate(k, n, name) -> dict:
-    lo, hi = wilson_interval(k, n)
-    return {name: k / n if n else np.nan, f"{name}_lo": float(lo), f"{name}_hi": float(hi)}
-
-
 def manoeuvre_row(label, motion, sigma, estimates, truth) -> dict:
     """One table row (``COLUMNS``) from one run's estimates."""
     metrics = track_metrics(estimates, truth)
@@ -114,12 +109,12 @@ def manoeuvre_row(label, motion, sigma, estimates, truth) -> dict:
     moved = (metrics["track_id"].map(truth.set_index("track_id")["manoeuvring"])
              .to_numpy(dtype=bool) if "manoeuvring" in truth else np.zeros(n, dtype=bool))
     row = {"estimator": label, "motion": motion, "sigma_deg": sigma, "n_tracks": n,
-           **_rate(int(flagged(estimates).sum()), n, "flagged"),
-           **_rate(int(ok.sum()), n, "ok"),
-           **_rate(consistent, int(metrics.loc[ok, "nees"].notna().sum()), "consistent"),
-           **_rate(int((ok & ~moved).sum()), int((~moved).sum()), "steady_ok")}
+           **rate_columns(int(flagged(estimates).sum()), n, "flagged"),
+           **rate_columns(int(ok.sum()), n, "ok"),
+           **rate_columns(consistent, int(metrics.loc[ok, "nees"].notna().sum()), "consistent"),
+           **rate_columns(int((ok & ~moved).sum()), int((~moved).sum()), "steady_ok")}
     for region in REGIONS:
-        row.update(_rate(int(metrics[region].sum()), n, region))
+        row.update(rate_columns(int(metrics[region].sum()), n, region))
     err = errors_now(estimates, truth)["range_err_m"].to_numpy()
     finite = np.isfinite(err)
     rel = np.abs(metrics["distance_rel_err"].to_numpy())
@@ -157,7 +152,8 @@ def manoeuvre_tables(entries) -> tuple[pd.DataFrame, pd.DataFrame]:
                 detections.append({"estimator": label, "motion": motion,
                                    "size_lo_deg": SIZE_BINS_DEG[b],
                                    "size_hi_deg": SIZE_BINS_DEG[b + 1], "n": int(sel.sum()),
-                                   **_rate(int(found[sel].sum()), int(sel.sum()), "detected")})
+                                   **rate_columns(int(found[sel].sum()), int(sel.sum()),
+                                                  "detected")})
     table = pd.DataFrame(rows, columns=COLUMNS).sort_values(
         ["estimator", "motion"], kind="stable").reset_index(drop=True)
     return table, pd.DataFrame(detections)
