@@ -73,6 +73,15 @@ Wander
     floor, 1e-7, means "no wander seen over the leg") and the single q (and r) that maximises
     the likelihood of all legs together ("pooled ML").
 
+Clustering (``dispersion``)
+    Whether manoeuvres come as a Poisson process, as the prior of a recording assumes: each
+    run of underway samples is cut into whole 20-minute windows (the span an answer rests on)
+    and the manoeuvre starts in each counted; their variance over their mean is 1 for a
+    Poisson process and above 1 where manoeuvres cluster (Fisher's dispersion test gives the
+    p-value of clustering). And the rate of manoeuvres in the 10 minutes after 20 minutes
+    underway without one: what a target that held course through a window does next
+    (Poisson: the same rate as at any other time).
+
 One report a minute (New York): what it does to these figures (``--check --report-s 60 80``,
 and the Solent ``--thin-s 60`` beside the Solent as recorded; figures in
 ``tests/data/ais_nyharbor/SOURCE.md``). On simulated NCV legs the fit of q stays unbiased but
@@ -114,6 +123,9 @@ FINE_WINDOW_S = 30.0  # mean velocities for the 10-90 % transition time
 FINE_STEP_S = 5.0
 MIN_LEG_S = 300.0
 MAX_LEG_S = 1800.0
+COUNT_WINDOW_S = 1200.0  # dispersion(): windows of manoeuvre counts
+QUIET_S = 1200.0  # dispersion(): a quiet spell this long...
+QUIET_NEXT_S = 600.0  # ...then the manoeuvres of this long after it
 LOG10_Q = np.arange(-7.0, 0.01, 0.25)
 LOG10_R = np.arange(-1.0, 2.51, 0.125)
 
@@ -127,6 +139,7 @@ class Stats:
     underway_h: float = 0.0
     legs: list = field(default_factory=list)  # dicts: mmsi, duration_s, q, r, t, e, n
     manoeuvres: list = field(default_factory=list)  # dicts, see manoeuvres()
+    runs: list = field(default_factory=list)  # (mmsi, start, end, starts): underway runs
 
 
 @njit(error_model="numpy")
@@ -215,6 +228,7 @@ def analyse_segment(track: bc.Track, t0: float, t1: float, stats: Stats) -> None
                    & (np.abs(sa - sb) > np.maximum(SPEED_FRAC * fast, MIN_SPEED_CHANGE_M_S))))
     runs = np.split(np.flatnonzero(changing), np.flatnonzero(np.diff(np.flatnonzero(changing)) > 1)
                     + 1) if changing.any() else []
+    first_moving = len(stats.manoeuvres)
     cut = np.zeros(len(t), dtype=bool)  # samples inside a manoeuvre's span
     for run in runs:
         tf, tl = t[run[0]], t[run[-1]]
@@ -222,6 +236,7 @@ def analyse_segment(track: bc.Track, t0: float, t1: float, stats: Stats) -> None
         if not underway[run].any():
             continue
         stats.manoeuvres.append(_manoeuvre(track, tf, tl))
+    _underway_runs(track.mmsi, t, underway, stats, first_moving)
     # legs: underway, outside every manoeuvre span, long enough
     good = underway & ~cut
     for run in np.split(np.flatnonzero(good), np.flatnonzero(np.diff(np.flatnonzero(good)) > 1)
@@ -232,6 +247,53 @@ def analyse_segment(track: bc.Track, t0: float, t1: float, stats: Stats) -> None
             pa, pb = a + k * (b - a) / n_pieces, a + (k + 1) * (b - a) / n_pieces
             if pb - pa >= MIN_LEG_S:
                 stats.legs.append(_leg(track, pa, pb))
+
+
+def _underway_runs(mmsi, t, underway, stats: Stats, first: int) -> None:
+    """The segment's runs of underway samples (each sample standing for ``SAMPLE_S``), with
+    the starts of the manoeuvres (from ``stats.manoeuvres[first:]``, those underway before or
+    after: not short trips) that fall in each: what ``dispersion`` counts."""
+    starts = np.sort([m["t_first"] for m in stats.manoeuvres[first:]
+                      if max(m["speed_before_m_s"], m["speed_after_m_s"]) >= MIN_SPEED_M_S])
+    idx = np.flatnonzero(underway)
+    for run in np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1) if idx.size else []:
+        a, b = t[run[0]] - SAMPLE_S / 2, t[run[-1]] + SAMPLE_S / 2
+        stats.runs.append((mmsi, a, b, starts[(starts >= a) & (starts < b)]))
+
+
+def dispersion(s: Stats) -> dict:
+    """Whether manoeuvres come as a Poisson process, the form of the prior a recording gets
+    (``manoeuvre_prior``): the underway runs cut into whole windows of ``COUNT_WINDOW_S`` (20
+    minutes, the span an answer rests on), the manoeuvres starting in each counted; their
+    variance over their mean (Poisson: 1; more: manoeuvres cluster, some windows busy and
+    others quiet) with the p-value of Fisher's dispersion test (the sum of (n - mean)^2 /
+    mean, chi-square with windows - 1 degrees of freedom) for clustering; and the rate of
+    manoeuvres in the ``QUIET_NEXT_S`` (10 minutes) after ``QUIET_S`` (20 minutes) underway
+    without one (Poisson: the same as any other time), which is what the prior says of a
+    target that held course through a window."""
+    from scipy.stats import chi2
+
+    counts, quiet_n, quiet_s = [], 0, 0.0
+    for _, a, b, starts in s.runs:
+        for k in range(int((b - a) // COUNT_WINDOW_S)):
+            lo = a + k * COUNT_WINDOW_S
+            counts.append(int(np.sum((starts >= lo) & (starts < lo + COUNT_WINDOW_S))))
+        edges = np.r_[a, starts, b]
+        for g0, g1 in zip(edges[:-1], edges[1:], strict=True):
+            if g1 - g0 > QUIET_S:  # quiet from g0 for QUIET_S: watch the next QUIET_NEXT_S
+                quiet_s += min(g1 - g0 - QUIET_S, QUIET_NEXT_S)
+                quiet_n += int(g1 < b and g1 - g0 - QUIET_S <= QUIET_NEXT_S)
+    c = np.asarray(counts, dtype=float)
+    out = {"20-min windows underway": c.size}
+    if c.size > 1 and c.mean() > 0:
+        out["manoeuvres per window, mean"] = c.mean()
+        out["  variance / mean (Poisson 1)"] = c.var(ddof=1) / c.mean()
+        out["  dispersion test p (clustered)"] = float(
+            chi2.sf(np.sum((c - c.mean()) ** 2) / c.mean(), c.size - 1))
+    out["after 20 quiet min: manoeuvres"] = quiet_n
+    out["  in hours watched"] = quiet_s / 3600.0
+    out["  per h"] = quiet_n / (quiet_s / 3600.0) if quiet_s else np.nan
+    return out
 
 
 def _manoeuvre(track: bc.Track, tf: float, tl: float) -> dict:
@@ -284,6 +346,7 @@ def pool(parts: list[Stats]) -> Stats:
         out.underway_h += p.underway_h
         out.legs += p.legs
         out.manoeuvres += p.manoeuvres
+        out.runs += p.runs
     return out
 
 
@@ -336,6 +399,7 @@ def summarise(s: Stats) -> dict:
         out["turn rate p90 deg/s"] = _pct(m["turn_rate_deg_s"], 90)
         out["|dv| median m/s"] = _pct(m["dv_m_s"], 50)
         out["|dv| RMS per axis m/s"] = float(np.sqrt(np.mean(m["dv_m_s"] ** 2) / 2.0))
+    out.update(dispersion(s))
     return out
 
 

@@ -100,3 +100,29 @@ def test_the_wander_fit_holds_at_one_report_a_minute():
         legs = ms.simulate_legs(rng, q, r, (60.0, 80.0), 13)
         lq, _ = ms.fit_ncv(legs)
         assert abs(lq - np.log10(q)) < np.log10(1.25), (q, 10 ** lq)
+
+
+def test_the_dispersion_of_manoeuvres_tells_poisson_from_clustered():
+    """``motion_stats.dispersion`` on simulated underway runs of 2 hours: manoeuvres as a
+    Poisson process at 9 an hour give a variance over mean near 1, no clustering found, and
+    the same rate after a quiet spell; the same mean rate in runs that are busy (18 an hour)
+    or quiet (none) is found clustered."""
+    ms = _load("motion_stats")
+    rng = np.random.default_rng(np.random.SeedSequence(20161112))
+
+    def runs(rates_per_h):
+        out = []
+        for k, rate in enumerate(rates_per_h):
+            n = rng.poisson(rate * 2.0)
+            out.append((k, 0.0, 7200.0, np.sort(rng.uniform(0.0, 7200.0, n))))
+        return out
+
+    poisson = ms.dispersion(ms.Stats("poisson", runs=runs([9.0] * 200)))
+    assert 0.85 < poisson["  variance / mean (Poisson 1)"] < 1.15, poisson
+    assert poisson["  dispersion test p (clustered)"] > 1e-3, poisson
+    assert poisson["20-min windows underway"] == 200 * 6
+    assert 6.0 < poisson["  per h"] < 12.0, poisson  # memoryless: 9 an hour still
+    clustered = ms.dispersion(ms.Stats("clustered", runs=runs([18.0, 0.0] * 100)))
+    assert clustered["  variance / mean (Poisson 1)"] > 2.0, clustered
+    assert clustered["  dispersion test p (clustered)"] < 1e-6, clustered
+    assert clustered["  per h"] < 2.0, clustered  # a quiet spell: a quiet run, mostly
