@@ -8,6 +8,7 @@ import pandas as pd
 import pytest
 
 from tma.families import build_estimator
+from tma.families.bearings2d.marquardt import STOP_MAX_ITER
 from tma.families.bearings2d.metrics import NEES_95, track_metrics
 from tma.families.bearings2d.scenario import (
     Config,
@@ -227,3 +228,16 @@ def test_the_manoeuvre_prior_options():
         both = np.isfinite(a["range_sd_m"]) & np.isfinite(b["range_sd_m"])
         assert both.sum() >= 10, other
         assert np.median(np.abs(b["range_sd_m"][both] / a["range_sd_m"][both] - 1)) > 0.01, other
+
+
+def test_an_answer_that_follows_the_motion_is_judged_by_its_own_convergence():
+    """With manoeuvres in the prior the answer is the mixture's, which the constant-velocity
+    fit only starts: a start stopped at max_iter (one step here; on a log of hours, a target
+    that manoeuvred throughout) is no ``not_converged`` answer where the mixture converged,
+    and the mixture from that poorer start still answers most tracks."""
+    log, _ = _manoeuvring(n=40, seed=5, accel_psd=1e-4)
+    full = _estimate(log, "lm")
+    one_step = _estimate(log, "lm", max_iter=1)
+    assert (one_step.stop_reason == STOP_MAX_ITER).all()  # every start stopped short
+    assert not (one_step.status == "not_converged").any(), one_step.status.value_counts()
+    assert (one_step.status == full.status).mean() >= 0.5, (one_step.status, full.status)

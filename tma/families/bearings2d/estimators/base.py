@@ -313,8 +313,11 @@ class BearingsEstimator(Estimator):
                     for v in (fit.theta, fit.cost, fit.jtj, fit.sigma2, fit.fit_p))
                 (fit.theta[rows], fit.cost[rows], fit.jtj[rows], fit.sigma2[rows],
                  fit.fit_p[rows]) = self._followed(motion_fit, b.sigma_deg, fit.fit_p[rows])
+                # the answer is the motion fit's: its own convergence (the constant-
+                # velocity start over the whole log may stop at max_iter on a target that
+                # manoeuvred for hours, and only starts it)
                 fit.converged = fit.converged.copy()
-                fit.converged[rows] &= motion_fit.passes >= 0
+                fit.converged[rows] = motion_fit.passes >= 0
         if test:
             fit.motion_p = np.where(fit.tested,
                                     trend_test_p(innovations, t, cfg.motion_terms), np.nan)
