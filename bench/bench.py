@@ -106,6 +106,7 @@ from tma.families.bearings2d.estimators.lm import initial_theta
 from tma.families.bearings2d.model import bearing_jacobian, bearing_residuals
 from tma.families.bearings2d.scenario import Config, simulate_shard
 from tma.io.mcap_writer import Ragged
+from tma.maths.stats import wilson_interval
 from tma.runtime.forkserver import keep_freed_memory
 
 REPO = Path(__file__).resolve().parents[1]
@@ -305,6 +306,7 @@ from tma.families import build_estimator
 from tma.families.bearings2d.model import BearingTerms
 from tma.families.bearings2d.scenario import Config, simulate_shard
 from tma.io.mcap_writer import Ragged
+from tma.maths.stats import wilson_interval
 from tma.families.ranges2d.bisection import BisectionDensity
 from tma.families.ranges2d.model import RangeModel
 from tma.families.bearing_doppler3d.model import AuvModel, model_record
@@ -784,8 +786,7 @@ GHOST_NEES = 100.0  # a 4D NEES above this is a confident ghost (issue 36, item 
 
 
 def _share(k: int, n: int) -> str:
-    from tma.maths.stats import wilson_interval
-
+    """k of n as a percentage with its 95 % Wilson interval."""
     if n == 0:
         return "- of 0"
     lo, hi = wilson_interval(k, n)
