@@ -241,3 +241,29 @@ def test_an_answer_that_follows_the_motion_is_judged_by_its_own_convergence():
     assert (one_step.stop_reason == STOP_MAX_ITER).all()  # every start stopped short
     assert not (one_step.status == "not_converged").any(), one_step.status.value_counts()
     assert (one_step.status == full.status).mean() >= 0.5, (one_step.status, full.status)
+
+
+def test_last_leg_rests_on_the_span_lm_answers_from():
+    """On a log of an hour under a recording's prior (manoeuvres not declared), ``last_leg``
+    seeks legs only within the window ``lm``'s answer rests on (``manoeuvres.window_s``): no
+    leg starts before it, and where ``lm``'s answer passes the trend test the two agree."""
+    import tma
+    from tma.families.bearings2d.manoeuvre_prior import RECORDED_MANOEUVRES, window_s
+
+    legs = [{"course_deg": 45.0 if k % 2 == 0 else 135.0, "duration_s": 720.0}
+            for k in range(5)]
+    ds = tma.simulate("bearings2d", n_tracks=16, sigma_deg=0.5, sample_period_s=10.0, seed=3,
+                      population={"distance_min_m": 5000.0, "distance_max_m": 15000.0,
+                                  "speed_min_m_s": 3.0, "speed_max_m_s": 6.0},
+                      observer={"legs": legs},
+                      target={"accel_psd_m2_s3": 1e-3, "manoeuvres": {"rate_per_h": 10.0},
+                              "declared": False})
+    lm, last_leg = tma.estimate(ds, "lm"), tma.estimate(ds, "last_leg")
+    window = window_s(RECORDED_MANOEUVRES)
+    assert (last_leg.t_now_s - last_leg.leg_start_s <= window + 1e-6).all(), last_leg.leg_start_s
+    assert (lm.t_now_s - lm.leg_start_s <= window + 1e-6).all()
+    same = (lm.motion_p_value >= 1e-3).to_numpy()  # (estimator.motion_alpha)
+    assert same.sum() >= 8, lm.motion_p_value
+    for column in ("status", "range_now_m", "bearing_now_deg", "leg_start_s"):
+        np.testing.assert_array_equal(last_leg[column].to_numpy()[same],
+                                      lm[column].to_numpy()[same], err_msg=column)

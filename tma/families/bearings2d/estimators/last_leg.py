@@ -19,6 +19,8 @@ followed here:
 3. The bearings from tau are the candidate last leg. If they fail the trend test in turn
    (tau fell within a turn, or an earlier manoeuvre was found first) step 2 is repeated on
    them, up to ``max_rounds`` times.
+   With manoeuvres in the prior, all of this is within the span ``lm``'s answer rests on
+   (``manoeuvres.window_s``: the last 20 minutes of a recording).
 4. The leg's solution is ``lm``'s on the leg's bearings alone (``bearings_used``), with
    every output column, its status and its one-sigma errors referring to that leg:
    ``leg_start_s`` is its first bearing, and a leg the own-ship did not manoeuvre during is
@@ -74,6 +76,12 @@ class LastLeg(LevenbergMarquardt):
         out = self.fit(bearings)
         n, K = measured_rad.shape
         present = np.ones((n, K), dtype=bool) if valid is None else valid
+        if prior is not None and motion.moving and self.models_motion:
+            # as lm's answer, the legs rest on the recent past where the mixture weighs the
+            # manoeuvres (manoeuvres.window_s): a log of hours costs what its window does
+            start = np.searchsorted(t, t[bearings.last] - manoeuvres.window_s(prior),
+                                    side="left")
+            present = present & (np.arange(K)[None, :] >= start[:, None])
         used = present.copy()
         rounds = np.zeros(n, dtype=np.int64)
         todo = np.arange(0) if self.config.motion_test == "off" else np.flatnonzero(
