@@ -305,13 +305,21 @@ def zone_problem(value) -> str | None:
     return None
 
 
+YEAR_DIRECTIVES = ("%Y", "%y", "%G", "%c", "%x")  # strptime's directives that give a year
+
+
 def pattern_problem(value) -> str | None:
     """What is wrong with a ``time.format`` pattern: one that formats a date back as itself
-    (no % directive) or that strftime cannot write."""
+    (no % directive), that strftime cannot write, or that gives no year (the time of day
+    alone)."""
     try:
         datetime(2001, 2, 3, 4, 5, 6).strftime(str(value))
     except ValueError as exc:
         return f"not a strptime pattern ({exc})"
+    if not any(d in str(value) for d in YEAR_DIRECTIVES):
+        return ("no year in it: strptime reads such times as on 1900-01-01, and a clock of "
+                "the time of day wraps at midnight; write each time with its date and give "
+                "the pattern of both ('%Y-%m-%d %H:%M:%S')")
     return None
 
 

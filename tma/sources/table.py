@@ -33,6 +33,7 @@ MAX_TRACK_ID = 2**53  # an id written as a larger integer is kept as text
 NAMED_ALIKE = 3  # groups of alike ids named in the warning
 INTEGER_ID = re.compile(r"-?(?:0|[1-9][0-9]{0,15})")  # an id written as a plain integer
 SAME_FIX = {"x": 1e-6, "lat": 1e-9}  # m, deg (0.1 mm): rows at one time share one own-ship
+MIDNIGHT_DROP_S = (43200.0, 86400.0)  # times that go back by this much: a midnight wrap
 
 
 def read_table(table, options, *, navigation: bool, contacts: bool) -> list[Recording]:
@@ -321,10 +322,22 @@ def _check_increasing(t, track, col, path, line, hint="", zone=None, epoch_ns=No
     if bad.any():
         k = int(np.argmax(bad))
         kind = "duplicate" if ts[k + 1] == ts[k] else "non-increasing"
-        back = _clocks_back(ts[k], ts[k + 1], zone, epoch_ns)
+        back = _clocks_back(ts[k], ts[k + 1], zone, epoch_ns) or _midnight(ts[k], ts[k + 1])
         raise InputError(f"{path}: {kind} {col} for track {track[order[k + 1]]} on line "
                          f"{line[order[k + 1]]} ({col} must increase within a track)"
                          f"{back or hint}")
+
+
+def _midnight(before_s, after_s) -> str:
+    """What to say when times go back by half a day to a day (a clock of the time of day,
+    seconds of the day or hh:mm:ss without a date, wrapping at midnight); else ""."""
+    drop = before_s - after_s
+    if not MIDNIGHT_DROP_S[0] <= drop <= MIDNIGHT_DROP_S[1]:
+        return ""
+    return (f"; the times go back by {drop / 3600:.1f} h there: a clock of the time of day "
+            "wraps at midnight, and the times carry no date to tell the days apart. Write "
+            "each time with its date (2024-05-01T23:59:50Z, or a time.format pattern with "
+            "%Y-%m-%d), or cut the log at midnight")
 
 
 def _clocks_back(before_s, after_s, zone, epoch_ns) -> str:

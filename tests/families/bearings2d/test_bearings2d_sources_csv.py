@@ -251,6 +251,9 @@ REFUSED = {
                        r"3\)"),
     "duplicate label time": ("time_s,x,y,bearing_deg,track\n0,0,0,1,T1\n1,0,0,2,T1\n"
                              "1,0,0,3,T1\n", {}, r"duplicate time_s for track T1 on line 4"),
+    "midnight wrap": ("time_s,x,y,bearing_deg\n86380,0,0,1\n86390,0,0,2\n0,0,0,3\n", {},
+                      r"non-increasing time_s for track .* on line 4 .* go back by 24.0 h "
+                      r"there: a clock of the time of day wraps at midnight.* with its date"),
     "not utf8": (b"time_s,x,y,bearing_deg\n0,0,0,1\n\xff\xfe,0,0,1\n", {},
                  r"not UTF-8 text"),
     "header only": ("time_s,x,y,bearing_deg\n", {}, r"no rows"),
@@ -320,3 +323,18 @@ def test_times_ending_in_utc_are_utc(tmp_path):
     assert one.contacts.epoch_utc_ns == EPOCH_NS + 500_000_000
     np.testing.assert_allclose(one.contacts.t_s, [0.0, 1.0, 2.0])
     assert any("' UTC' read as the zone Z" in n for n in one.notes)
+
+
+def test_a_time_pattern_without_a_year_is_refused_with_a_pattern_that_works(tmp_path):
+    """A clock of the time of day alone (strptime reads it as on 1900-01-01, and it wraps
+    at midnight) is refused in one line naming a pattern with the date, which reads."""
+    text = "time,lat,lon,bearing_deg\n{},59.9,10.7,10\n{},59.9,10.71,11\n{},59.9,10.72,12\n"
+    clock = tmp_path / "clock.csv"
+    clock.write_text(text.format("23:59:50", "00:00:00", "00:00:10"))
+    with pytest.raises((InputError, ValueError), match=r"no year in it.*'%Y-%m-%d %H:%M:%S'"):
+        _read(clock, time={"format": "%H:%M:%S", "zone": "UTC"})
+    dated = tmp_path / "dated.csv"
+    dated.write_text(text.format("2025-09-14 23:59:50", "2025-09-15 00:00:00",
+                                 "2025-09-15 00:00:10"))
+    (one,) = _read(dated, time={"format": "%Y-%m-%d %H:%M:%S", "zone": "UTC"})
+    np.testing.assert_allclose(one.contacts.t_s, [0.0, 10.0, 20.0])

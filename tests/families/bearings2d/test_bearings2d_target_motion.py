@@ -149,3 +149,17 @@ def test_the_truth_counts_the_manoeuvres_started_within_the_observation():
     assert abs(counts.mean() - mean) <= 4 * np.sqrt(mean / counts.size)
     assert abs(counts.var() - mean) <= 4 * mean * np.sqrt(2.0 / counts.size) + 0.1
     assert ((counts > 0) == poisson.to_pandas().manoeuvring).all()
+
+
+@pytest.mark.parametrize("hours", [0.5, 6.0])
+def test_poisson_manoeuvres_keep_their_rate_on_logs_of_hours(hours):
+    """At ten an hour, a run of 30 minutes and one of 6 hours make rate x duration
+    manoeuvres per target on average, with a Poisson variance (none cut off: 6 hours expect
+    60, twice the slots a short run needs)."""
+    n = 4000
+    plan = manoeuvre_plan(ManoeuvreConfig(rate_per_h=10.0), hours * 3600.0,
+                          np.full(n, 5.0), np.random.default_rng(np.random.SeedSequence(6)))
+    count = (plan["turn"] != 0).sum(axis=0)
+    mean = 10.0 * hours
+    assert abs(count.mean() - mean) < 4 * np.sqrt(mean / n), count.mean()
+    assert abs(count.var() / mean - 1) < 0.1, count.var()

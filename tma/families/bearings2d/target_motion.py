@@ -6,8 +6,9 @@ both on top of the scenario's constant-velocity target.
 Manoeuvres (``ManoeuvreConfig``): a share ``prob`` of the targets manoeuvre ``count`` times,
 each starting at a time drawn uniform over [``start_frac``, ``end_frac``] of the observation;
 or (``rate_per_h`` > 0) every target manoeuvres at the times of a Poisson process of that
-rate over the whole observation (at most ``MAX_POISSON`` times: a Poisson count given, its
-times are uniform). Start times are sorted; one that would start before the previous has
+rate over the whole observation (a Poisson count given, its times are uniform; counts are
+drawn with room for all but a ``MISSED_POISSON`` tail, at least ``MAX_POISSON``). Start
+times are sorted; one that would start before the previous has
 ended starts when it ends. Each turns by an angle uniform in [``course_change_min_deg``,
 ``course_change_max_deg``],
 left or right alike, at a rate uniform in [``turn_rate_min_deg_s``,
@@ -37,13 +38,15 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import poisson
 
 from tma.config import param, require
 from tma.families.bearings2d.manoeuvre_prior import ManoeuvrePrior
 
 MANOEUVRE_STREAM, WANDER_STREAM = 2, 3  # spawn-key elements under the shard's (shard,)
 DURATIONS = 3  # a declared prior's durations: the means of the thirds of their distribution
-MAX_POISSON = 30  # Poisson manoeuvres per target at most (P(more) < 1e-9 below 10 per run)
+MAX_POISSON = 30  # Poisson manoeuvres per target at least room for (P(more) < 1e-9 below
+MISSED_POISSON = 1e-9  # 10 per run); longer runs get room for all but this tail probability
 GAUSS_NODES = (0.5 - np.sqrt(15) / 10, 0.5, 0.5 + np.sqrt(15) / 10)  # on [0, 1]
 GAUSS_WEIGHTS = (5 / 18, 8 / 18, 5 / 18)
 
@@ -154,8 +157,11 @@ def manoeuvre_plan(cfg: ManoeuvreConfig, duration_s, speed0, rng):
     and the index of its last manoeuvre (n,; 0 where none)."""
     n = speed0.size
     if cfg.rate_per_h > 0:
-        slots = MAX_POISSON
-        count = np.minimum(rng.poisson(cfg.rate_per_h / 3600.0 * duration_s, n), slots)
+        mean = cfg.rate_per_h / 3600.0 * duration_s
+        # room for every count but a 1e-9 tail (a log of hours at ten an hour needs more
+        # than MAX_POISSON; the same slots, and so the same draws, below it)
+        slots = max(MAX_POISSON, int(poisson.isf(MISSED_POISSON, mean)) + 1)
+        count = np.minimum(rng.poisson(mean, n), slots)
         active = np.arange(slots)[:, None] < count
         times = np.sort(np.where(active, rng.uniform(0.0, duration_s, (slots, n)), np.inf),
                         axis=0)
