@@ -68,8 +68,10 @@
     and ``last_leg``: per duration the status shares, the share flagged ``poor_fit`` or
     ``manoeuvring`` (issue 36: at most 5 %), the ``ok`` tracks, their consistency (4D NEES
     within the chi-square(4) 95 % point; target 88-98 %) and those with a NEES above 100
-    (ghosts: none), each share with its 95 % Wilson interval, the span the answer rests on and
-    the CPU time per track.
+    (ghosts: none), the ``position_only`` answers' range within 2 sd (their position now is
+    promised), each share with its 95 % Wilson interval, the span the answer rests on and
+    the CPU time per track; and how far the targets are at the end (they wander off over
+    hours).
 
 Options: ``--tracks N`` (2000), ``--sigma DEG`` (0.5), ``--runs N`` (30), ``--skip-tables``,
 ``--skip-first-table``, ``--only SECTION`` (lm, tables, ranges2d, filters3d, cmnf, compile,
@@ -812,6 +814,13 @@ def bench_long_logs(n_tracks: int, sigma_deg: float):
                           population=LONG_POPULATION,
                           observer={"legs": zigzag_legs(60.0 * minutes)},
                           target={**MANOEUVRING, "declared": False})
+        log, truth = ds.logs[0], ds.truth  # (every shard: the same own-ship and times)
+        t_end = log.t_s[-1]
+        away = np.hypot(truth.x0_m + truth.vx_m_s * t_end - log.own_x_m[-1],
+                        truth.y0_m + truth.vy_m_s * t_end - log.own_y_m[-1])
+        print(f"    {minutes:3d} min: the targets at the end {np.median(away) / 1e3:.0f} km "
+              f"away (median; 5-95 % {np.percentile(away, 5) / 1e3:.0f}-"
+              f"{np.percentile(away, 95) / 1e3:.0f} km)")
         for estimator in ("lm", "last_leg"):
             r, cpu, _ = timed(tma.estimate, ds, estimator)
             status = r.status.to_numpy()
@@ -821,10 +830,15 @@ def bench_long_logs(n_tracks: int, sigma_deg: float):
             ok = status == "ok"
             nees = r.nees.to_numpy()[ok]
             span = (r.t_now_s - r.leg_start_s).to_numpy()
+            only = status == "position_only"  # its position now is promised: range z
+            z = (r.distance_rel_err / (1 + r.distance_rel_err) * r.range_now_m
+                 / r.range_sd_m).to_numpy()[only]
             print(f"    {minutes:3d} min, {estimator:8s}: {counts}; flagged "
                   f"{_share(flagged, status.size)}; ok consistent "
                   f"{_share(int((nees <= consistent_nees).sum()), int(ok.sum()))}, ghosts "
-                  f"(NEES > {GHOST_NEES:g}) {int((nees > GHOST_NEES).sum())}; the answer "
+                  f"(NEES > {GHOST_NEES:g}) {int((nees > GHOST_NEES).sum())}; position_only"
+                  f" range within 2 sd {_share(int((np.abs(z) <= 2).sum()), int(only.sum()))}"
+                  f"; the answer "
                   f"rests on the last {np.nanmedian(span) / 60:.0f} min (median); "
                   f"{1e3 * cpu / n_tracks:.0f} ms CPU per track")
 

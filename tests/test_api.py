@@ -217,7 +217,7 @@ def test_results_show_no_number_that_is_not_an_answer(tmp_path):
     assert found["note"].str.contains("the estimate is not shown").all()
     figure = tma.plot_contact(found, rec, "S1")
     assert "no estimate shown" in figure.axes[0].get_title()
-    assert line_data(figure, "estimated track")[0].size == 0
+    assert line_data(figure, "estimated")[0].size == 0
     from tests.conftest import plain_messages
     topics = {ch.topic for ch, _, _ in plain_messages(tma.write_map(found, rec,
                                                                     tmp_path / "m.mcap"))}

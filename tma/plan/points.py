@@ -174,6 +174,10 @@ def checked_estimator_configs(estimator: dict, estimators: dict | None,
 _PLAIN_VALUE = re.compile(r"[\w./@:+-]+", re.ASCII)  # Hydra reads only ASCII unquoted
 
 
+_HYDRA_TYPED = re.compile(r"[+-]?(?:[\d_]+\.?[\d_]*|\.[\d_]+)(?:[eE][+-]?[\d_]+)?"
+                          r"|[+-]?(?:inf|nan)|true|false|null", re.IGNORECASE)
+
+
 def override_text(key: str, value) -> str:
     """``key=value`` as the command line takes it: null, true/false, numbers, lists and
     mappings as Hydra writes them; text quoted when it holds anything but letters, digits and
@@ -189,10 +193,9 @@ def _value_text(value) -> str:
     if isinstance(value, dict):
         return "{" + ",".join(f"{k}:{_value_text(v)}" for k, v in value.items()) + "}"
     text = str(value)
-    try:
-        typed = json.loads(text) is not None or text == "null"
-    except ValueError:
-        typed = text.lower() in ("true", "false", "nan", "inf", "-inf")
+    # a text Hydra would read unquoted as a number, bool or null (+0, 1_000, 1e3, .5, INF,
+    # True, NULL): quoted (quoting more than needed is harmless)
+    typed = _HYDRA_TYPED.fullmatch(text) is not None
     if _PLAIN_VALUE.fullmatch(text) and not typed:
         return text
     # Hydra's quoted text: backslashes doubled before a quote or at the end, quotes escaped;

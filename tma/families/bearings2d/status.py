@@ -28,7 +28,8 @@ course and speed at each track's last bearing ("now") by their Jacobians (delta 
   largest eigenvalue <= ``singular_rcond``), or range_sd / range > ``max_range_rel_sd``
   (range is not determined well enough to use: no own-ship manoeuvre, a target too far
   away, too much unmodelled target motion), or the trend test was due but too few bearings
-  remain to run it (the motion cannot be checked);
+  remain to run it (the motion cannot be checked); with range, the velocity is not
+  determined: every output leaves its course and speed blank (``HEADING_UNDETERMINED``);
 - ``approximate``: the fit passed every test, but its one-sigma errors are not honest by
   construction: the estimator is biased (``nbearings``), or it assumes a constant-velocity
   target where the log's targets are not known to move so (``accel_psd`` > 0);
@@ -63,8 +64,10 @@ from tma.runtime.jit import njit
 # (in the order of the tables' columns; the rules' order is in the module docstring)
 STATUSES = ("ok", "not_converged", "poor_fit", "unobservable", "manoeuvring", "approximate",
             "position_only")
-# the statuses whose course and speed are no answer: every output leaves them blank
-HEADING_UNDETERMINED = ("position_only",)
+# the statuses whose course and speed are no answer: every output leaves them blank (an
+# unobservable answer's range is not determined, and with it neither is its velocity: its
+# linearised course error can read 2 deg where the course is 120 deg off)
+HEADING_UNDETERMINED = ("position_only", "unobservable")
 
 
 def heading_undetermined(status) -> np.ndarray:

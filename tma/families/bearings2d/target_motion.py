@@ -38,7 +38,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import poisson
 
 from tma.config import param, require
 from tma.families.bearings2d.manoeuvre_prior import ManoeuvrePrior
@@ -157,6 +156,8 @@ def manoeuvre_plan(cfg: ManoeuvreConfig, duration_s, speed0, rng):
     and the index of its last manoeuvre (n,; 0 where none)."""
     n = speed0.size
     if cfg.rate_per_h > 0:
+        from scipy.stats import poisson  # (only where simulated: heavy for every command)
+
         mean = cfg.rate_per_h / 3600.0 * duration_s
         # room for every count but a 1e-9 tail (a log of hours at ten an hour needs more
         # than MAX_POISSON; the same slots, and so the same draws, below it)

@@ -87,7 +87,7 @@ def status_note(report: pd.DataFrame, stop_reason=None, sigma_known=True) -> lis
         elif status == "manoeuvring":
             note = (f"the residuals drift (trend test p = {row.motion_p_value:.1e}): the "
                     "target did not move as assumed (a manoeuvre?); `estimator=last_leg` "
-                    "solves its last leg")
+                    "solves its last leg (its range only if own-ship manoeuvred since)")
         elif status == "not_converged":
             note = (NOT_CONVERGED.get(stop, SINGULAR) if stop is not None else
                     "the estimator stopped before converging")
@@ -99,7 +99,7 @@ def status_note(report: pd.DataFrame, stop_reason=None, sigma_known=True) -> lis
             note = ((f"range sd {row.range_sd_m / row.range_now_m:.0%} of the range: "
                      if np.isfinite(row.range_sd_m) else "range ") +
                     "not determined from this geometry (no own-ship manoeuvre? target too "
-                    "far? too much target motion?)")
+                    "far? too much target motion?)" + _resting_on(row))
         elif status == "approximate":
             note = ("the estimator's one-sigma errors are not honest here: it is biased "
                     "(nbearings) or assumes a constant-velocity target while this log's "
@@ -108,6 +108,17 @@ def status_note(report: pd.DataFrame, stop_reason=None, sigma_known=True) -> lis
             note = ""
         notes.append(note)
     return notes
+
+
+def _resting_on(row) -> str:
+    """Where an answer rests on the recent part of its bearings (``leg_start_s`` after the
+    log's start: a target that may manoeuvre, or a last leg), that only own-ship's motion
+    within it can determine the range: a longer log cannot."""
+    span = row.t_now_s - row.leg_start_s
+    if not (row.leg_start_s > 0 and np.isfinite(span)):
+        return ""
+    return (f"; the answer rests on the last {span / 60:.0f} min of bearings (leg_start_s): "
+            "an own-ship manoeuvre within them can give the range, earlier bearings cannot")
 
 
 # what a report shows of an estimate: blank, all of it, where it is no answer
