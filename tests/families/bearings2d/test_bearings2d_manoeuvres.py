@@ -262,6 +262,12 @@ def test_last_leg_rests_on_the_span_lm_answers_from():
     window = window_s(RECORDED_MANOEUVRES)
     assert (last_leg.t_now_s - last_leg.leg_start_s <= window + 1e-6).all(), last_leg.leg_start_s
     assert (lm.t_now_s - lm.leg_start_s <= window + 1e-6).all()
+    # an unobservable answer says that only own-ship's motion within its span can help, and
+    # shows no course or speed (nor its range determined, its velocity)
+    unobservable = lm[lm.status == "unobservable"]
+    assert len(unobservable) >= 1, lm.status.value_counts()
+    assert unobservable.note.str.contains("the answer rests on the last 20 min of bearings").all()
+    assert unobservable.course_deg.isna().all() and unobservable.speed_m_s.isna().all()
     same = (lm.motion_p_value >= 1e-3).to_numpy()  # (estimator.motion_alpha)
     assert same.sum() >= 8, lm.motion_p_value
     for column in ("status", "range_now_m", "bearing_now_deg", "leg_start_s"):
