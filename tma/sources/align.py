@@ -15,7 +15,9 @@
 - Own-ship at each value: linear interpolation between fixes; a value up to
   ``nav.max_extrapolation_s`` outside the fixes' span is extrapolated from the end segment,
   one further out is dropped and counted. Gaps between fixes longer than ``nav.max_gap_s``
-  are reported (values inside are interpolated across them).
+  are reported (values inside are interpolated across them); values inside a gap longer
+  than ``nav.max_bridge_s`` (at least ``nav.max_gap_s``) are dropped and counted: own-ship's
+  track across it is unknown (it may have turned), and a straight line would be made up.
 - Text track labels become ids 0..n-1 in sorted label order (``Aligned.labels``, and the
   summary); a note says how each one unsafe for file names or Markdown is shown
   (``tma.sources.labels``).
@@ -105,7 +107,9 @@ def align(recordings: list[Recording], options, where: str) -> Aligned:
     if observation.guard is not None:
         observation.guard(recordings, options, where)
 
-    per_nav, dropped, gaps = [], {"before_navigation": 0, "after_navigation": 0}, []
+    per_nav, gaps = [], []
+    dropped = {"before_navigation": 0, "after_navigation": 0, "in_navigation_gaps": 0}
+    bridge_s = max(options.nav.max_bridge_s, options.nav.max_gap_s)
     for rec, t_nav, (x_nav, y_nav), t_obs, track in zip(recordings, navs, positions, obs, ids,
                                                         strict=True):
         t_nav, x_nav, y_nav = _distinct_fixes(t_nav, x_nav, y_nav, rec.navigation,
@@ -121,6 +125,9 @@ def align(recordings: list[Recording], options, where: str) -> Aligned:
         dropped["before_navigation"] += int(before.sum())
         dropped["after_navigation"] += int(after.sum())
         keep = ~(before | after)
+        unknown = _in_long_gaps(t_obs, t_nav, bridge_s) & keep  # own-ship's track unknown
+        dropped["in_navigation_gaps"] += int(unknown.sum())
+        keep &= ~unknown
         gaps += _gaps(t_nav, t_obs[keep], options.nav.max_gap_s, rec.navigation.source, plural)
         values = rec.contacts.values[keep]
         if observation.direction and origin is not None and rec.navigation.geographic:
@@ -151,7 +158,7 @@ def align(recordings: list[Recording], options, where: str) -> Aligned:
     epoch = None if ref is None else ref + int(round(t0 * 1e9))
     platforms = [Platform(t - t0, x, y, track, values, rec)
                  for t, x, y, track, values, rec in per_nav if t.size]
-    n_dropped = dropped["before_navigation"] + dropped["after_navigation"]
+    n_dropped = sum(dropped.values())
     if len(platforms) > 1 and all(p.recording.platform for p in platforms):
         notes.append("several platforms: " + ", ".join(
             f"{p.recording.platform!r} ({p.t_s.size} {plural})" for p in platforms)
@@ -168,8 +175,15 @@ def align(recordings: list[Recording], options, where: str) -> Aligned:
                                                      for i, s in enumerate(labels)},
         f"dropped_{plural}": {
             "count": n_dropped, **dropped,
-            "why": (f"more than nav.max_extrapolation_s = {options.nav.max_extrapolation_s:g} s "
-                    "outside the own-ship fixes' time span")},
+            "why": "; ".join(
+                [f"more than nav.max_extrapolation_s = {options.nav.max_extrapolation_s:g} s "
+                 "outside the own-ship fixes' time span"] * bool(
+                    dropped["before_navigation"] + dropped["after_navigation"]
+                    or not dropped["in_navigation_gaps"])
+                + [f"inside a gap between the own-ship fixes longer than nav.max_bridge_s = "
+                   f"{bridge_s:g} s (own-ship's track there is unknown; a larger "
+                   "nav.max_bridge_s interpolates across it)"] * bool(
+                    dropped["in_navigation_gaps"]))},
         "nav_gaps": {"max_gap_s": options.nav.max_gap_s, "count": len(gaps),
                      "longest_s": max((g["length_s"] for g in gaps), default=None),
                      "gaps": gaps[:MAX_LISTED_GAPS]},
@@ -416,6 +430,15 @@ def _ownship_at(t, t_nav, x_nav, y_nav, max_extrapolation_s):
     before = t < t_nav[0] - max_extrapolation_s
     after = t > t_nav[-1] + max_extrapolation_s
     return x, y, before, after
+
+
+def _in_long_gaps(t, t_nav, max_gap_s) -> np.ndarray:
+    """Which times ``t`` lie strictly inside a gap between consecutive fixes ``t_nav``
+    (sorted, common clock seconds) longer than ``max_gap_s``."""
+    if t_nav.size < 2:  # (a fixed platform: one fix, no gap)
+        return np.zeros(t.size, dtype=bool)
+    k = np.clip(np.searchsorted(t_nav, t, side="right"), 1, t_nav.size - 1)
+    return (t > t_nav[k - 1]) & (t < t_nav[k]) & (t_nav[k] - t_nav[k - 1] > max_gap_s)
 
 
 def _gaps(t_nav, t_obs, max_gap_s, source, plural) -> list[dict]:

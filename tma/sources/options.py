@@ -58,6 +58,10 @@ class NavLimits:
                                        "own-ship's fixes is dropped", "[0, 1e9)")
     max_gap_s: float = param(10.0, "a gap between own-ship's fixes longer than this (s) is "
                              "reported", "(0, 1e9)")
+    max_bridge_s: float = param(300.0, "values inside a gap between own-ship's fixes longer "
+                                "than this (s; at least max_gap_s) are left out: own-ship's "
+                                "track across it is unknown, and a straight line between its "
+                                "ends would be made up", "(0, 1e9)")
     max_speed_m_s: float = param(50.0, "own-ship never moves faster (m/s): a fix farther off "
                                  "its neighbours is an outlier", "(0, 1e5)")
 

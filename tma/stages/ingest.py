@@ -327,9 +327,11 @@ def _read(family, recordings, options, settings, config, sources, where) -> Read
         log.log(logging.WARNING if isinstance(note, Caution) else logging.INFO, "%s", note)
     dropped = summary[f"dropped_{options.observation.plural}"]
     if dropped["count"]:
-        log.warning("%s: dropped %d %s(s) (%d before, %d after the own-ship fixes): %s",
-                    where, dropped["count"], options.observation.role,
-                    dropped["before_navigation"], dropped["after_navigation"], dropped["why"])
+        log.warning("%s: dropped %d %s(s) (%d before, %d after the own-ship fixes, %d in "
+                    "gaps between them): %s", where, dropped["count"],
+                    options.observation.role, dropped["before_navigation"],
+                    dropped["after_navigation"], dropped["in_navigation_gaps"],
+                    dropped["why"])
     if aligned.epoch_utc_ns is None and aligned.origin_deg is not None:
         log.warning("%s: relative times: the outputs give no UTC and no map MCAP is written (it "
                     "would be dated 1970); give time.start_utc=<ISO-8601 UTC of the log's time "

@@ -233,7 +233,7 @@ def _one_line(proc, expected):
     ("columns.foo=bar", "unknown option columns.foo (the columns options: columns.time, "),
     ("+columns.foo=bar", "unknown option columns.foo"),
     ("nav.max_gap=3", "unknown option nav.max_gap (the nav options: nav.max_extrapolation_s, "
-                      "nav.max_gap_s, nav.max_speed_m_s)"),
+                      "nav.max_gap_s, nav.max_bridge_s, nav.max_speed_m_s)"),
     ("bad_rows=skip", "bad_rows must be one of drop, fail, got 'skip'"),
     ("nav.max_speed_m_s=0", "nav.max_speed_m_s must be in (0, 1e5), got 0"),
     ("bearing.units=grad", "bearing.units must be one of null, deg, rad, got 'grad'"),

@@ -138,7 +138,7 @@ def test_navigation_starting_late_extrapolates_within_the_limit_and_drops_beyond
     one, rec = _recording(("T1", "T2"), nav_rows=lambda n: (n.t_s >= 2.0) & (n.t_s <= 2390))
     (lg,), summary = _run([one])
     assert summary["dropped_bearings"] == {
-        "count": 4, "before_navigation": 2, "after_navigation": 2,
+        "count": 4, "before_navigation": 2, "after_navigation": 2, "in_navigation_gaps": 0,
         "why": "more than nav.max_extrapolation_s = 1 s outside the own-ship fixes' time span"}
     assert lg.t_s.size == 398 and summary["epoch_utc_ns"] == EPOCH_NS + 6_500_000_000
     # a wider limit keeps them, extrapolated exactly along the straight first and last legs
@@ -221,3 +221,24 @@ def test_radians_of_unstated_units_are_refused():
 def test_start_utc_is_written_as_the_logs_write_it():
     assert format_utc(EPOCH_NS + 1) == "2025-06-01T08:00:00.000000001Z"
     assert format_utc(EPOCH_NS + 500_000_000) == "2025-06-01T08:00:00.5Z"
+
+
+def test_values_in_a_long_navigation_gap_are_dropped_not_bridged():
+    """Own-ship's fixes missing for 10 minutes (it may have turned meanwhile): the bearings
+    inside are left out and counted, those in a shorter gap interpolated across (reported),
+    and nav.max_bridge_s sets the bound."""
+    one, rec = _recording(nav_rows=lambda n: (n.t_s < 600) | (n.t_s > 1200))
+    (lg,), summary = _run([one])
+    t = rec.bearings.t_s.to_numpy()
+    inside = (t > 599.0) & (t < 1201.0)  # the fixes' gap: 599 s to 1201 s
+    assert inside.sum() > 100
+    assert summary["dropped_bearings"]["in_navigation_gaps"] == inside.sum()
+    assert summary["dropped_bearings"]["count"] == inside.sum()
+    assert "nav.max_bridge_s = 300 s" in summary["dropped_bearings"]["why"]
+    kept_t = lg.t_s + 0.5  # (the log's t = 0 is the first bearing, at 0.5 s)
+    assert not ((kept_t > 599.0) & (kept_t < 1201.0)).any()
+    assert np.unique(kept_t).size == np.unique(t[~inside]).size
+    (bridged,), summary = _run([one], nav={"max_bridge_s": 900.0})
+    assert summary["dropped_bearings"]["count"] == 0
+    assert np.unique(bridged.t_s).size == np.unique(t).size
+    assert summary["nav_gaps"]["count"] == 1  # still reported
