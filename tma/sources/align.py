@@ -175,15 +175,7 @@ def align(recordings: list[Recording], options, where: str) -> Aligned:
                                                      for i, s in enumerate(labels)},
         f"dropped_{plural}": {
             "count": n_dropped, **dropped,
-            "why": "; ".join(
-                [f"more than nav.max_extrapolation_s = {options.nav.max_extrapolation_s:g} s "
-                 "outside the own-ship fixes' time span"] * bool(
-                    dropped["before_navigation"] + dropped["after_navigation"]
-                    or not dropped["in_navigation_gaps"])
-                + [f"inside a gap between the own-ship fixes longer than nav.max_bridge_s = "
-                   f"{bridge_s:g} s (own-ship's track there is unknown; a larger "
-                   "nav.max_bridge_s interpolates across it)"] * bool(
-                    dropped["in_navigation_gaps"]))},
+            "why": _why_dropped(dropped, options.nav.max_extrapolation_s, bridge_s)},
         "nav_gaps": {"max_gap_s": options.nav.max_gap_s, "count": len(gaps),
                      "longest_s": max((g["length_s"] for g in gaps), default=None),
                      "gaps": gaps[:MAX_LISTED_GAPS]},
@@ -430,6 +422,21 @@ def _ownship_at(t, t_nav, x_nav, y_nav, max_extrapolation_s):
     before = t < t_nav[0] - max_extrapolation_s
     after = t > t_nav[-1] + max_extrapolation_s
     return x, y, before, after
+
+
+def _why_dropped(dropped: dict, max_extrapolation_s: float, bridge_s: float) -> str:
+    """Why values were dropped, the causes of ``dropped`` (counts) that occurred (the
+    extrapolation limit alone where none did)."""
+    outside = (f"more than nav.max_extrapolation_s = {max_extrapolation_s:g} s outside the "
+               "own-ship fixes' time span")
+    in_gaps = (f"inside a gap between the own-ship fixes longer than nav.max_bridge_s = "
+               f"{bridge_s:g} s (own-ship's track there is unknown; a larger nav.max_bridge_s "
+               "interpolates across it)")
+    if not dropped["in_navigation_gaps"]:
+        return outside
+    if dropped["before_navigation"] + dropped["after_navigation"]:
+        return f"{outside}; {in_gaps}"
+    return in_gaps
 
 
 def _in_long_gaps(t, t_nav, max_gap_s) -> np.ndarray:

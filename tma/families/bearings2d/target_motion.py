@@ -44,8 +44,9 @@ from tma.families.bearings2d.manoeuvre_prior import ManoeuvrePrior
 
 MANOEUVRE_STREAM, WANDER_STREAM = 2, 3  # spawn-key elements under the shard's (shard,)
 DURATIONS = 3  # a declared prior's durations: the means of the thirds of their distribution
-MAX_POISSON = 30  # Poisson manoeuvres per target at least room for (P(more) < 1e-9 below
-MISSED_POISSON = 1e-9  # 10 per run); longer runs get room for all but this tail probability
+MAX_POISSON = 30  # slots for Poisson manoeuvres per target, at least (P(more) < 1e-9 for
+# up to 10 expected in a run); a longer run gets slots for every count but a tail this likely:
+MISSED_POISSON = 1e-9
 GAUSS_NODES = (0.5 - np.sqrt(15) / 10, 0.5, 0.5 + np.sqrt(15) / 10)  # on [0, 1]
 GAUSS_WEIGHTS = (5 / 18, 8 / 18, 5 / 18)
 

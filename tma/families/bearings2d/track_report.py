@@ -123,7 +123,7 @@ def _resting_on(row) -> str:
 
 # what a report shows of an estimate: blank, all of it, where it is no answer
 # (``status.not_an_answer``); its heading (course, speed) blank where the status says that it
-# is not determined (``status.HEADING_UNDETERMINED``: ``position_only``)
+# is not determined (``status.HEADING_UNDETERMINED``: ``position_only``, ``unobservable``)
 HEADING_COLUMNS = ["course_deg", "course_sd_deg", "speed_m_s", "speed_sd_m_s"]
 ESTIMATE_COLUMNS = ["x_now_m", "x_sd_m", "y_now_m", "y_sd_m", "lat_now_deg", "lon_now_deg",
                     "range_now_m", "range_sd_m", "bearing_now_deg", "bearing_sd_deg",
