@@ -308,7 +308,6 @@ from tma.families import build_estimator
 from tma.families.bearings2d.model import BearingTerms
 from tma.families.bearings2d.scenario import Config, simulate_shard
 from tma.io.mcap_writer import Ragged
-from tma.maths.stats import wilson_interval
 from tma.families.ranges2d.bisection import BisectionDensity
 from tma.families.ranges2d.model import RangeModel
 from tma.families.bearing_doppler3d.model import AuvModel, model_record
