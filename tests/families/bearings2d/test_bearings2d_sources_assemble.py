@@ -225,8 +225,8 @@ def test_start_utc_is_written_as_the_logs_write_it():
 
 def test_values_in_a_long_navigation_gap_are_dropped_not_bridged():
     """Own-ship's fixes missing for 10 minutes (it may have turned meanwhile): the bearings
-    inside are left out and counted, those in a shorter gap interpolated across (reported),
-    and nav.max_bridge_s sets the bound."""
+    inside are left out and counted; with nav.max_bridge_s above the gap's length they are
+    interpolated across it (the gap still reported)."""
     one, rec = _recording(nav_rows=lambda n: (n.t_s < 600) | (n.t_s > 1200))
     (lg,), summary = _run([one])
     t = rec.bearings.t_s.to_numpy()
