@@ -91,6 +91,8 @@ each quantity within 1 and 2 sd, beyond 5 sd, with 95 % intervals clustered by v
 """
 
 import argparse
+import functools
+import logging
 import os
 import subprocess
 import sys
@@ -100,7 +102,6 @@ from pathlib import Path
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.stats import chi2
 from threadpoolctl import threadpool_limits
 
 from tma.families import build_estimator
@@ -117,6 +118,19 @@ SECTIONS = ("lm", "tables", "ranges2d", "filters3d", "cmnf", "compile", "real_mo
             "crossfix_real_motion", "cluster", "io", "trace", "first_table", "manoeuvres",
             "sharpness", "long_logs")
 FIRST_TABLES = ("bearings2d_table", "ranges2d_table", "radar2d_table")  # as issue 32 measured
+
+
+def quiet(section):
+    """The bench section ``section`` with log warnings off (each non-ok track's note), on
+    again after it, however it ends."""
+    @functools.wraps(section)
+    def run(*args, **kwargs):
+        logging.disable(logging.WARNING)
+        try:
+            return section(*args, **kwargs)
+        finally:
+            logging.disable(logging.NOTSET)
+    return run
 
 
 def timed(function, *args):
@@ -395,8 +409,7 @@ def bench_real_motion(draws: int):
             ("lm assuming wander but no manoeuvres (issue 20)",
              {"name": "lm", "manoeuvre_rate_per_h": 0.0}, 0.5),
             ("lm at constant velocity, no trend test (before issue 20)",
-             {"name": "lm", "accel_psd_m2_s3": 0.0, "manoeuvre_rate_per_h": 0.0,
-              "motion_test": "off"}, 0.5)]
+             {"name": "lm", **CONSTANT_VELOCITY}, 0.5)]
     with tempfile.TemporaryDirectory() as workdir:
         for recording in ("solent", "nyharbor"):
             for i, (label, estimator, sigma) in enumerate(runs):
@@ -468,11 +481,11 @@ class MessageWriter:
         self._writer.finish()
 
 
+@quiet
 def bench_crossfix_real_motion(draws: int):
     """Issue 39, item 4: ``lm`` from two platforms on real ship motion (the AIS triples of
     ``tests/families/bearings2d/crossfix_real_motion.py``) against the baseline, the first
     platform alone, on the same targets and noise: ``draws`` noise draws per triple."""
-    import logging
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     import pandas as pd
@@ -486,7 +499,6 @@ def bench_crossfix_real_motion(draws: int):
         triples,
     )
 
-    logging.disable(logging.WARNING)  # each non-ok track's note
     counts = ", ".join(f"{r} {len(triples(r))}" for r in RECORDINGS)
     print(f"(l) two platforms on real ship motion (issue 39): AIS triples ({counts}): a target "
           "and two vessels 1-15 km away, lines of sight crossing at 40-89 deg, bearings every "
@@ -747,18 +759,16 @@ def _sd_ratio(aware, cv) -> str:
     return f"{q2:.2f} ({q1:.2f}-{q3:.2f}) over {r.size} targets"
 
 
+@quiet
 def bench_sharpness(n_tracks: int, sigma_deg: float):
     """Issue 36, item 4: how much wider the manoeuvre-aware ``lm``'s stated range sd is than
     the constant-velocity fit's on targets that held course (the price of allowing
     manoeuvres that did not happen), simulated and on the real pairs' steady targets."""
-    import logging
-
     import tma
 
     sys.path.insert(0, str(REPO))
     from tests.families.bearings2d.real_motion import run_cases
 
-    logging.disable(logging.WARNING)
     print("(m) sharpness on targets that held course: stated range sd / range of the "
           "manoeuvre-aware lm over the constant-velocity fit's, median (quartiles), targets ok "
           "in both")
@@ -776,9 +786,9 @@ def bench_sharpness(n_tracks: int, sigma_deg: float):
                           recording)
         steady = (a.kind.to_numpy() == "steady") & (a.status.to_numpy() == "ok") & (
             c.status.to_numpy() == "ok")
-        ratio = a.range_sd[steady].to_numpy() / c.range_sd[steady].to_numpy()
         print(f"    real, {recording} steady pairs (sigma estimated, one draw): "
-              f"{_sd_ratio(ratio, np.ones(ratio.size)) if ratio.size else 'none ok in both'}")
+              + (_sd_ratio(a.range_sd[steady], c.range_sd[steady]) if steady.any()
+                 else "none ok in both"))
 
 
 LONG_MINUTES = (30, 120, 360)  # (n): issue 36's durations of a watch
@@ -794,15 +804,13 @@ def _share(k: int, n: int) -> str:
     return f"{100 * k / n:.1f} % ({100 * lo:.0f}-{100 * hi:.0f}) of {n}"
 
 
+@quiet
 def bench_long_logs(n_tracks: int, sigma_deg: float):
     """Issue 36, item 6: the promise on logs of 30 minutes, 2 hours and 6 hours of targets
     that move as the recorded-log prior says (the issue's scenario)."""
-    import logging
-
     import tma
+    from tma.families.bearings2d.metrics import NEES_95
 
-    logging.disable(logging.WARNING)
-    consistent_nees = chi2.ppf(0.95, 4)
     print(f"(n) logs of minutes and hours: {n_tracks} targets per duration from the recorded-"
           f"log prior (wander 1e-3 m^2/s^3, 10 manoeuvres/h, not declared), 5-15 km at 3-6 "
           f"m/s,\n    own-ship zig-zagging every 15 min, a bearing every {LONG_PERIOD_S:g} s at "
@@ -834,7 +842,7 @@ def bench_long_logs(n_tracks: int, sigma_deg: float):
                  / r.range_sd_m).to_numpy()[only]
             print(f"    {minutes:3d} min, {estimator:8s}: {counts}; flagged "
                   f"{_share(flagged, status.size)}; ok consistent "
-                  f"{_share(int((nees <= consistent_nees).sum()), int(ok.sum()))}, ghosts "
+                  f"{_share(int((nees <= NEES_95).sum()), int(ok.sum()))}, ghosts "
                   f"(NEES > {GHOST_NEES:g}) {int((nees > GHOST_NEES).sum())}; position_only"
                   f" range within 2 sd {_share(int((np.abs(z) <= 2).sum()), int(only.sum()))}"
                   f"; the answer "

@@ -12,6 +12,7 @@ line naming a ``nav.max_gap_s`` that would keep them. The bearings must have UTC
 ``source_text``.
 """
 
+import dataclasses
 import logging
 
 import numpy as np
@@ -19,7 +20,7 @@ import numpy as np
 from tma.ais.match import gap_bound
 from tma.ais.options import TruthError, TruthOptions
 from tma.errors import InputError
-from tma.sources.base import Contacts, Navigation, Recording
+from tma.sources.base import Navigation, Recording
 from tma.utc import format_utc
 
 log = logging.getLogger(__name__)
@@ -96,8 +97,9 @@ def ownship_recording(options: TruthOptions, reading, contacts: list[Recording],
                  for t in values.t_s[in_gap][:5]]
         rec.dropped.add(GAP_REASON, int(in_gap.sum()), lines)
         keep = ~in_gap
-        rec.contacts = Contacts(values.t_s[keep], values.epoch_utc_ns, values.track[keep],
-                                values.values[keep], values.source, values.units_stated)
+        rec.contacts = dataclasses.replace(values, t_s=values.t_s[keep],
+                                           track=values.track[keep],
+                                           values=values.values[keep])
     nav = Navigation(t_own, epoch, source_text(options), zone_option="truth.time.zone",
                      lat_deg=track.lat_deg,
                      lon_deg=track.lon_deg)

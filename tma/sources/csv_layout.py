@@ -202,11 +202,11 @@ class CsvFile:
     def read(self, cols: dict[str, str]):
         """The chosen columns (by position, so odd header spellings cannot get in the way).
         Every column is parsed, so that a line with more fields than the header is refused.
-        The track column is text as written (``007`` is not ``7``, ``NA`` is a name)."""
+        The track and platform columns are text as written (``007`` is not ``7``, ``NA`` is
+        a name)."""
         import pandas as pd
 
         index = sorted({self.header.index(name) for name in cols.values()})
-        track = self.header.index(cols["track"]) if "track" in cols else None
         text = {self.header.index(cols[r]): str for r in ("track", "platform") if r in cols}
         try:
             with warnings.catch_warnings():  # a row longer than the header: refused
@@ -216,18 +216,20 @@ class CsvFile:
                                  index_col=False, skipinitialspace=True,
                                  encoding="utf-8-sig", low_memory=False,
                                  dtype=text or None)
-                if track is not None and df.iloc[:, track].isna().any():
-                    # pandas read a name such as NA or null as missing: the ids as written
-                    df.iloc[:, track] = pd.read_csv(
-                        self.path, sep=self.delimiter, usecols=[track], dtype=str,
-                        keep_default_na=False, skipinitialspace=True, encoding="utf-8-sig",
-                        skiprows=[1] if self.units is not None else None).iloc[:, 0]
-                if track is not None and _space_after(self.path, self.delimiter):
-                    # skipinitialspace took the spaces before the ids: ' 7' is not '7'
-                    df.iloc[:, track] = with_leading_space(df.iloc[:, track], pd.read_csv(
-                        self.path, sep=self.delimiter, usecols=[track], dtype=str,
-                        keep_default_na=False, encoding="utf-8-sig",
-                        skiprows=[1] if self.units is not None else None).iloc[:, 0])
+                for named in text:  # the track's and the platform's names
+                    if df.iloc[:, named].isna().any():
+                        # pandas read a name such as NA or null as missing: as written
+                        df.iloc[:, named] = pd.read_csv(
+                            self.path, sep=self.delimiter, usecols=[named], dtype=str,
+                            keep_default_na=False, skipinitialspace=True,
+                            encoding="utf-8-sig",
+                            skiprows=[1] if self.units is not None else None).iloc[:, 0]
+                    if _space_after(self.path, self.delimiter):
+                        # skipinitialspace took the spaces before the names: ' 7' is not '7'
+                        df.iloc[:, named] = with_leading_space(df.iloc[:, named], pd.read_csv(
+                            self.path, sep=self.delimiter, usecols=[named], dtype=str,
+                            keep_default_na=False, encoding="utf-8-sig",
+                            skiprows=[1] if self.units is not None else None).iloc[:, 0])
         except (pd.errors.ParserError, pd.errors.ParserWarning, pd.errors.EmptyDataError,
                 UnicodeDecodeError, ValueError) as exc:
             raise InputError(f"{self.path}: not a readable CSV "

@@ -154,7 +154,8 @@ def _with_navigation(found, nav, where, nav_where, options):
     """The input's recordings with their own-ship from the navigation file's: its one
     recording, or, where both name platforms (a platform column), each platform's with that
     platform's fixes."""
-    if len(found) > 1 or len(nav) > 1:
+    if len(found) > 1 or len(nav) > 1 or all(r.platform is not None for r in found + nav):
+        # (named on both sides, even one each: matched by name, never by count)
         return _per_platform_navigation(found, nav, where, nav_where, options)
     if len(found) != 1 or found[0].contacts is None:
         raise InputError(f"{where}: no {options.observation.plural} found in the input")
@@ -181,12 +182,20 @@ def _per_platform_navigation(found, nav, where, nav_where, options):
                          "platforms, but this file names no platform per row: give both files "
                          "a platform column (columns.platform=<column>) naming the platform "
                          "(ship, buoy, station) of each row")
-    fixes = {r.platform: r for r in nav}
+    fixes = {}
+    for r in nav:
+        if r.platform in fixes:
+            raise InputError(f"{nav_where}: platform {r.platform!r} is named by two navigation "
+                             f"sources ({fixes[r.platform].navigation.source} and "
+                             f"{r.navigation.source}): give each platform's fixes once")
+        fixes[r.platform] = r
     missing = [r.platform for r in found if r.platform not in fixes]
     if missing:
         raise InputError(f"{nav_where}: no own-ship fixes of platform(s) "
                          f"{', '.join(map(repr, missing))} whose {plural} {where} holds "
-                         f"(its platforms: {', '.join(map(repr, fixes))})")
+                         f"(its platforms: {', '.join(map(repr, fixes))}): name each platform's "
+                         "file after it (<platform>.csv) or give it a platform column "
+                         "(columns.platform=<column>)")
     for rec in found:
         own = fixes[rec.platform]
         rec.dropped.merge(own.dropped)
@@ -256,6 +265,9 @@ def read_log(input_path, *, family: str, fmt="auto", navigation=None, options=No
     path = _file(input_path, "input")
     own = truth if truth.own_mmsi is not None else None
     if _several(navigation):  # one file per platform
+        if not len(navigation):
+            raise ConfigError("navigation=[] names no file: give the own-ship file, or one per "
+                              "platform (navigation=[ship_a.csv,buoy_7.csv])")
         navigation = [_file(p, "navigation") for p in navigation]
     elif navigation is not None:
         navigation = _file(navigation, "navigation")

@@ -240,7 +240,10 @@ def test_an_answer_that_follows_the_motion_is_judged_by_its_own_convergence():
     one_step = _estimate(log, "lm", max_iter=1)
     assert (one_step.stop_reason == STOP_MAX_ITER).all()  # every start stopped short
     assert not (one_step.status == "not_converged").any(), one_step.status.value_counts()
-    assert (one_step.status == full.status).mean() >= 0.5, (one_step.status, full.status)
+    ok = (full.status == "ok").to_numpy()  # the same answers where the full start's are ok
+    assert ok.sum() >= 20 and (one_step.status[ok] == "ok").all(), one_step.status[ok]
+    np.testing.assert_array_less(np.abs(one_step.range_now_m - full.range_now_m)[ok],
+                                 0.1 * full.range_sd_m[ok])
 
 
 def test_last_leg_rests_on_the_span_lm_answers_from():

@@ -353,3 +353,33 @@ def test_refusals_of_several_platforms_name_the_platform_column(tmp_path):
     with pytest.raises(InputError, match=rf"platform 'ship A' has two different positions at "
                        rf"the time of line ({k + 1}|{k + 2}) "):
         tma.read_log(tmp_path / "bad.csv")
+
+
+def test_named_platforms_are_matched_by_name_and_named_once(tmp_path):
+    """Where the input and the navigation both name platforms they are matched by name, even
+    one each (a buoy's file never gives a ship its fixes); a platform named by two files is
+    refused naming both; navigation=[] names no file; a platform named NA is a name."""
+    frame = two_platform_export()
+    ship = frame[frame["platform"] == frame["platform"].iloc[0]]
+    ship[["timestamp_utc", "platform", "contact", "bearing_deg"]].to_csv(
+        tmp_path / "bearings.csv", index=False)
+    fixes = ship[["timestamp_utc", "latitude_deg", "longitude_deg"]].drop_duplicates()
+    fixes.to_csv(tmp_path / "buoy_7.csv", index=False)
+    with pytest.raises(InputError, match=r"no own-ship fixes of platform\(s\) .* \(its "
+                       r"platforms: 'buoy_7'\): name each platform's file after it"):
+        tma.read_log(tmp_path / "bearings.csv", navigation=[tmp_path / "buoy_7.csv"])
+    name = ship["platform"].iloc[0]
+    fixes.to_csv(tmp_path / "a.csv", index=False)
+    fixes.assign(platform=name).to_csv(tmp_path / "b.csv", index=False)
+    fixes.to_csv(tmp_path / f"{name}.csv", index=False)
+    with pytest.raises(InputError, match=rf"platform '{name}' is named by two navigation "
+                       r"sources"):
+        tma.read_log(tmp_path / "bearings.csv",
+                     navigation=[tmp_path / f"{name}.csv", tmp_path / "b.csv"])
+    with pytest.raises(ValueError, match=r"navigation=\[\] names no file"):
+        tma.read_log(tmp_path / "bearings.csv", navigation=[])
+    na = frame.assign(platform=np.where(frame["platform"] == name, "NA", "buoy"))
+    na.to_csv(tmp_path / "na.csv", index=False)
+    rec = tma.read_log(tmp_path / "na.csv")
+    assert set(rec.bearings["platform"]) == {"NA", "buoy"}
+    assert len(rec.bearings) == len(frame)

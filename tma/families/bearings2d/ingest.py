@@ -154,9 +154,7 @@ def _logs(t, x, y, track, bearing, sigma, where, platform=None, names=None
     value's index into ``names``, on one grid of (time, platform) epochs); tracks split into
     several logs only when the grid (tracks x epochs) would exceed MAX_CELLS."""
     ids, counts = np.unique(track, return_counts=True)
-    n_epochs = np.count_nonzero(np.diff(np.sort(t))) + 1
-    if platform is not None:  # (an upper bound: the distinct (time, platform) pairs)
-        n_epochs = t.size
+    n_epochs = epochs(t, platform)[0].size  # (distinct times, or (time, platform) pairs)
     if ids.size * n_epochs <= MAX_CELLS:
         groups = [ids]
     else:  # bound each group's grid by (tracks in it) x (its bearings)

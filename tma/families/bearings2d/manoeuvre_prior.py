@@ -57,6 +57,12 @@ def window_s(prior: ManoeuvrePrior) -> float:
                else np.inf)
 
 
+def window_start(t, first, last, prior: ManoeuvrePrior) -> np.ndarray:
+    """Per track the index of the first bearing the answer rests on (``window_s`` before its
+    last bearing ``last``, not before its first ``first``; ``t`` the log's epochs, s)."""
+    return np.maximum(first, np.searchsorted(t, t[last] - window_s(prior), side="left"))
+
+
 def start_cells(t_first, t_last, step_s):
     """Cells of ``step_s`` over each track's window: their bounds (n, J) each, clipped to the
     window (J cells over the longest)."""

@@ -20,7 +20,7 @@ from tma.families.bearings2d.bearing_noise import differenced_sigma
 from tma.families.bearings2d.contract import Bearings, JudgedFit, Solution, TargetMotion
 from tma.families.bearings2d.end_bearing import end_bearing
 from tma.families.bearings2d.log import BearingsLog
-from tma.families.bearings2d.manoeuvre_prior import RECORDED_MANOEUVRES
+from tma.families.bearings2d.manoeuvre_prior import RECORDED_MANOEUVRES, window_start
 from tma.families.bearings2d.model import BearingTerms
 from tma.families.bearings2d.ncv import RECORDED_ACCEL_PSD
 from tma.families.bearings2d.platforms import observer_now, reference_index
@@ -280,9 +280,8 @@ class BearingsEstimator(Estimator):
         if follows and prior is not None:
             follow = np.isfinite(fit.theta).all(axis=1)
             # the answer rests on the recent past, where the manoeuvres it weighs are few
-            # enough to be weighed (manoeuvres.window_s): from when it holds
-            fit.start = np.maximum(first, np.searchsorted(
-                t, t[last] - manoeuvres.window_s(prior), side="left"))
+            # enough to be weighed (manoeuvre_prior.window_start): from when it holds
+            fit.start = window_start(t, first, last, prior)
             if np.any(fit.start > first):
                 inside = np.arange(t.size)[None, :] >= fit.start[:, None]
                 fit.use = inside if fit.use is None else fit.use & inside

@@ -41,6 +41,7 @@ from tma.families.bearings2d.bearing_noise import differenced_sigma
 from tma.families.bearings2d.contract import Bearings, Solution, TargetMotion
 from tma.families.bearings2d.estimators.lm import Config as LmConfig
 from tma.families.bearings2d.estimators.lm import LevenbergMarquardt
+from tma.families.bearings2d.manoeuvre_prior import window_start
 from tma.families.bearings2d.marquardt import STOP_F_TOL, MarquardtSettings, fit_starts
 from tma.families.bearings2d.status import trend_test_p
 
@@ -79,8 +80,7 @@ class LastLeg(LevenbergMarquardt):
         if prior is not None and motion.moving and self.models_motion:
             # as lm's answer, the legs rest on the recent past where the mixture weighs the
             # manoeuvres (manoeuvres.window_s): a log of hours costs what its window does
-            start = np.searchsorted(t, t[bearings.last] - manoeuvres.window_s(prior),
-                                    side="left")
+            start = window_start(t, bearings.first, bearings.last, prior)
             present = present & (np.arange(K)[None, :] >= start[:, None])
         used = present.copy()
         rounds = np.zeros(n, dtype=np.int64)
