@@ -29,7 +29,7 @@ import numpy as np
 
 from tma.ais.pairs import START_STEP_S, classify, motion
 from tma.ais.tracks import PlaneTrack
-from tma.maths.angles import bearing_from_north
+from tma.maths.angles import bearing_from_north, crossing_angle_deg
 
 
 @dataclass(frozen=True)
@@ -60,14 +60,6 @@ class Triple:
     duration_s: float
     kind: str
     max_cross_deg: float
-
-
-def crossing_angle_deg(bearing_a_rad, bearing_b_rad):
-    """The acute angle (deg, 0-90) between two lines of sight of bearings ``a`` and ``b``
-    (rad): 0 where they are parallel (the platforms in line with the target), 90 where they
-    are square."""
-    d = np.abs(np.degrees(np.asarray(bearing_a_rad) - np.asarray(bearing_b_rad))) % 180.0
-    return np.minimum(d, 180.0 - d)
 
 
 def find_triples(ships: dict[int, PlaneTrack], rules: TripleRules,

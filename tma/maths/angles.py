@@ -36,3 +36,11 @@ def bearing_from_north(dx_m, dy_m):
 def course_from_velocity(vx_m_s, vy_m_s):
     """Course (radians in [0, 2pi), clockwise from north) of a velocity (vx east, vy north)."""
     return np.arctan2(vx_m_s, vy_m_s) % TWO_PI
+
+
+def crossing_angle_deg(bearing_a_rad, bearing_b_rad):
+    """The acute angle (deg, 0-90) between two lines of sight of bearings ``a`` and ``b``
+    (rad): 0 where they are parallel (the platforms in line with the target), 90 where they
+    are square."""
+    d = np.abs(np.degrees(np.asarray(bearing_a_rad) - np.asarray(bearing_b_rad))) % 180.0
+    return np.minimum(d, 180.0 - d)

@@ -251,9 +251,10 @@ def _epoch(parts: dict[str, np.ndarray], where: str) -> int | None:
 
 
 def read_recorded(path, options, need: tuple[str, ...] = (),
-                  navigation: bool = True) -> Recording:
-    """``tma.sources.mcap.read_mcap`` (its arguments, its Recording)."""
-    file = RecordedLog(path, options.dropped())
+                  navigation: bool = True, file: RecordedLog | None = None) -> Recording:
+    """``tma.sources.mcap.read_mcap`` (its arguments, its Recording); ``file``: the log
+    already open (read once)."""
+    file = RecordedLog(path, options.dropped()) if file is None else file
     nav_topic = _select_navigation(file, options)
     if not navigation:
         if nav_topic is not None:
@@ -270,10 +271,14 @@ def read_platforms(path, options, need: tuple[str, ...] = (),
     log holds several (``_platforms``: ``ownship.topic`` a list or a pattern, or tma's own
     log of several, ``tma.platforms``), each named by it, with its own-ship topic and the
     values of the topics in its namespace."""
+    if options.ownship.several and not navigation:
+        raise InputError(f"{path}: ownship.topic={options.ownship.topic} names the own-ship "
+                         "topics of several platforms, but own-ship comes from navigation=: "
+                         "drop one of the two")
     probe = RecordedLog(path, options.dropped())
     platforms = _platforms(probe, options) if navigation else None
     if platforms is None:
-        return [read_recorded(path, options, need, navigation)]
+        return [read_recorded(path, options, need, navigation, file=probe)]
     out = []
     for k, (name, nav_topic, contact_topics) in enumerate(platforms):
         file = probe if k == 0 else RecordedLog(path, options.dropped())

@@ -23,10 +23,10 @@ from tests.families.bearings2d.crossfix_real_motion import (
 )
 from tests.families.bearings2d.real_motion import QUANTITIES, _cases_module
 from tma.ais.recording import recording_of
-from tma.ais.triples import crossing_angle_deg
 from tma.families import build_estimator
 from tma.families.bearings2d.log import BearingsLog
 from tma.families.bearings2d.real_motion import triple_log, triple_times
+from tma.maths.angles import crossing_angle_deg
 
 STRIDE, DRAWS = 3, 3
 

@@ -383,3 +383,21 @@ def test_named_platforms_are_matched_by_name_and_named_once(tmp_path):
     rec = tma.read_log(tmp_path / "na.csv")
     assert set(rec.bearings["platform"]) == {"NA", "buoy"}
     assert len(rec.bearings) == len(frame)
+
+
+@pytest.mark.parametrize("topic", [["/ship_a/navigation", "/buoy/navigation"],
+                                   "/*/navigation"])
+def test_several_own_ship_topics_and_a_navigation_file_are_refused_in_one_line(tmp_path,
+                                                                                topic):
+    """``ownship.topic`` naming several platforms' topics (a list or a pattern) and a
+    navigation file: two sources of own-ship, refused naming both (was a TypeError or a
+    misleading "no such topic")."""
+    two_platform_export().to_csv(tmp_path / "two.csv", index=False)
+    rec = tma.read_log(tmp_path / "two.csv")
+    write_namespaced(tmp_path / "ns.mcap", rec.logs[0], ("/ship_a", "/buoy"))
+    pd.DataFrame({"time_s": [0.0, 1.0], "own_x_m": [0.0, 1.0], "own_y_m": 0.0}).to_csv(
+        tmp_path / "nav.csv", index=False)
+    with pytest.raises(InputError, match=r"ownship\.topic=.* names the own-ship topics of "
+                       r"several platforms, but own-ship comes from navigation=: drop one"):
+        tma.read_log(tmp_path / "ns.mcap", navigation=tmp_path / "nav.csv",
+                     ownship={"topic": topic})

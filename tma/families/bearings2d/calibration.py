@@ -28,7 +28,7 @@ import numpy as np
 import pandas as pd
 
 from tma.families.bearings2d.metrics import NEES_95, THETA, errors_now, normalised_error
-from tma.maths.stats import chi2_mean_interval, wilson_interval
+from tma.maths.stats import chi2_mean_interval, rate_columns
 
 # quantity: (error column of ``errors_now``, the estimate's stated one-sigma error)
 QUANTITIES = {"range": ("range_err_m", "range_sd_m"),
@@ -75,11 +75,6 @@ def track_calibration(estimates: pd.DataFrame, truth: pd.DataFrame) -> pd.DataFr
     return out
 
 
-def _share(k, n, name) -> dict:
-    lo, hi = wilson_interval(k, n)
-    return {name: k / n if n else np.nan, f"{name}_lo": float(lo), f"{name}_hi": float(hi)}
-
-
 def within_shares(z, name: str) -> dict:
     """``<name>_within_1sd`` and ``_2sd`` (each with ``_lo``, ``_hi``): the shares of the
     finite ``z`` with |z| <= 1 and <= 2, with 95 % Wilson intervals."""
@@ -87,7 +82,7 @@ def within_shares(z, name: str) -> dict:
     z = z[np.isfinite(z)]
     row = {}
     for k in WITHIN_TARGETS:
-        row.update(_share(int(np.sum(z <= k)), z.size, f"{name}_within_{k}sd"))
+        row.update(rate_columns(int(np.sum(z <= k)), z.size, f"{name}_within_{k}sd"))
     return row
 
 
@@ -99,7 +94,7 @@ def nees_figures(nees) -> dict:
     nees = np.asarray(nees, dtype=float)
     nees = nees[np.isfinite(nees)]
     lo, hi = chi2_mean_interval(nees.size, NEES_DOF)
-    return {**_share(int(np.sum(nees <= NEES_95)), nees.size, "consistent"),
+    return {**rate_columns(int(np.sum(nees <= NEES_95)), nees.size, "consistent"),
             "mean_nees": float(nees.mean()) if nees.size else np.nan,
             "mean_nees_lo": float(lo), "mean_nees_hi": float(hi)}
 

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from tma.families.bearings2d.benchmark import _pct, dataset_bounds, estimator_label
+from tma.families.bearings2d.benchmark import _num, _pct, dataset_bounds, estimator_label
 from tma.families.bearings2d.log import read_bearings_log
 from tma.families.bearings2d.manoeuvre_table import motion_label
 from tma.families.bearings2d.metrics import (
@@ -38,7 +38,7 @@ from tma.families.bearings2d.metrics import (
     track_metrics,
 )
 from tma.families.bearings2d.platforms import observer_now, position_at
-from tma.maths.angles import bearing_from_north, wrap_to_pi
+from tma.maths.angles import bearing_from_north, crossing_angle_deg
 from tma.maths.stats import rate_columns
 from tma.tables.write import write_table
 
@@ -86,8 +86,8 @@ def crossing_angles(log, truth: pd.DataFrame) -> np.ndarray:
     widest = np.zeros(n)
     for k in range(1, log.n_platforms):
         px, py = position_at(log.t_s, log.own_x_m, log.own_y_m, log.platform, k, t)
-        a = np.abs(np.rad2deg(wrap_to_pi(bearing_from_north(x - px, y - py) - ref)))
-        widest = np.maximum(widest, np.minimum(a, 180.0 - a))  # two lines: a and 180 - a
+        widest = np.maximum(widest, crossing_angle_deg(bearing_from_north(x - px, y - py),
+                                                       ref))
     return widest
 
 
@@ -172,10 +172,6 @@ def crossfix_table(entries) -> pd.DataFrame:
             entry.estimates, truth, *per_dataset[name]))
     return pd.DataFrame(rows, columns=COLUMNS).sort_values(
         ["estimator", "motion", "platforms"], kind="stable").reset_index(drop=True)
-
-
-def _num(x, fmt="{:.3g}"):
-    return "-" if pd.isna(x) else "inf" if np.isinf(x) else fmt.format(x)
 
 
 def shown_table(table: pd.DataFrame) -> pd.DataFrame:
