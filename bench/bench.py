@@ -72,11 +72,20 @@
     promised), each share with its 95 % Wilson interval, the span the answer rests on and
     the CPU time per track; and how far the targets are at the end (they wander off over
     hours).
+(o) The estimators' own model (issue 36, items 1-2, ``--only own_model``): ``--tracks``
+    targets whose manoeuvres are drawn from the very model ``lm`` assumes (``target.
+    manoeuvres.shape=burst``: Poisson starts, Gaussian velocity changes as white-acceleration
+    bursts of the declared durations) beside the same declared prior's ship-like turns, 3 an
+    hour at 0.5 deg, seed 7, ``lm`` with the declared prior: ok, consistent, ghosts (NEES
+    above 100), each quantity within 1 and 2 sd and the consistency by manoeuvres made and
+    ``p_manoeuvre``; on the bursts also the component of the true manoeuvres (their true
+    starts and durations, refined and linearised as ``lm``'s are: the Laplace approximation
+    alone, with no search), on the same ``ok`` tracks.
 
 Options: ``--tracks N`` (2000), ``--sigma DEG`` (0.5), ``--runs N`` (30), ``--skip-tables``,
 ``--skip-first-table``, ``--only SECTION`` (lm, tables, ranges2d, filters3d, cmnf, compile,
 real_motion, crossfix_real_motion, cluster, io, trace, first_table, manoeuvres, sharpness,
-long_logs), ``--long-tracks N`` (120),
+long_logs, own_model), ``--long-tracks N`` (120),
 ``--first-table EXPERIMENTS``
 (comma-separated; bearings2d_table,ranges2d_table,radar2d_table), ``--first-table-repeat N``
 (1), ``--paths3d N`` (2500), ``--cmnf-paths N`` (100000), ``--repeat N`` (3),
@@ -116,7 +125,7 @@ REPO = Path(__file__).resolve().parents[1]
 THETA = ("x0_m", "y0_m", "vx_m_s", "vy_m_s")
 SECTIONS = ("lm", "tables", "ranges2d", "filters3d", "cmnf", "compile", "real_motion",
             "crossfix_real_motion", "cluster", "io", "trace", "first_table", "manoeuvres",
-            "sharpness", "long_logs")
+            "sharpness", "long_logs", "own_model")
 FIRST_TABLES = ("bearings2d_table", "ranges2d_table", "radar2d_table")  # as issue 32 measured
 
 
@@ -850,6 +859,68 @@ def bench_long_logs(n_tracks: int, sigma_deg: float):
                   f"{1e3 * cpu / n_tracks:.0f} ms CPU per track")
 
 
+OWN_MODEL_SEED = 7
+
+
+@quiet
+def bench_own_model(n_tracks: int, sigma_deg: float):
+    """Issue 36, items 1-2: ``lm`` on targets drawn from its own model, beside ship-like turns
+    of the same declared prior, and the component of the true manoeuvres (module
+    docstring, (o))."""
+    import tma
+    from tma.families.bearings2d.calibration import cells, track_calibration
+    from tma.families.bearings2d.manoeuvre_components import known_manoeuvres_nees
+    from tma.families.bearings2d.metrics import NEES_95
+    from tma.families.bearings2d.scenario import MANOEUVRE
+    from tma.families.bearings2d.target_motion import ManoeuvreConfig, burst_plan
+    from tma.runtime.sharding import shard_rng
+
+    print(f"(o) the estimators' own model: {n_tracks} targets, 3 manoeuvres/h declared, "
+          f"{sigma_deg} deg, seed {OWN_MODEL_SEED}, lm with the declared prior")
+    for shape in ("turn", "burst"):
+        ds = tma.simulate("bearings2d", n_tracks=n_tracks, sigma_deg=sigma_deg,
+                          seed=OWN_MODEL_SEED, shard_size=n_tracks,
+                          target={"manoeuvres": {"rate_per_h": 3.0, "shape": shape}})
+        r = tma.estimate(ds)
+        estimates = r.attrs["tma"].tables["estimates"]
+        tracks = track_calibration(estimates, ds.truth)
+        ok = tracks.status.to_numpy() == "ok"
+        nees = tracks.nees.to_numpy()
+        print(f"    {shape:5s}: ok {ok.sum()} of {ok.size}; consistent "
+              f"{_share(int((nees[ok] <= NEES_95).sum()), int(ok.sum()))}; ghosts (NEES > "
+              f"{GHOST_NEES:g}) {int((nees[ok] > GHOST_NEES).sum())}; within 1 / 2 sd "
+              + ", ".join(f"{q} {100 * np.mean(np.abs(z) <= 1):.1f} / "
+                          f"{100 * np.mean(np.abs(z) <= 2):.1f} %"
+                          for q in ("range", "course", "speed")
+                          for z in [tracks[f"{q}_z"].to_numpy()[ok]]))
+        for group, cell, mask in cells(tracks):
+            if group in ("manoeuvres", "p_manoeuvre"):
+                m = mask & ok
+                print(f"        {group} {cell}: ok {m.sum()}, consistent "
+                      f"{100 * np.mean(nees[m] <= NEES_95):.1f} %" if m.any() else
+                      f"        {group} {cell}: no ok")
+    # the true manoeuvres' component on the bursts' ok tracks (the last dataset)
+    log, cfg = ds.logs[0], ds.config
+    t = np.asarray(log.t_s, dtype=float)
+    prior = log.manoeuvres
+    count, start, duration = burst_plan(
+        ManoeuvreConfig(rate_per_h=3.0, shape="burst"), prior, t, n_tracks,
+        shard_rng(cfg, 0, MANOEUVRE))
+    truth = ds.truth[list(THETA)].to_numpy()  # (one shard: rows in the log's order)
+    true_nees = np.full(n_tracks, np.nan)
+    for i in np.flatnonzero(ok):
+        true_nees[i] = known_manoeuvres_nees(
+            t, log.own_x_m, log.own_y_m, np.deg2rad(log.bearing_deg[i]), np.deg2rad(sigma_deg),
+            truth[i], start[:, i], duration[:, i], prior.dv_m_s)
+    made = tracks.n_manoeuvres.to_numpy()
+    print(f"    the true manoeuvres' component on the same {ok.sum()} ok tracks: consistent "
+          f"{_share(int((true_nees[ok] <= NEES_95).sum()), int(ok.sum()))}; NEES > "
+          f"{GHOST_NEES:g} {int((true_nees[ok] > GHOST_NEES).sum())}; by manoeuvres made "
+          + ", ".join(f"{k}: {100 * np.mean(true_nees[ok & sel] <= NEES_95):.1f} %"
+                      for k, sel in (("0", made == 0), ("1", made == 1), ("2", made == 2),
+                                     ("3+", made >= 3)) if (ok & sel).any()))
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--tracks", type=int, default=2000)
@@ -916,6 +987,8 @@ def main():
         bench_sharpness(min(args.tracks, 1000), args.sigma)
     if wanted("long_logs"):
         bench_long_logs(args.long_tracks, args.sigma)
+    if wanted("own_model"):
+        bench_own_model(args.tracks, args.sigma)
 
 
 if __name__ == "__main__":

@@ -9,6 +9,7 @@ from tma.families.bearings2d.scenario import Config, simulate_shard
 from tma.families.bearings2d.target_motion import (
     ManoeuvreConfig,
     TargetConfig,
+    burst_deviations,
     course_speed,
     manoeuvre_plan,
     target_paths,
@@ -123,7 +124,9 @@ def test_bad_target_options_are_refused():
     for target in (TargetConfig(accel_psd_m2_s3=-1.0),
                    TargetConfig(manoeuvres=ManoeuvreConfig(prob=2.0)),
                    TargetConfig(manoeuvres=ManoeuvreConfig(start_frac=0.9, end_frac=0.1)),
-                   TargetConfig(manoeuvres=ManoeuvreConfig(turn_rate_min_deg_s=0.0))):
+                   TargetConfig(manoeuvres=ManoeuvreConfig(turn_rate_min_deg_s=0.0)),
+                   TargetConfig(manoeuvres=ManoeuvreConfig(prob=0.5, shape="burst")),
+                   TargetConfig(manoeuvres=ManoeuvreConfig(rate_per_h=3.0, shape="arc"))):
         with pytest.raises(ConfigError, match="target"):
             Config(target=target)
 
@@ -163,3 +166,45 @@ def test_poisson_manoeuvres_keep_their_rate_on_logs_of_hours(hours):
     mean = 10.0 * hours
     assert abs(count.mean() - mean) < 4 * np.sqrt(mean / n), count.mean()
     assert abs(count.var() / mean - 1) < 0.1, count.var()
+
+
+def test_a_burst_changes_the_velocity_as_the_estimators_model_says():
+    """The estimators' manoeuvre (``manoeuvres.py``): a burst of white acceleration of density
+    s^2 / D over D changes the velocity by N(0, s^2) per axis and puts the position, seen from
+    after it, N(0, s^2 D^2 / 12) off a sudden change at its centre, uncorrelated: the
+    covariance of (position, velocity) at the end of 20,000 draws against that closed form,
+    the burst's ends off the bearing grid (steps it covers in part)."""
+    s, D, start = 5.0, 120.0, 303.7
+    t = np.arange(0.0, 601.0, 10.0)
+    n = 20000
+    begin = np.full((1, n), start)
+    px, py, vx, vy = burst_deviations(t, begin, np.full((1, n), D), s,
+                                      np.random.default_rng(3))
+    after = t[-1] - (start + D / 2)  # from the burst's centre to the last epoch
+    expected = s**2 * np.array([[after**2 + D**2 / 12, after], [after, 1.0]])
+    for p, v in ((px, vx), (py, vy)):
+        np.testing.assert_allclose(np.cov(np.vstack([p[:, -1], v[:, -1]])), expected,
+                                   rtol=0.05)
+        assert np.all(v[:, t <= start] == 0) and np.all(p[:, t <= start] == 0)
+    # before the burst ends, as far as it went: the velocity change has s^2 (seen / D)
+    k = np.searchsorted(t, start + D / 2)
+    assert np.var(vx[:, k]) == pytest.approx(s**2 * (t[k] - start) / D, rel=0.05)
+
+
+def test_burst_manoeuvres_are_the_declared_prior():
+    """``shape=burst``: the log declares the prior the targets were drawn from; Poisson
+    counts at its rate, each burst one of its durations; a dataset of turns is as before."""
+    log, truth = _sim(manoeuvres=ManoeuvreConfig(rate_per_h=6.0, shape="burst"))
+    truth = truth.to_pandas()
+    prior = log.manoeuvres
+    assert prior is not None and prior.rate_per_h == 6.0
+    counts = truth.n_manoeuvres.to_numpy()
+    mean = 6.0 / 3600.0 * (log.t_s[-1] - log.t_s[0])
+    assert abs(counts.mean() - mean) <= 4 * np.sqrt(mean / counts.size)
+    made = truth[truth.manoeuvring]
+    span = (made.manoeuvre_end_s - made.manoeuvre_start_s).to_numpy()
+    assert np.isin(np.round(span, 6), np.round(prior.durations_s, 6)).all()
+    assert ((counts > 0) == truth.manoeuvring).all()
+    turns, _ = _sim(manoeuvres=ManoeuvreConfig(rate_per_h=6.0))
+    assert turns.manoeuvres == prior  # the same declaration, another motion
+    assert not np.array_equal(turns.bearing_deg, log.bearing_deg)

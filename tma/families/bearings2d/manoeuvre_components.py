@@ -191,3 +191,40 @@ def component(t, own_x, own_y, measured_rad, theta_cv, levels, sigma_rad, start=
     loglik = _laplace(t, ox, oy, z, np.empty(0), False, 0, K - 1, nom, Q, prior, p0, s2, *work,
                       mean, cov)
     return loglik, mean, cov * s2, nom
+
+
+def burst_levels(t, start, duration, dv_m_s):
+    """The process levels (K,; m^2/s^3, ``component``'s ``levels`` without the wander) of
+    one target's manoeuvres at known times: each burst (``start``, ``duration``: (slots,),
+    s; inf: none) a density dv^2 / D over the share of each step into an epoch of ``t`` it
+    covers, as the mixture's components take theirs. For the check of a component against
+    targets whose manoeuvres are known (``target_motion.burst_plan``)."""
+    t = np.asarray(t, dtype=float)
+    step = np.diff(t, prepend=t[0])
+    levels = np.zeros(t.size)
+    for a0, d in zip(start, duration, strict=True):
+        if not np.isfinite(a0):
+            continue
+        a, b = np.clip(t - step, a0, a0 + d), np.clip(t, a0, a0 + d)
+        levels += np.divide(b - a, step, out=np.zeros_like(t), where=step > 0) * dv_m_s**2 / d
+    return levels
+
+
+def known_manoeuvres_nees(t, own_x, own_y, measured_rad, sigma_rad, theta, start, duration,
+                          dv_m_s) -> float:
+    """The 4D normalised error, at the last epoch, of the component of one target's known
+    manoeuvres (``start``, ``duration``: (slots,), s, inf: none; ``burst_levels``), refined
+    to its MAP trajectory from the straight line ``theta`` (x0, y0, vx, vy: m, m/s, through
+    the true state at the last epoch, as the truth states it) and linearised there, as the
+    mixture's components are: the Laplace approximation alone, with no search (inf where
+    the fit fails)."""
+    x0, y0, vx, vy = theta
+    line = np.column_stack([x0 + vx * t, y0 + vy * t, np.full(t.size, vx),
+                            np.full(t.size, vy)])
+    _, mean, cov, _ = component(t, own_x, own_y, measured_rad, line[0],
+                                burst_levels(t, start, duration, dv_m_s), sigma_rad,
+                                start=line)
+    if not np.isfinite(cov).all():
+        return np.inf
+    error = mean - line[-1]
+    return float(error @ np.linalg.solve(cov, error))

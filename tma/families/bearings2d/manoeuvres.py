@@ -23,8 +23,10 @@ weigh (above ``LOG_SCREEN`` of the mixture's mass) are then evaluated exactly, t
 it is (``manoeuvre_components._extension``: the base's filter run again over the burst
 alone, the bearings after it through the backward pass); the lighter ones are pooled into
 one Gaussian of their moments. The ``KEEP`` most probable extensions of a level join the
-mixture, its ``REFINE`` most probable are refined to their maximum a posteriori trajectory
-(``kalman._fit``: the iterated Kalman smoother) and linearised there (Laplace). The search goes
+mixture; its most probable is refined to its maximum a posteriori trajectory (``kalman._fit``:
+the iterated Kalman smoother) and linearised there (Laplace), the next ``REFINE`` - 1 (those
+above ``LOG_REFINE`` of it) by ``REFINE_PASSES`` pass of that smoother from the base's
+trajectory. The search goes
 at least ``MIN_LEVELS`` deep and on while a level holds more than ``LOG_STOP`` of the
 mixture's mass, up to ``MAX_LEVEL``; what it leaves out is computed: the extensions not
 kept, and beyond the last level the tail of the levels' masses (geometric, at the ratio of
@@ -82,7 +84,10 @@ MIN_LEVELS = 3  # levels searched whatever their mass (two manoeuvres may explai
 # cannot: a level's mass says little of the next one's)
 BASES = 3  # components of a level the next level extends
 KEEP = 64  # extensions of a level kept in the mixture
-REFINE = 3  # of which refined to their MAP trajectory (2: 90 % consistent where 3 gives 92 %)
+REFINE = 6  # of which refined: the most probable to its MAP trajectory, the rest (those
+# above LOG_REFINE of it) by REFINE_PASSES passes of the iterated smoother
+REFINE_PASSES = 1
+LOG_REFINE = math.log(1e-2)
 LOG_STOP = math.log(1e-3)  # a level holding less of the mixture's mass ends the search
 LOG_SCREEN = math.log(1e-2)  # an extension screened below this share of the mass is left out
 
@@ -281,8 +286,14 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
                         order[bb], order[bb - 1] = order[bb - 1], order[bb]
                     else:
                         break
+            # (an extension's weight and state are the base's linearisation's: after a large
+            # manoeuvre they rank it poorly, and the next level's bases are chosen among the
+            # refined; one pass from the base's trajectory re-ranks five more at the cost of
+            # one pass each, which the long logs' many manoeuvres need: flagged 15 % -> 5 %)
             for f in range(min(REFINE, used - start)):
                 c = order[f]
+                if f > 0 and logw[c] < logw[order[0]] + LOG_REFINE:
+                    break
                 _component_noise(t, lo, hi, q[i], taus[i], durations, burst[i], cells[c],
                                  count[c], Q)
                 noms[filled] = noms[slot[parent[c]]]
@@ -290,7 +301,8 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
                 for m in range(count[c]):
                     lp += log_pn[cells[c, m] // D]
                 if _fit(t, ox, oy, z, w, weighted, lo, hi, noms[filled], Q, prior, p0,
-                        max_iter, tol_m, mf, Pf, Pp, nu, S, ms, trial) < 0:
+                        max_iter if f == 0 else REFINE_PASSES, tol_m, mf, Pf, Pp, nu, S, ms,
+                        trial) < 0:
                     logw[c] = -np.inf
                     continue
                 logw[c] = lp + _laplace(t, ox, oy, z, w, weighted, lo, hi, noms[filled], Q,

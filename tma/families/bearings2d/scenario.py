@@ -351,7 +351,9 @@ def simulate_shard(cfg: Config, shard_index: int):
         grid, at = (t, slice(None)) if platform is None else _time_grid(t)
         x, y, v_end, last = target_motion.target_paths(
             cfg.target, x0, y0, course, speed, grid, shard_rng(cfg, shard_index, MANOEUVRE),
-            shard_rng(cfg, shard_index, WANDER))
+            shard_rng(cfg, shard_index, WANDER),
+            target_motion.declared_prior(cfg.target.manoeuvres, rms_speed(pop))
+            if cfg.target.manoeuvres.shape == "burst" else None)
         x, y = x[:, at], y[:, at]
         true_bearing = bearing_from_north(x - own_x, y - own_y)
     else:

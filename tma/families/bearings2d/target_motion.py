@@ -17,6 +17,12 @@ left or right alike, at a rate uniform in [``turn_rate_min_deg_s``,
 are then piecewise linear in time, and positions their integral (3-point Gauss-Legendre per
 bearing interval: within millimetres of the exact arcs, ``tma.path``).
 
+Or (``shape`` burst: the estimators' own model, ``manoeuvres.py``, to check them on data
+drawn from it) each Poisson manoeuvre is a burst of white acceleration of density s^2 / D per
+axis over a duration D, s and D (one of them alike) those the log declares
+(``declared_prior``): the velocity changes by N(0, s^2) per axis (``burst_deviations``,
+drawn exactly on the bearing epochs).
+
 Wander (``accel_psd_m2_s3`` = q > 0): per axis, position and velocity deviations driven by
 white acceleration of spectral density q, drawn exactly on the bearing epochs (the
 discrete model of ``ncv.py``: Q = q [[T^3/3, T^2/2], [T^2/2, T]]), added to the path.
@@ -73,6 +79,12 @@ class ManoeuvreConfig:
                                     "[0, 1)")
     accel_m_s2: float = param(0.05, "while changing speed (m/s^2; merchant ships 0.01-0.05)",
                               "(0, 100]")
+    shape: str = param("turn", "how a Poisson manoeuvre moves the target: turn (as a ship: "
+                       "the turn and speed change above) or burst (the estimators' own "
+                       "model: a velocity change N(0, s^2) per axis as white acceleration "
+                       "over one of the durations, s and the durations those the log "
+                       "declares; to check an estimator on data drawn from its own model)",
+                       choices=("turn", "burst"), unhashed_default=True)
 
 
 @dataclass
@@ -118,6 +130,8 @@ def check(cfg: TargetConfig, where: str):
             "target.manoeuvres needs course_change_min_deg <= course_change_max_deg")
     require(m.turn_rate_min_deg_s <= m.turn_rate_max_deg_s, where,
             "target.manoeuvres needs turn_rate_min_deg_s <= turn_rate_max_deg_s")
+    require(m.shape == "turn" or m.prob == 0, where,
+            "target.manoeuvres.shape=burst draws Poisson manoeuvres: set rate_per_h, not prob")
 
 
 def declared_prior(m: ManoeuvreConfig, speed_m_s: float) -> ManoeuvrePrior:
@@ -150,6 +164,22 @@ def _ramp(t, start, duration):
     return np.where(duration[:, None] > 0, np.clip(x, 0.0, 1.0), (t >= start[:, None]) * 1.0)
 
 
+def poisson_times(rate_per_h, duration_s, n, rng):
+    """Per target (n): how many manoeuvres start over ``duration_s`` at the times of a Poisson
+    process of ``rate_per_h``, and their start times (slots, n; s, sorted, inf past the
+    count)."""
+    from scipy.stats import poisson  # (only where simulated: heavy for every command)
+
+    mean = rate_per_h / 3600.0 * duration_s
+    # room for every count but a 1e-9 tail (a log of hours at ten an hour needs more than
+    # MAX_POISSON; the same slots, and so the same draws, below it)
+    slots = max(MAX_POISSON, int(poisson.isf(MISSED_POISSON, mean)) + 1)
+    count = np.minimum(rng.poisson(mean, n), slots)
+    active = np.arange(slots)[:, None] < count
+    times = np.sort(np.where(active, rng.uniform(0.0, duration_s, (slots, n)), np.inf), axis=0)
+    return count, times
+
+
 def manoeuvre_plan(cfg: ManoeuvreConfig, duration_s, speed0, rng):
     """Per target (n = ``speed0.size``): start, turn (rad, signed: > 0 right), turn duration,
     speed change (m/s) and its duration of each manoeuvre, arrays (slots, n) (a slot without
@@ -157,16 +187,9 @@ def manoeuvre_plan(cfg: ManoeuvreConfig, duration_s, speed0, rng):
     and the index of its last manoeuvre (n,; 0 where none)."""
     n = speed0.size
     if cfg.rate_per_h > 0:
-        from scipy.stats import poisson  # (only where simulated: heavy for every command)
-
-        mean = cfg.rate_per_h / 3600.0 * duration_s
-        # room for every count but a 1e-9 tail (a log of hours at ten an hour needs more
-        # than MAX_POISSON; the same slots, and so the same draws, below it)
-        slots = max(MAX_POISSON, int(poisson.isf(MISSED_POISSON, mean)) + 1)
-        count = np.minimum(rng.poisson(mean, n), slots)
+        count, times = poisson_times(cfg.rate_per_h, duration_s, n, rng)
+        slots = times.shape[0]
         active = np.arange(slots)[:, None] < count
-        times = np.sort(np.where(active, rng.uniform(0.0, duration_s, (slots, n)), np.inf),
-                        axis=0)
         manoeuvres = count > 0
     else:
         slots, active = cfg.count, None
@@ -211,9 +234,16 @@ def wander(q, t, n, rng):
     """Position and velocity deviations (x, y, vx, vy), each (n, K), of white random
     acceleration with spectral density ``q`` per axis, zero at t[0]."""
     T = np.diff(t)
-    l11 = np.sqrt(q * T**3 / 3)
-    l21 = np.divide(q * T**2 / 2, l11, out=np.zeros_like(T), where=l11 > 0)
-    l22 = np.sqrt(np.maximum(q * T - l21**2, 0.0))
+    return _white_steps(q * T**3 / 3, q * T**2 / 2, q * T, T, n, rng)
+
+
+def _white_steps(pp, pv, vv, T, n, rng):
+    """Per axis, position and velocity deviations (n, K), zero at the first epoch, whose step
+    into each epoch (steps ``T``, s) adds white-acceleration noise of covariance [[pp, pv],
+    [pv, vv]] (each (K - 1,) or (n, K - 1): m^2, m^2/s, m^2/s^2), drawn exactly."""
+    l11 = np.sqrt(pp)
+    l21 = np.divide(pv, l11, out=np.zeros_like(l11), where=l11 > 0)
+    l22 = np.sqrt(np.maximum(vv - l21**2, 0.0))
     u = rng.standard_normal((2, 2, n, T.size))  # (axis, position/velocity, track, step)
     out = []
     for axis in range(2):
@@ -226,11 +256,82 @@ def wander(q, t, n, rng):
     return px, py, vx, vy
 
 
-def target_paths(cfg: TargetConfig, x0, y0, course0, speed0, t, manoeuvre_rng, wander_rng):
+def burst_deviations(t, start, duration, dv_m_s, rng):
+    """Position and velocity deviations (x, y, vx, vy), each (n, K), at the epochs ``t`` (s)
+    of white acceleration of density ``dv_m_s``^2 / D per axis over each burst [start, start
+    + D] (``start``, ``duration``: (slots, n), s, inf: none), zero at t[0]: the estimators'
+    manoeuvre (``manoeuvres.py``), each burst changing the velocity by N(0, dv^2) per axis.
+    Drawn exactly: each step's covariance is that of the parts of the bursts within it."""
+    n = start.shape[1]
+    t0, t1 = t[:-1], t[1:]
+    pp, pv, vv = (np.zeros((n, t.size - 1)) for _ in range(3))
+    for j in range(start.shape[0]):
+        live = np.isfinite(start[j])
+        if not live.any():  # (sorted: no later slot has one either)
+            break
+        a = np.clip(np.where(live, start[j], t[-1])[:, None], t0, t1)
+        b = np.clip(np.where(live, start[j] + duration[j], t[-1])[:, None], t0, t1)
+        density = np.where(live, dv_m_s**2 / np.where(live, duration[j], 1.0), 0.0)[:, None]
+        pp += density * ((t1 - a) ** 3 - (t1 - b) ** 3) / 3
+        pv += density * ((t1 - a) ** 2 - (t1 - b) ** 2) / 2
+        vv += density * (b - a)
+    return _white_steps(pp, pv, vv, np.diff(t), n, rng)
+
+
+def burst_plan(cfg: ManoeuvreConfig, prior: ManoeuvrePrior, t, n, rng):
+    """Per target (n) of a log of epochs ``t`` (s), its manoeuvres of ``shape`` burst: how
+    many (n,), their starts (slots, n; s in ``t``'s time, sorted, inf past the count: Poisson
+    over the observation) and durations (slots, n; s, each one of ``prior``'s alike, 0 past
+    the count). The first draws of the shard's manoeuvre stream ``rng``, so that the bursts
+    of a dataset can be drawn again (``bench.py``'s check against the true manoeuvres)."""
+    count, start = poisson_times(cfg.rate_per_h, float(t[-1] - t[0]), n, rng)
+    durations = np.asarray(prior.durations_s, dtype=float)
+    duration = np.where(np.isfinite(start), durations[rng.integers(0, durations.size,
+                                                                   start.shape)], 0.0)
+    return count, start + t[0], duration
+
+
+def _burst_paths(cfg: ManoeuvreConfig, prior: ManoeuvrePrior, x0, y0, course0, speed0, t,
+                 rng):
+    """``target_paths``'s manoeuvres of ``shape`` burst (``burst_plan``), the velocity
+    changed by ``prior.dv_m_s`` per axis over each (``burst_deviations``)."""
+    n = x0.size
+    count, start, duration = burst_plan(cfg, prior, t, n, rng)
+    px, py, vx, vy = burst_deviations(t, start, duration, prior.dv_m_s, rng)
+    v0 = np.column_stack([speed0 * np.sin(course0), speed0 * np.cos(course0)])
+    x = x0[:, None] + v0[:, :1] * (t - t[0]) + px
+    y = y0[:, None] + v0[:, 1:] * (t - t[0]) + py
+    vx, vy = v0[:, :1] + vx, v0[:, 1:] + vy
+    # the last burst: its course and speed change between the epochs about it
+    on = count > 0
+    j = np.maximum(count - 1, 0)
+    last_start = np.where(on, np.take_along_axis(start, j[None], axis=0)[0], np.nan)
+    last_end = last_start + np.take_along_axis(duration, j[None], axis=0)[0]
+    rows = np.arange(n)
+    k0 = np.clip(np.searchsorted(t, np.nan_to_num(last_start), side="right") - 1, 0, t.size - 1)
+    k1 = np.clip(np.searchsorted(t, np.nan_to_num(last_end)), 0, t.size - 1)
+    before = np.hypot(vx[rows, k0], vy[rows, k0])
+    turn = np.rad2deg(np.arctan2(vx[rows, k1], vy[rows, k1]) - np.arctan2(vx[rows, k0],
+                                                                          vy[rows, k0]))
+    last = {"manoeuvre_start_s": last_start, "manoeuvre_end_s": last_end,
+            "course_change_deg": np.where(on, (turn + 180.0) % 360.0 - 180.0, np.nan),
+            "speed_change_rel": np.where(on, np.hypot(vx[rows, k1], vy[rows, k1]) / before
+                                         - 1.0, np.nan),
+            "n_manoeuvres": count.astype(np.int64)}
+    return x, y, np.column_stack([vx[:, -1], vy[:, -1]]), last
+
+
+def target_paths(cfg: TargetConfig, x0, y0, course0, speed0, t, manoeuvre_rng, wander_rng,
+                 prior: ManoeuvrePrior | None = None):
     """Positions (n, K) of the targets at the bearing times ``t`` and their velocity at the
     last one (n, 2), and per target its last manoeuvre (start, end s; turn deg, speed
     factor; NaN where none) and ``n_manoeuvres``, how many manoeuvres started within the
-    observation (one delayed past its end by the one before is not counted)."""
+    observation (one delayed past its end by the one before is not counted). Manoeuvres of
+    ``shape`` burst take the size and durations of ``prior`` (what the log declares)."""
+    if cfg.manoeuvres.shape == "burst" and cfg.manoeuvres.rate_per_h > 0:
+        x, y, v_end, last = _burst_paths(cfg.manoeuvres, prior, x0, y0, course0, speed0, t,
+                                         manoeuvre_rng)
+        return _wandering(cfg, t, x, y, v_end, wander_rng) + (last,)
     n = x0.size
     duration = float(t[-1] - t[0])
     plan = manoeuvre_plan(cfg.manoeuvres, duration, speed0, manoeuvre_rng)
@@ -253,10 +354,7 @@ def target_paths(cfg: TargetConfig, x0, y0, course0, speed0, t, manoeuvre_rng, w
         x = x0[:, None] + v0[:, :1] * (t - t[0])
         y = y0[:, None] + v0[:, 1:] * (t - t[0])
         v_end = v0
-    if cfg.accel_psd_m2_s3 > 0:
-        px, py, vx, vy = wander(cfg.accel_psd_m2_s3, t, n, wander_rng)
-        x, y = x + px, y + py
-        v_end = v_end + np.column_stack([vx[:, -1], vy[:, -1]])
+    x, y, v_end = _wandering(cfg, t, x, y, v_end, wander_rng)
     # the last manoeuvre that started within the observation
     # (delayed ones are sorted last; a slot without a manoeuvre starts at inf)
     j = plan["last"] - np.sum(np.isfinite(plan["start"]) & (plan["start"] > t[-1]), axis=0)
@@ -277,3 +375,12 @@ def target_paths(cfg: TargetConfig, x0, y0, course0, speed0, t, manoeuvre_rng, w
             "speed_change_rel": np.where(on, of("dv") / speed_before, np.nan),
             "n_manoeuvres": started.astype(np.int64)}
     return x, y, v_end, last
+
+
+def _wandering(cfg: TargetConfig, t, x, y, v_end, rng):
+    """The paths (n, K) and last velocities (n, 2) with the wander added (q > 0)."""
+    if cfg.accel_psd_m2_s3 > 0:
+        px, py, vx, vy = wander(cfg.accel_psd_m2_s3, t, x.shape[0], rng)
+        x, y = x + px, y + py
+        v_end = v_end + np.column_stack([vx[:, -1], vy[:, -1]])
+    return x, y, v_end
