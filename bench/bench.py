@@ -872,7 +872,7 @@ def bench_own_model(n_tracks: int, sigma_deg: float):
     from tma.families.bearings2d.manoeuvre_components import known_manoeuvres_nees
     from tma.families.bearings2d.metrics import NEES_95
     from tma.families.bearings2d.scenario import MANOEUVRE
-    from tma.families.bearings2d.target_motion import ManoeuvreConfig, burst_plan
+    from tma.families.bearings2d.target_motion import burst_plan
     from tma.runtime.sharding import shard_rng
 
     print(f"(o) the estimators' own model: {n_tracks} targets, 3 manoeuvres/h declared, "
@@ -903,9 +903,10 @@ def bench_own_model(n_tracks: int, sigma_deg: float):
     log, cfg = ds.logs[0], ds.config
     t = np.asarray(log.t_s, dtype=float)
     prior = log.manoeuvres
-    count, start, duration = burst_plan(
-        ManoeuvreConfig(rate_per_h=3.0, shape="burst"), prior, t, n_tracks,
-        shard_rng(cfg, 0, MANOEUVRE))
+    count, start, duration = burst_plan(cfg.target.manoeuvres, prior, t, n_tracks,
+                                        shard_rng(cfg, 0, MANOEUVRE))
+    if not np.array_equal(count, ds.truth.n_manoeuvres):
+        raise RuntimeError("the bursts drawn again are not the dataset's")
     truth = ds.truth[list(THETA)].to_numpy()  # (one shard: rows in the log's order)
     true_nees = np.full(n_tracks, np.nan)
     for i in np.flatnonzero(ok):

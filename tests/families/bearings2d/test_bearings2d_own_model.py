@@ -12,7 +12,7 @@ import tma
 from tma.families.bearings2d.manoeuvre_components import burst_levels, known_manoeuvres_nees
 from tma.families.bearings2d.metrics import NEES_95, THETA
 from tma.families.bearings2d.scenario import MANOEUVRE
-from tma.families.bearings2d.target_motion import ManoeuvreConfig, burst_plan
+from tma.families.bearings2d.target_motion import burst_plan
 from tma.runtime.sharding import shard_rng
 
 N, SEED = 800, 7
@@ -54,8 +54,8 @@ def test_the_true_manoeuvres_component_is_consistent_where_it_was_made(runs):
     log = ds.logs[0]
     t = np.asarray(log.t_s, dtype=float)
     prior = log.manoeuvres
-    count, start, duration = burst_plan(ManoeuvreConfig(rate_per_h=3.0, shape="burst"), prior,
-                                        t, N, shard_rng(ds.config, 0, MANOEUVRE))
+    count, start, duration = burst_plan(ds.config.target.manoeuvres, prior, t, N,
+                                        shard_rng(ds.config, 0, MANOEUVRE))
     np.testing.assert_array_equal(count, ds.truth.n_manoeuvres)  # the same draws again
     _, ok = _consistent(result)
     few = ok & (count <= 1)

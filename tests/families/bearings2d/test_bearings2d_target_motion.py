@@ -2,6 +2,8 @@
 arcs of ``tma.maths.path``, wander against its covariance (Monte Carlo), the truth at the last
 bearing, reproducibility and common random numbers."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -208,3 +210,28 @@ def test_burst_manoeuvres_are_the_declared_prior():
     turns, _ = _sim(manoeuvres=ManoeuvreConfig(rate_per_h=6.0))
     assert turns.manoeuvres == prior  # the same declaration, another motion
     assert not np.array_equal(turns.bearing_deg, log.bearing_deg)
+    # shape=turn, the default, leaves a dataset and its name (config hash) as they were
+    named, _ = _sim(manoeuvres=ManoeuvreConfig(rate_per_h=6.0, shape="turn"))
+    np.testing.assert_array_equal(named.bearing_deg, turns.bearing_deg)
+    from tma.families import dataset_name
+    from tma.families.bearings2d import scenario
+
+    def name(shape):
+        return dataset_name(scenario, Config(n_tracks=300, shard_size=300, seed=4, target=
+                                             TargetConfig(manoeuvres=ManoeuvreConfig(
+                                                 rate_per_h=6.0, shape=shape))))
+    assert name("turn") == dataset_name(scenario, Config(
+        n_tracks=300, shard_size=300, seed=4,
+        target=TargetConfig(manoeuvres=ManoeuvreConfig(rate_per_h=6.0))))
+    assert name("burst") != name("turn")
+
+
+def test_a_burst_of_no_size_changes_nothing():
+    """A declared prior of no size (no turns, no speed changes): bursts leave the targets at
+    constant velocity (no 0 / 0), as the turns do."""
+    still = ManoeuvreConfig(rate_per_h=6.0, course_change_min_deg=0.0,
+                            course_change_max_deg=0.0, speed_change_rel=0.0)
+    bursts, _ = _sim(manoeuvres=dataclasses.replace(still, shape="burst"))
+    turns, _ = _sim(manoeuvres=still)
+    assert bursts.manoeuvres.dv_m_s == 0.0
+    np.testing.assert_allclose(bursts.bearing_deg, turns.bearing_deg, atol=1e-9)

@@ -271,7 +271,9 @@ def burst_deviations(t, start, duration, dv_m_s, rng):
             break
         a = np.clip(np.where(live, start[j], t[-1])[:, None], t0, t1)
         b = np.clip(np.where(live, start[j] + duration[j], t[-1])[:, None], t0, t1)
-        density = np.where(live, dv_m_s**2 / np.where(live, duration[j], 1.0), 0.0)[:, None]
+        # (a burst of no duration or no size changes nothing: 0, not 0 / 0)
+        sized = live & (duration[j] > 0) & (dv_m_s > 0)
+        density = np.where(sized, dv_m_s**2 / np.where(sized, duration[j], 1.0), 0.0)[:, None]
         pp += density * ((t1 - a) ** 3 - (t1 - b) ** 3) / 3
         pv += density * ((t1 - a) ** 2 - (t1 - b) ** 2) / 2
         vv += density * (b - a)
@@ -329,6 +331,9 @@ def target_paths(cfg: TargetConfig, x0, y0, course0, speed0, t, manoeuvre_rng, w
     observation (one delayed past its end by the one before is not counted). Manoeuvres of
     ``shape`` burst take the size and durations of ``prior`` (what the log declares)."""
     if cfg.manoeuvres.shape == "burst" and cfg.manoeuvres.rate_per_h > 0:
+        if prior is None:
+            raise ValueError("target_paths: manoeuvres of shape burst need the prior they are "
+                             "drawn from (prior=declared_prior(...))")
         x, y, v_end, last = _burst_paths(cfg.manoeuvres, prior, x0, y0, course0, speed0, t,
                                          manoeuvre_rng)
         return _wandering(cfg, t, x, y, v_end, wander_rng) + (last,)
