@@ -80,7 +80,8 @@
     above 100), each quantity within 1 and 2 sd and the consistency by manoeuvres made and
     ``p_manoeuvre``; on the bursts also the component of the true manoeuvres (their true
     starts and durations, refined and linearised as ``lm``'s are: the Laplace approximation
-    alone, with no search), on the same ``ok`` tracks.
+    alone, with no search), on the same ``ok`` tracks, as it is and stated through log-polar
+    coordinates (``tma/families/bearings2d/log_polar.py``).
 
 Options: ``--tracks N`` (2000), ``--sigma DEG`` (0.5), ``--runs N`` (30), ``--skip-tables``,
 ``--skip-first-table``, ``--only SECTION`` (lm, tables, ranges2d, filters3d, cmnf, compile,
@@ -908,18 +909,21 @@ def bench_own_model(n_tracks: int, sigma_deg: float):
     if not np.array_equal(count, ds.truth.n_manoeuvres):
         raise RuntimeError("the bursts drawn again are not the dataset's")
     truth = ds.truth[list(THETA)].to_numpy()  # (one shard: rows in the log's order)
-    true_nees = np.full(n_tracks, np.nan)
-    for i in np.flatnonzero(ok):
-        true_nees[i] = known_manoeuvres_nees(
-            t, log.own_x_m, log.own_y_m, np.deg2rad(log.bearing_deg[i]), np.deg2rad(sigma_deg),
-            truth[i], start[:, i], duration[:, i], prior.dv_m_s)
     made = tracks.n_manoeuvres.to_numpy()
-    print(f"    the true manoeuvres' component on the same {ok.sum()} ok tracks: consistent "
-          f"{_share(int((true_nees[ok] <= NEES_95).sum()), int(ok.sum()))}; NEES > "
-          f"{GHOST_NEES:g} {int((true_nees[ok] > GHOST_NEES).sum())}; by manoeuvres made "
-          + ", ".join(f"{k}: {100 * np.mean(true_nees[ok & sel] <= NEES_95):.1f} %"
-                      for k, sel in (("0", made == 0), ("1", made == 1), ("2", made == 2),
-                                     ("3+", made >= 3)) if (ok & sel).any()))
+    for label, log_polar in (("the true manoeuvres' component", False),
+                             ("    stated through log-polar coordinates", True)):
+        true_nees = np.full(n_tracks, np.nan)
+        for i in np.flatnonzero(ok):
+            true_nees[i] = known_manoeuvres_nees(
+                t, log.own_x_m, log.own_y_m, np.deg2rad(log.bearing_deg[i]),
+                np.deg2rad(sigma_deg), truth[i], start[:, i], duration[:, i], prior.dv_m_s,
+                log_polar=log_polar)
+        print(f"    {label} on the same {ok.sum()} ok tracks: consistent "
+              f"{_share(int((true_nees[ok] <= NEES_95).sum()), int(ok.sum()))}; NEES > "
+              f"{GHOST_NEES:g} {int((true_nees[ok] > GHOST_NEES).sum())}; by manoeuvres made "
+              + ", ".join(f"{k}: {100 * np.mean(true_nees[ok & sel] <= NEES_95):.1f} %"
+                          for k, sel in (("0", made == 0), ("1", made == 1), ("2", made == 2),
+                                         ("3+", made >= 3)) if (ok & sel).any()))
 
 
 def main():
