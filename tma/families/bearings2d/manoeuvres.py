@@ -152,7 +152,6 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
     count = np.empty(C + 1, dtype=np.int64)
     logw = np.empty(C)
     slot = np.empty(C, dtype=np.int64)
-    full = np.zeros(C, dtype=np.bool_)  # refined to its MAP trajectory (not one pass only)
     parent = np.empty(C, dtype=np.int64)
     means, covs = np.empty((C + 1, 4)), np.empty((C + 1, 4, 4))
     mf2, Pf2, Pp2, nu2, S2 = (np.empty((K, 4)), np.empty((K, 4, 4)), np.empty((K, 4, 4)),
@@ -181,7 +180,7 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
             log_pn[c] = (math.log((1.0 - p_none[i, c]) / D) - math.log(p_none[i, c])
                          if epochs[i, c, 0] >= 0 and p_none[i, c] < 1.0 else -np.inf)
         # component 0: no manoeuvre
-        count[0], slot[0], parent[0], full[0] = 0, 0, -1, True
+        count[0], slot[0], parent[0] = 0, 0, -1
         _component_noise(t, lo, hi, q[i], taus[i], durations, burst[i], cells[0], 0, Q)
         passes[i] = _fit(t, ox, oy, z, w, weighted, lo, hi, noms[0], Q, prior, p0, max_iter,
                          tol_m, mf, Pf, Pp, nu, S, ms, trial)
@@ -271,7 +270,7 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
                         count[c] = nb + 1
                         for m in range(nb + 1):
                             cells[c, m] = cells[C, m]
-                        logw[c], slot[c], parent[c], full[c] = lw, -1, b, False
+                        logw[c], slot[c], parent[c] = lw, -1, b
                         for a in range(4):
                             means[c, a] = means[C, a]
                             for bb in range(4):
@@ -306,15 +305,15 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
                 lp = log_none
                 for m in range(count[c]):
                     lp += log_pn[cells[c, m] // D]
-                full[c] = first_w == -np.inf
+                whole = first_w == -np.inf  # (to its MAP trajectory, else one pass)
                 if _fit(t, ox, oy, z, w, weighted, lo, hi, noms[filled], Q, prior, p0,
-                        max_iter if full[c] else REFINE_PASSES, tol_m, mf, Pf, Pp, nu, S, ms,
+                        max_iter if whole else REFINE_PASSES, tol_m, mf, Pf, Pp, nu, S, ms,
                         trial) < 0:
                     logw[c] = -np.inf
                     continue
                 logw[c] = lp + _laplace(t, ox, oy, z, w, weighted, lo, hi, noms[filled], Q,
                                         prior, p0, s2, mf, Pf, Pp, nu, S, means[c], covs[c])
-                if full[c]:
+                if whole:
                     first_w = logw[c]
                 slot[c] = filled
                 filled += 1
