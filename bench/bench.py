@@ -77,11 +77,11 @@
     manoeuvres.shape=burst``: Poisson starts, Gaussian velocity changes as white-acceleration
     bursts of the declared durations) beside the same declared prior's ship-like turns, 3 an
     hour at 0.5 deg, seed 7, ``lm`` with the declared prior: ok, consistent, ghosts (NEES
-    above 100), each quantity within 1 and 2 sd and the consistency by manoeuvres made and
-    ``p_manoeuvre``; on the bursts also the component of the true manoeuvres (their true
-    starts and durations, refined and linearised as ``lm``'s are: the Laplace approximation
-    alone, with no search), on the same ``ok`` tracks, as it is and stated through log-polar
-    coordinates (``tma/families/bearings2d/log_polar.py``).
+    above 100), each quantity within 1 and 2 sd and the consistency by manoeuvres made,
+    ``p_manoeuvre`` and the true range now; on the bursts also the component of the true
+    manoeuvres (their true starts and durations, refined and linearised as ``lm``'s are:
+    the Laplace approximation alone, with no search), on the same ``ok`` tracks, as it is
+    and stated through log-polar coordinates (``tma/families/bearings2d/log_polar.py``).
 
 Options: ``--tracks N`` (2000), ``--sigma DEG`` (0.5), ``--runs N`` (30), ``--skip-tables``,
 ``--skip-first-table``, ``--only SECTION`` (lm, tables, ranges2d, filters3d, cmnf, compile,
@@ -895,7 +895,7 @@ def bench_own_model(n_tracks: int, sigma_deg: float):
                           for q in ("range", "course", "speed")
                           for z in [tracks[f"{q}_z"].to_numpy()[ok]]))
         for group, cell, mask in cells(tracks):
-            if group in ("manoeuvres", "p_manoeuvre"):
+            if group in ("range_km", "manoeuvres", "p_manoeuvre"):
                 m = mask & ok
                 print(f"        {group} {cell}: ok {m.sum()}, consistent "
                       f"{100 * np.mean(nees[m] <= NEES_95):.1f} %" if m.any() else

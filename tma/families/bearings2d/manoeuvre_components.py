@@ -7,6 +7,9 @@ import math
 import numpy as np
 
 from tma.families.bearings2d.kalman import _filter, _fit, _predict, filter_on, white_step
+from tma.families.bearings2d.log_polar import log_polar_statement
+from tma.families.bearings2d.manoeuvre_prior import burst_step_noise
+from tma.families.bearings2d.mixture_tails import tail_points
 from tma.families.bearings2d.ncv import (
     MAX_PASSES,
     MIN_PRIOR_M,
@@ -200,14 +203,10 @@ def burst_levels(t, start, duration, dv_m_s):
     covers, as the mixture's components take theirs. For the check of a component against
     targets whose manoeuvres are known (``target_motion.burst_plan``)."""
     t = np.asarray(t, dtype=float)
-    step = np.diff(t, prepend=t[0])
-    levels = np.zeros(t.size)
-    for a0, d in zip(start, duration, strict=True):
-        if not np.isfinite(a0):
-            continue
-        a, b = np.clip(t - step, a0, a0 + d), np.clip(t, a0, a0 + d)
-        levels += np.divide(b - a, step, out=np.zeros_like(t), where=step > 0) * dv_m_s**2 / d
-    return levels
+    _, _, vv = burst_step_noise(t, np.asarray(start, float)[:, None],
+                                np.asarray(duration, float)[:, None], dv_m_s)
+    step = np.diff(t)
+    return np.r_[0.0, np.divide(vv[0], step, out=np.zeros_like(step), where=step > 0)]
 
 
 def known_manoeuvres_nees(t, own_x, own_y, measured_rad, sigma_rad, theta, start, duration,
@@ -228,9 +227,6 @@ def known_manoeuvres_nees(t, own_x, own_y, measured_rad, sigma_rad, theta, start
     if not np.isfinite(cov).all():
         return np.inf
     if log_polar:
-        from tma.families.bearings2d.log_polar import log_polar_statement
-        from tma.families.bearings2d.mixture_tails import tail_points
-
         own_p = np.array([own_x[-1], own_y[-1]])
         own_v = (own_p - np.array([own_x[-2], own_y[-2]])) / (t[-1] - t[-2])
         mean, cov = log_polar_statement(mean, cov, own_p, own_v, *tail_points())

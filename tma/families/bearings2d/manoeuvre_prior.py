@@ -102,3 +102,28 @@ def cell_priors(prior: ManoeuvrePrior, t, first, last):
                   last[:, None, None]).astype(np.int64)
     return (tau, after, end, np.where(inside, np.exp(-prior.rate_per_s * (b - a)), 1.0),
             np.where(inside[..., None], epoch, -1).astype(np.int64), shock)
+
+
+def burst_step_noise(t, start, duration, dv_m_s):
+    """Per target and step into each epoch of ``t`` (n, K - 1), the noise that white
+    acceleration of density dv^2 / D per axis over each burst [start, start + D] (``start``,
+    ``duration``: (slots, n), s; inf: none, sorted) adds to that step, exactly for the part of
+    each burst within it: position (m^2), position-velocity (m^2/s) and velocity (m^2/s^2)
+    per axis. A burst of no duration or no size adds nothing. The estimators' manoeuvre: the
+    simulator draws it (``target_motion.burst_deviations``), and a component of known
+    manoeuvres takes its velocity term over the step (``manoeuvre_components.burst_levels``)."""
+    n = start.shape[1]
+    t0, t1 = t[:-1], t[1:]
+    pp, pv, vv = (np.zeros((n, t.size - 1)) for _ in range(3))
+    for j in range(start.shape[0]):
+        live = np.isfinite(start[j])
+        if not live.any():  # (sorted: no later slot has one either)
+            break
+        a = np.clip(np.where(live, start[j], t[-1])[:, None], t0, t1)
+        b = np.clip(np.where(live, start[j] + duration[j], t[-1])[:, None], t0, t1)
+        sized = live & (duration[j] > 0) & (dv_m_s > 0)  # (0, not 0 / 0)
+        density = np.where(sized, dv_m_s**2 / np.where(sized, duration[j], 1.0), 0.0)[:, None]
+        pp += density * ((t1 - a) ** 3 - (t1 - b) ** 3) / 3
+        pv += density * ((t1 - a) ** 2 - (t1 - b) ** 2) / 2
+        vv += density * (b - a)
+    return pp, pv, vv

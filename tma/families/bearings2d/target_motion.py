@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tma.config import param, require
-from tma.families.bearings2d.manoeuvre_prior import ManoeuvrePrior
+from tma.families.bearings2d.manoeuvre_prior import ManoeuvrePrior, burst_step_noise
 
 MANOEUVRE_STREAM, WANDER_STREAM = 2, 3  # spawn-key elements under the shard's (shard,)
 DURATIONS = 3  # a declared prior's durations: the means of the thirds of their distribution
@@ -261,23 +261,10 @@ def burst_deviations(t, start, duration, dv_m_s, rng):
     of white acceleration of density ``dv_m_s``^2 / D per axis over each burst [start, start
     + D] (``start``, ``duration``: (slots, n), s, inf: none), zero at t[0]: the estimators'
     manoeuvre (``manoeuvres.py``), each burst changing the velocity by N(0, dv^2) per axis.
-    Drawn exactly: each step's covariance is that of the parts of the bursts within it."""
-    n = start.shape[1]
-    t0, t1 = t[:-1], t[1:]
-    pp, pv, vv = (np.zeros((n, t.size - 1)) for _ in range(3))
-    for j in range(start.shape[0]):
-        live = np.isfinite(start[j])
-        if not live.any():  # (sorted: no later slot has one either)
-            break
-        a = np.clip(np.where(live, start[j], t[-1])[:, None], t0, t1)
-        b = np.clip(np.where(live, start[j] + duration[j], t[-1])[:, None], t0, t1)
-        # (a burst of no duration or no size changes nothing: 0, not 0 / 0)
-        sized = live & (duration[j] > 0) & (dv_m_s > 0)
-        density = np.where(sized, dv_m_s**2 / np.where(sized, duration[j], 1.0), 0.0)[:, None]
-        pp += density * ((t1 - a) ** 3 - (t1 - b) ** 3) / 3
-        pv += density * ((t1 - a) ** 2 - (t1 - b) ** 2) / 2
-        vv += density * (b - a)
-    return _white_steps(pp, pv, vv, np.diff(t), n, rng)
+    Drawn exactly: each step's covariance is that of the parts of the bursts within it
+    (``manoeuvre_prior.burst_step_noise``)."""
+    pp, pv, vv = burst_step_noise(t, start, duration, dv_m_s)
+    return _white_steps(pp, pv, vv, np.diff(t), start.shape[1], rng)
 
 
 def burst_plan(cfg: ManoeuvreConfig, prior: ManoeuvrePrior, t, n, rng):
