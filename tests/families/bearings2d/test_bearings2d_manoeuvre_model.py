@@ -97,6 +97,39 @@ def _levels(t, q, tau=None, q_burst=0.0, duration=0.0):
     return levels
 
 
+def _mixture_and_by_hand(t, ox, oy, z, sigma, theta, prior, q, most):
+    """One track's mixture, and Bayesian model averaging done by hand over every set of up to
+    ``most`` manoeuvres (``component``, each refined, weighted by its Poisson prior: each cell
+    of ``prior.step_s`` holds no manoeuvre with probability exp(-lambda cell), else one of
+    the equally likely durations, started at its centre): (the mixture, the components, their
+    weights normalised, their numbers of manoeuvres)."""
+    mixed = manoeuvres.mixture(t, ox, oy, z[None], None, np.array([0]), np.array([t.size - 1]),
+                               theta[None], q, prior, np.array([sigma]))
+    none = manoeuvres.component(t, ox, oy, z, theta, _levels(t, q), sigma)
+    edges = np.append(np.arange(t[0], t[-1], prior.step_s), t[-1])
+    cells = np.diff(edges)
+    log_none = -prior.rate_per_s * cells.sum()
+    options = [[(a + cell / 2, duration,
+                 math.log(-math.expm1(-prior.rate_per_s * cell) / len(prior.durations_s))
+                 + prior.rate_per_s * cell) for duration in prior.durations_s]
+               for a, cell in zip(edges[:-1], cells, strict=True)]
+    comps, logw, counts = [none], [log_none + none[0]], [0]
+    for n in range(1, most + 1):
+        for chosen in itertools.combinations(options, n):
+            for made in itertools.product(*chosen):
+                levels = _levels(t, q)
+                for tau, duration, _ in made:
+                    levels += _levels(t, 0.0, tau=tau, q_burst=prior.dv_m_s**2 / duration,
+                                      duration=duration)
+                c = manoeuvres.component(t, ox, oy, z, theta, levels, sigma, start=none[3],
+                                         prior_state=none[3][0])
+                comps.append(c)
+                logw.append(log_none + sum(m[2] for m in made) + c[0])
+                counts.append(n)
+    w = np.exp(np.array(logw) - max(logw))
+    return mixed, comps, w / w.sum(), np.array(counts)
+
+
 @pytest.mark.parametrize("turn_at", [None, 270.0])
 def test_each_component_matches_a_dense_least_squares_solution(turn_at):
     t, ox, oy, z, sigma, theta = _geometry(turn_at=turn_at)
@@ -139,27 +172,7 @@ def test_the_mixture_averages_its_components_by_prior_and_likelihood():
     within the tolerance."""
     t, ox, oy, z, sigma, theta = _geometry(turn_at=270.0)
     prior = manoeuvres.ManoeuvrePrior(0.5, 2.0, (30.0, 120.0), step_s=100.0)
-    q = 1e-4
-    mixed = manoeuvres.mixture(t, ox, oy, z[None], None, np.array([0]), np.array([t.size - 1]),
-                               theta[None], q, prior, np.array([sigma]))
-    none = manoeuvres.component(t, ox, oy, z, theta, _levels(t, q), sigma)
-    edges = np.append(np.arange(t[0], t[-1], prior.step_s), t[-1])
-    cells = np.diff(edges)
-    log_none = -prior.rate_per_s * cells.sum()
-    comps, logw = [none], [log_none + none[0]]
-    for a, cell in zip(edges[:-1], cells, strict=True):
-        tau = a + cell / 2
-        log_each = (math.log(-math.expm1(-prior.rate_per_s * cell)
-                             / len(prior.durations_s)) + prior.rate_per_s * cell)
-        for duration in prior.durations_s:
-            levels = _levels(t, q, tau=tau, q_burst=prior.dv_m_s**2 / duration,
-                             duration=duration)
-            c = manoeuvres.component(t, ox, oy, z, theta, levels, sigma, start=none[3],
-                                     prior_state=none[3][0])
-            comps.append(c)
-            logw.append(log_none + log_each + c[0])
-    w = np.exp(np.array(logw) - max(logw))
-    w /= w.sum()
+    mixed, comps, w, _ = _mixture_and_by_hand(t, ox, oy, z, sigma, theta, prior, 1e-4, 1)
     means = np.array([c[1] for c in comps])
     mean = w @ means
     cov = sum(wi * (c[2] + np.outer(m - mean, m - mean))
@@ -205,33 +218,7 @@ def test_the_mixture_averages_over_sets_of_several_manoeuvres():
     the level's mass over its bases') said 1.6 manoeuvres for 1.36."""
     t, ox, oy, z, sigma, theta = _two_turns()
     prior = manoeuvres.ManoeuvrePrior(10.0, 2.0, (30.0, 120.0), step_s=50.0)
-    q = 1e-4
-    mixed = manoeuvres.mixture(t, ox, oy, z[None], None, np.array([0]), np.array([t.size - 1]),
-                               theta[None], q, prior, np.array([sigma]))
-    none = manoeuvres.component(t, ox, oy, z, theta, _levels(t, q), sigma)
-    edges = np.append(np.arange(t[0], t[-1], prior.step_s), t[-1])
-    cells = np.diff(edges)
-    log_none = -prior.rate_per_s * cells.sum()
-    options = [[(a + cell / 2, duration,
-                 math.log(-math.expm1(-prior.rate_per_s * cell) / len(prior.durations_s))
-                 + prior.rate_per_s * cell) for duration in prior.durations_s]
-               for a, cell in zip(edges[:-1], cells, strict=True)]
-    comps, logw, counts = [none], [log_none + none[0]], [0]
-    for n in (1, 2, 3):
-        for chosen in itertools.combinations(options, n):
-            for made in itertools.product(*chosen):
-                levels = np.full(t.size, q)
-                for tau, duration, _ in made:
-                    levels += _levels(t, 0.0, tau=tau, q_burst=prior.dv_m_s**2 / duration,
-                                      duration=duration)
-                c = manoeuvres.component(t, ox, oy, z, theta, levels, sigma, start=none[3],
-                                         prior_state=none[3][0])
-                comps.append(c)
-                logw.append(log_none + sum(m[2] for m in made) + c[0])
-                counts.append(n)
-    w = np.exp(np.array(logw) - max(logw))
-    w /= w.sum()
-    counts = np.array(counts)
+    mixed, comps, w, counts = _mixture_and_by_hand(t, ox, oy, z, sigma, theta, prior, 1e-4, 3)
     assert w[counts == 2].sum() > 0.2  # two manoeuvres weigh: the search must reach them
     means = np.array([c[1] for c in comps])
     mean = w @ means
