@@ -77,7 +77,9 @@
     manoeuvres.shape=burst``: Poisson starts, Gaussian velocity changes as white-acceleration
     bursts of the declared durations) beside the same declared prior's ship-like turns, 3 an
     hour at 0.5 deg, seed 7, ``lm`` with the declared prior: ok, consistent, ghosts (NEES
-    above 100), each quantity within 1 and 2 sd and the consistency by manoeuvres made,
+    above 100), each quantity within 1 and 2 sd, the search's count against the truth's (the
+    mean ``p_manoeuvre`` and share that made one, the mean ``n_manoeuvres`` and number made:
+    equal on average for an exact posterior) and the consistency by manoeuvres made,
     ``p_manoeuvre`` and the true range now; on the bursts also the component of the true
     manoeuvres (their true starts and durations, refined and linearised as ``lm``'s are:
     the Laplace approximation alone, with no search), on the same ``ok`` tracks, as it is
@@ -894,6 +896,18 @@ def bench_own_model(n_tracks: int, sigma_deg: float):
                           f"{100 * np.mean(np.abs(z) <= 2):.1f} %"
                           for q in ("range", "course", "speed")
                           for z in [tracks[f"{q}_z"].to_numpy()[ok]]))
+        # the search's count against the truth's: equal on average for an exact posterior
+        # (also within the cell of p_manoeuvre > 0.99, a function of the bearings alone)
+        p = estimates.p_manoeuvre.to_numpy(dtype=float)
+        weighed = estimates.n_manoeuvres.to_numpy(dtype=float)
+        made = tracks.n_manoeuvres.to_numpy()
+        answered = np.isfinite(p)
+        sure = answered & (p > 0.99)
+        print(f"        the search's count ({answered.sum()} answers): p_manoeuvre "
+              f"{p[answered].mean():.3f} where {np.mean(made[answered] > 0):.3f} made one; "
+              f"manoeuvres weighed {weighed[answered].mean():.3f} where "
+              f"{made[answered].mean():.3f} made; p_manoeuvre > 0.99: "
+              f"{weighed[sure].mean():.3f} for {made[sure].mean():.3f}")
         for group, cell, mask in cells(tracks):
             if group in ("range_km", "manoeuvres", "p_manoeuvre"):
                 m = mask & ok
