@@ -82,8 +82,9 @@
     equal on average for an exact posterior) and the consistency by manoeuvres made,
     ``p_manoeuvre`` and the true range now; on the bursts also the component of the true
     manoeuvres (their true starts and durations, refined and linearised as ``lm``'s are:
-    the Laplace approximation alone, with no search), on the same ``ok`` tracks, as it is
-    and stated through log-polar coordinates (``tma/families/bearings2d/log_polar.py``).
+    the Laplace approximation alone, with no search), on the same ``ok`` tracks, as it is,
+    stated through log-polar coordinates (``tma/families/bearings2d/log_polar.py``) and as
+    a bank over range (``tma/families/bearings2d/range_bank.py``).
 
 Options: ``--tracks N`` (2000), ``--sigma DEG`` (0.5), ``--runs N`` (30), ``--skip-tables``,
 ``--skip-first-table``, ``--only SECTION`` (lm, tables, ranges2d, filters3d, cmnf, compile,
@@ -872,7 +873,7 @@ def bench_own_model(n_tracks: int, sigma_deg: float):
     docstring, (o))."""
     import tma
     from tma.families.bearings2d.calibration import cells, track_calibration
-    from tma.families.bearings2d.manoeuvre_components import known_manoeuvres_nees
+    from tma.families.bearings2d.known_manoeuvres import known_manoeuvres_nees
     from tma.families.bearings2d.metrics import NEES_95
     from tma.families.bearings2d.scenario import MANOEUVRE
     from tma.families.bearings2d.target_motion import burst_plan
@@ -924,14 +925,15 @@ def bench_own_model(n_tracks: int, sigma_deg: float):
         raise RuntimeError("the bursts drawn again are not the dataset's")
     truth = ds.truth[list(THETA)].to_numpy()  # (one shard: rows in the log's order)
     made = tracks.n_manoeuvres.to_numpy()
-    for label, log_polar in (("the true manoeuvres' component", False),
-                             ("    stated through log-polar coordinates", True)):
+    for label, statement in (("the true manoeuvres' component", {}),
+                             ("    stated through log-polar coordinates", {"log_polar": True}),
+                             ("    as a bank over range", {"over_range": True})):
         true_nees = np.full(n_tracks, np.nan)
         for i in np.flatnonzero(ok):
             true_nees[i] = known_manoeuvres_nees(
                 t, log.own_x_m, log.own_y_m, np.deg2rad(log.bearing_deg[i]),
                 np.deg2rad(sigma_deg), truth[i], start[:, i], duration[:, i], prior.dv_m_s,
-                log_polar=log_polar)
+                **statement)
         print(f"    {label} on the same {ok.sum()} ok tracks: consistent "
               f"{_share(int((true_nees[ok] <= NEES_95).sum()), int(ok.sum()))}; NEES > "
               f"{GHOST_NEES:g} {int((true_nees[ok] > GHOST_NEES).sum())}; by manoeuvres made "

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 import tma
-from tma.families.bearings2d.manoeuvre_components import burst_levels, known_manoeuvres_nees
+from tma.families.bearings2d.known_manoeuvres import known_manoeuvres_nees
+from tma.families.bearings2d.manoeuvre_components import burst_levels
 from tma.families.bearings2d.metrics import NEES_95, THETA
 from tma.families.bearings2d.scenario import MANOEUVRE
 from tma.families.bearings2d.target_motion import burst_plan

@@ -7,9 +7,7 @@ import math
 import numpy as np
 
 from tma.families.bearings2d.kalman import _filter, _fit, _predict, filter_on, white_step
-from tma.families.bearings2d.log_polar import log_polar_statement
 from tma.families.bearings2d.manoeuvre_prior import burst_step_noise
-from tma.families.bearings2d.mixture_tails import tail_points
 from tma.families.bearings2d.ncv import (
     MAX_PASSES,
     MIN_PRIOR_M,
@@ -159,11 +157,13 @@ def _insert(cells, b, nb, code, row):
 
 
 def component(t, own_x, own_y, measured_rad, theta_cv, levels, sigma_rad, start=None,
-              prior_state=None):
+              prior_state=None, prior_sd=None):
     """One track's component under the process levels ``levels`` (K,: the density q_k of the
     step into each epoch, m^2/s^3), refined to its MAP trajectory from the constant-velocity
     ``theta_cv`` (4,) or the trajectory ``start`` (K, 4), with bearing noise ``sigma_rad``
-    and the weak prior about ``prior_state`` (4,; default: the start at the first epoch):
+    and the weak prior about ``prior_state`` (4,; default: the start at the first epoch; its
+    sd per position and velocity axis ``prior_sd`` (m, m/s), default the mixture's diffuse
+    one):
     (log likelihood up to a constant that depends on sigma and the prior alone, state at the
     last bearing (4,), its covariance (4, 4), the MAP trajectory (K, 4)). What
     ``mixture_tracks`` computes for each component it refines, for tests and diagnosis."""
@@ -178,7 +178,8 @@ def component(t, own_x, own_y, measured_rad, theta_cv, levels, sigma_rad, start=
         nom[:] = start
     prior = np.array(nom[0] if prior_state is None else prior_state, dtype=float)
     start_range = math.hypot(theta_cv[0] - own_x[0], theta_cv[1] - own_y[0])
-    p0 = np.array([max(PRIOR_RANGES * start_range, MIN_PRIOR_M) ** 2, PRIOR_SPEED_M_S**2]) / s2
+    p0 = np.array([max(PRIOR_RANGES * start_range, MIN_PRIOR_M), PRIOR_SPEED_M_S]
+                  if prior_sd is None else prior_sd, dtype=float) ** 2 / s2
     T = np.diff(t, prepend=t[0])
     lam = np.asarray(levels, dtype=float) / s2
     Q = np.column_stack([lam * T**3 / 3.0, lam * T**2 / 2.0, lam * T])
@@ -207,28 +208,3 @@ def burst_levels(t, start, duration, dv_m_s):
                                 np.asarray(duration, float)[:, None], dv_m_s)
     step = np.diff(t)
     return np.r_[0.0, np.divide(vv[0], step, out=np.zeros_like(step), where=step > 0)]
-
-
-def known_manoeuvres_nees(t, own_x, own_y, measured_rad, sigma_rad, theta, start, duration,
-                          dv_m_s, log_polar: bool = False) -> float:
-    """The 4D normalised error, at the last epoch, of the component of one target's known
-    manoeuvres (``start``, ``duration``: (slots,), s, inf: none; ``burst_levels``), refined
-    to its MAP trajectory from the straight line ``theta`` (x0, y0, vx, vy: m, m/s, through
-    the true state at the last epoch, as the truth states it) and linearised there, as the
-    mixture's components are: the Laplace approximation alone, with no search (inf where
-    the fit fails). ``log_polar``: that Gaussian stated through log-polar coordinates about
-    own-ship at the last epoch (``log_polar.log_polar_statement``)."""
-    x0, y0, vx, vy = theta
-    line = np.column_stack([x0 + vx * t, y0 + vy * t, np.full(t.size, vx),
-                            np.full(t.size, vy)])
-    _, mean, cov, _ = component(t, own_x, own_y, measured_rad, line[0],
-                                burst_levels(t, start, duration, dv_m_s), sigma_rad,
-                                start=line)
-    if not np.isfinite(cov).all():
-        return np.inf
-    if log_polar:
-        own_p = np.array([own_x[-1], own_y[-1]])
-        own_v = (own_p - np.array([own_x[-2], own_y[-2]])) / (t[-1] - t[-2])
-        mean, cov = log_polar_statement(mean, cov, own_p, own_v, *tail_points())
-    error = mean - line[-1]
-    return float(error @ np.linalg.solve(cov, error))
