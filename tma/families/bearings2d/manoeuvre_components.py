@@ -164,8 +164,9 @@ def component(t, own_x, own_y, measured_rad, theta_cv, levels, sigma_rad, start=
     and the weak prior about ``prior_state`` (4,; default: the start at the first epoch; its
     sd per position and velocity axis ``prior_sd`` (m, m/s), default the mixture's diffuse
     one):
-    (log likelihood up to a constant that depends on sigma and the prior alone, state at the
-    last bearing (4,), its covariance (4, 4), the MAP trajectory (K, 4)). What
+    (log likelihood of the bearings, the prior integrated out, up to a constant that depends
+    on sigma alone, so that components under different priors compare (``range_bank``); state
+    at the last bearing (4,), its covariance (4, 4), the MAP trajectory (K, 4)). What
     ``mixture_tracks`` computes for each component it refines, for tests and diagnosis."""
     t = np.ascontiguousarray(t, dtype=float)
     K = t.size

@@ -27,7 +27,7 @@ from tma.families.bearings2d.manoeuvre_components import component
 
 BANK_RANGES_M = (1000.0, 120000.0)  # the span of the bands (m)
 BANK_RATIO = 1.15  # each band's range over the one before
-BAND_SD = 0.1  # each band's prior position sd over its range
+BAND_SD = 0.1  # each band's prior sd over its range (position) and relative speed (velocity)
 
 
 def bank_ranges(span_m=BANK_RANGES_M, ratio=BANK_RATIO) -> np.ndarray:
