@@ -82,9 +82,8 @@
     equal on average for an exact posterior) and the consistency by manoeuvres made,
     ``p_manoeuvre`` and the true range now; on the bursts also the component of the true
     manoeuvres (their true starts and durations, refined and linearised as ``lm``'s are:
-    the Laplace approximation alone, with no search), on the same ``ok`` tracks, as it is,
-    stated through log-polar coordinates (``tma/families/bearings2d/log_polar.py``) and as
-    a bank over range (``tma/families/bearings2d/range_bank.py``).
+    the Laplace approximation alone, with no search), on the same ``ok`` tracks, as it is
+    and stated through log-polar coordinates (``tma/families/bearings2d/log_polar.py``).
 
 Options: ``--tracks N`` (2000), ``--sigma DEG`` (0.5), ``--runs N`` (30), ``--skip-tables``,
 ``--skip-first-table``, ``--only SECTION`` (lm, tables, ranges2d, filters3d, cmnf, compile,
@@ -383,6 +382,7 @@ def bench_compile():
         print(f"    {label:68s} {cold_s:>6s} / {warm.rsplit(' ', 1)[1]:>5s}")
 
 
+@quiet
 def bench_real_motion(draws: int):
     """Issue 28, item 3: bearings-only TMA on real ship motion (the AIS cases of two
     recordings of different traffic, tests/data/ais and tests/data/ais_nyharbor), ingested
@@ -390,8 +390,6 @@ def bench_real_motion(draws: int):
     noise draws per pair, two-sided per-quantity figures with intervals clustered by vessel,
     under the pooled prior, the prior measured on the other recording alone, the pooled one
     as measured (unrounded) and the pooled one ten times too poor."""
-    import logging
-
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     import pandas as pd
 
@@ -407,7 +405,6 @@ def bench_real_motion(draws: int):
         run_cases,
     )
 
-    logging.disable(logging.WARNING)  # each non-ok track's note
     print("(g) real ship motion: own-ship/target pairs of two AIS recordings (the Solent: "
           "tests/data/ais; New York Harbor: tests/data/ais_nyharbor), bearings every 5 s, "
           "0.5 deg noise")
@@ -456,7 +453,6 @@ def bench_real_motion(draws: int):
             print(f"    both recordings, prior {name}:")
             for line in describe(figures(pd.concat(both[name], ignore_index=True))):
                 print(f"      {line}")
-    logging.disable(logging.NOTSET)
 
 
 class MessageWriter:
@@ -873,11 +869,8 @@ def bench_own_model(n_tracks: int, sigma_deg: float):
     docstring, (o))."""
     import tma
     from tma.families.bearings2d.calibration import cells, track_calibration
-    from tma.families.bearings2d.known_manoeuvres import known_manoeuvres_nees
+    from tma.families.bearings2d.known_manoeuvres import true_manoeuvres_nees
     from tma.families.bearings2d.metrics import NEES_95
-    from tma.families.bearings2d.scenario import MANOEUVRE
-    from tma.families.bearings2d.target_motion import burst_plan
-    from tma.runtime.sharding import shard_rng
 
     print(f"(o) the estimators' own model: {n_tracks} targets, 3 manoeuvres/h declared, "
           f"{sigma_deg} deg, seed {OWN_MODEL_SEED}, lm with the declared prior")
@@ -916,31 +909,17 @@ def bench_own_model(n_tracks: int, sigma_deg: float):
                       f"{100 * np.mean(nees[m] <= NEES_95):.1f} %" if m.any() else
                       f"        {group} {cell}: no ok")
     # the true manoeuvres' component on the bursts' ok tracks (the last dataset)
-    log, cfg = ds.logs[0], ds.config
-    t = np.asarray(log.t_s, dtype=float)
-    prior = log.manoeuvres
-    count, start, duration = burst_plan(cfg.target.manoeuvres, prior, t, n_tracks,
-                                        shard_rng(cfg, 0, MANOEUVRE))
-    if not np.array_equal(count, ds.truth.n_manoeuvres):
-        raise RuntimeError("the bursts drawn again are not the dataset's")
-    truth = ds.truth[list(THETA)].to_numpy()  # (one shard: rows in the log's order)
-    made = tracks.n_manoeuvres.to_numpy()
-    for label, statement in (("the true manoeuvres' component", {}),
-                             ("    stated through log-polar coordinates", {"log_polar": True}),
-                             ("    as a bank over range", {"over_range": True})):
-        true_nees = np.full(n_tracks, np.nan)
-        for i in np.flatnonzero(ok):
-            true_nees[i] = known_manoeuvres_nees(
-                t, log.own_x_m, log.own_y_m, np.deg2rad(log.bearing_deg[i]),
-                np.deg2rad(sigma_deg), truth[i], start[:, i], duration[:, i], prior.dv_m_s,
-                **statement)
+    true_nees = np.full((n_tracks, 2), np.nan)
+    true_nees[ok] = true_manoeuvres_nees(ds, np.flatnonzero(ok))
+    for j, label in enumerate(("the true manoeuvres' component",
+                               "    stated through log-polar coordinates")):
+        nees = true_nees[:, j]
         print(f"    {label} on the same {ok.sum()} ok tracks: consistent "
-              f"{_share(int((true_nees[ok] <= NEES_95).sum()), int(ok.sum()))}; NEES > "
-              f"{GHOST_NEES:g} {int((true_nees[ok] > GHOST_NEES).sum())}; by manoeuvres made "
-              + ", ".join(f"{k}: {100 * np.mean(true_nees[ok & sel] <= NEES_95):.1f} %"
+              f"{_share(int((nees[ok] <= NEES_95).sum()), int(ok.sum()))}; NEES > "
+              f"{GHOST_NEES:g} {int((nees[ok] > GHOST_NEES).sum())}; by manoeuvres made "
+              + ", ".join(f"{k}: {100 * np.mean(nees[ok & sel] <= NEES_95):.1f} %"
                           for k, sel in (("0", made == 0), ("1", made == 1), ("2", made == 2),
                                          ("3+", made >= 3)) if (ok & sel).any()))
-
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -216,20 +216,24 @@ class CsvFile:
                                  index_col=False, skipinitialspace=True,
                                  encoding="utf-8-sig", low_memory=False,
                                  dtype=text or None)
-                for named in text:  # the track's and the platform's names
-                    if df.iloc[:, named].isna().any():
-                        # pandas read a name such as NA or null as missing: as written
-                        df.iloc[:, named] = pd.read_csv(
-                            self.path, sep=self.delimiter, usecols=[named], dtype=str,
-                            keep_default_na=False, skipinitialspace=True,
-                            encoding="utf-8-sig",
-                            skiprows=[1] if self.units is not None else None).iloc[:, 0]
-                    if _space_after(self.path, self.delimiter):
-                        # skipinitialspace took the spaces before the names: ' 7' is not '7'
-                        df.iloc[:, named] = with_leading_space(df.iloc[:, named], pd.read_csv(
-                            self.path, sep=self.delimiter, usecols=[named], dtype=str,
-                            keep_default_na=False, encoding="utf-8-sig",
-                            skiprows=[1] if self.units is not None else None).iloc[:, 0])
+                named = sorted(text)  # the track's and the platform's names, as written
+
+                def as_written(columns, skip_space):  # (one read for all of them)
+                    return pd.read_csv(self.path, sep=self.delimiter, usecols=columns,
+                                       dtype=str, keep_default_na=False,
+                                       skipinitialspace=skip_space, encoding="utf-8-sig",
+                                       skiprows=[1] if self.units is not None else None)
+
+                missing = [c for c in named if df.iloc[:, c].isna().any()]
+                if missing:  # pandas read a name such as NA or null as missing
+                    raw = as_written(missing, True)
+                    for j, c in enumerate(missing):
+                        df.iloc[:, c] = raw.iloc[:, j]
+                if named and _space_after(self.path, self.delimiter):
+                    # skipinitialspace took the spaces before the names: ' 7' is not '7'
+                    raw = as_written(named, False)
+                    for j, c in enumerate(named):
+                        df.iloc[:, c] = with_leading_space(df.iloc[:, c], raw.iloc[:, j])
         except (pd.errors.ParserError, pd.errors.ParserWarning, pd.errors.EmptyDataError,
                 UnicodeDecodeError, ValueError) as exc:
             raise InputError(f"{self.path}: not a readable CSV "

@@ -111,6 +111,11 @@ class RecordedLog(McapFile):
 # -- selection, checks, time base -----------------------------------------------------------
 
 def _select_navigation(file: RecordedLog, options) -> str | None:
+    if options.ownship.several:  # (read_platforms reads those, a recording per platform)
+        raise InputError(f"{file.where}: ownship.topic={options.ownship.topic} names the "
+                         "own-ship topics of several platforms, where one recording is read: "
+                         "name one topic, or read the log with tma.read_log (a recording per "
+                         "platform)")
     if options.ownship.topic is not None:
         topic = file.topic(options.ownship.topic, "ownship.topic")
         if topic.schema not in NAVIGATION:

@@ -154,7 +154,8 @@ def _with_navigation(found, nav, where, nav_where, options):
     """The input's recordings with their own-ship from the navigation file's: its one
     recording, or, where both name platforms (a platform column), each platform's with that
     platform's fixes."""
-    if len(found) > 1 or len(nav) > 1 or all(r.platform is not None for r in found + nav):
+    if len(found) > 1 or len(nav) > 1 or (found and nav and all(r.platform is not None
+                                                                for r in found + nav)):
         # (named on both sides, even one each: matched by name, never by count)
         return _per_platform_navigation(found, nav, where, nav_where, options)
     if len(found) != 1 or found[0].contacts is None:

@@ -25,12 +25,15 @@ def test_log_polar_coordinates_invert():
     assert to_log_polar(MEAN, OWN_P, OWN_V)[1] == pytest.approx(np.log(np.hypot(*d)))
 
 
-def test_a_narrow_gaussian_is_stated_as_it_is():
+@pytest.mark.parametrize("where", [MEAN, np.r_[OWN_P + [0.0, -18000.0], MEAN[2:]]],
+                         ids=["north-north-east", "due south"])
+def test_a_narrow_gaussian_is_stated_as_it_is(where):
     """Where the mapping is linear over the Gaussian (100 m at 18 km), the statement is the
-    Gaussian itself: mean within a metre, covariance within 2 %."""
+    Gaussian itself: mean within a metre, covariance within 2 %; also due south of own-ship,
+    where the bearing steps across +-pi."""
     cov = np.diag([100.0, 80.0, 0.05, 0.04]) ** 2
-    mean, stated = log_polar_statement(MEAN, cov, OWN_P, OWN_V, *tail_points())
-    np.testing.assert_allclose(mean, MEAN, atol=1.0)
+    mean, stated = log_polar_statement(where, cov, OWN_P, OWN_V, *tail_points())
+    np.testing.assert_allclose(mean, where, atol=1.0)
     np.testing.assert_allclose(np.sqrt(np.diag(stated)), np.sqrt(np.diag(cov)), rtol=0.02)
 
 

@@ -13,18 +13,20 @@ from scipy.stats import chi2
 from tma.families.bearings2d import manoeuvres, mixture_tails, ncv
 
 
-def _geometry(K=40, dt=10.0, seed=1, turn_at=None):
+def _geometry(K=40, dt=10.0, seed=1, turn_at=None, turns=()):
     """Own-ship on two legs at 10 m/s (turning at a third of the time), a target 4 km away;
-    with ``turn_at`` (s) the target turns 60 deg there. Bearings with 0.3 deg noise."""
+    with ``turn_at`` (s) the target turns 60 deg there, with ``turns`` ((share of the time,
+    deg), ...) by each angle there in turn. Bearings with 0.3 deg noise."""
     rng = np.random.default_rng(seed)
     t = np.arange(K) * dt
     ox = np.where(t < t[-1] / 3, 0.0, 10.0 * (t - t[-1] / 3))
     oy = np.minimum(t, t[-1] / 3) * 10.0
     vx, vy = np.full(K, 3.0), np.full(K, -2.0)
-    if turn_at is not None:
-        c, s = math.cos(math.radians(60)), math.sin(math.radians(60))
-        after = t >= turn_at
-        vx[after], vy[after] = c * 3.0 + s * -2.0, -s * 3.0 + c * -2.0
+    turns = [(turn_at, 60.0)] if turn_at is not None else [(f * t[-1], a) for f, a in turns]
+    for at, angle in turns:
+        c, s = math.cos(math.radians(angle)), math.sin(math.radians(angle))
+        after = t >= at
+        vx[after], vy[after] = c * vx[after] + s * vy[after], -s * vx[after] + c * vy[after]
     x = 3000.0 + np.concatenate([[0.0], np.cumsum(vx[:-1] * dt)])
     y = 2500.0 + np.concatenate([[0.0], np.cumsum(vy[:-1] * dt)])
     sigma = math.radians(0.3)
@@ -101,8 +103,9 @@ def _mixture_and_by_hand(t, ox, oy, z, sigma, theta, prior, q, most):
     """One track's mixture, and Bayesian model averaging done by hand over every set of up to
     ``most`` manoeuvres (``component``, each refined, weighted by its Poisson prior: each cell
     of ``prior.step_s`` holds no manoeuvre with probability exp(-lambda cell), else one of
-    the equally likely durations, started at its centre): (the mixture, the components, their
-    weights normalised, their numbers of manoeuvres)."""
+    the equally likely durations, started at its centre): (the mixture, the components'
+    weights normalised, means and covariances at the last epoch, numbers of manoeuvres, and
+    the average's mean and covariance)."""
     mixed = manoeuvres.mixture(t, ox, oy, z[None], None, np.array([0]), np.array([t.size - 1]),
                                theta[None], q, prior, np.array([sigma]))
     none = manoeuvres.component(t, ox, oy, z, theta, _levels(t, q), sigma)
@@ -127,7 +130,12 @@ def _mixture_and_by_hand(t, ox, oy, z, sigma, theta, prior, q, most):
                 logw.append(log_none + sum(m[2] for m in made) + c[0])
                 counts.append(n)
     w = np.exp(np.array(logw) - max(logw))
-    return mixed, comps, w / w.sum(), np.array(counts)
+    w /= w.sum()
+    means, covs = np.array([c[1] for c in comps]), np.array([c[2] for c in comps])
+    mean = w @ means
+    spread = means - mean
+    cov = np.einsum("c,cij->ij", w, covs) + np.einsum("c,ci,cj->ij", w, spread, spread)
+    return mixed, w, means, covs, np.array(counts), mean, cov
 
 
 @pytest.mark.parametrize("turn_at", [None, 270.0])
@@ -172,16 +180,13 @@ def test_the_mixture_averages_its_components_by_prior_and_likelihood():
     within the tolerance."""
     t, ox, oy, z, sigma, theta = _geometry(turn_at=270.0)
     prior = manoeuvres.ManoeuvrePrior(0.5, 2.0, (30.0, 120.0), step_s=100.0)
-    mixed, comps, w, _ = _mixture_and_by_hand(t, ox, oy, z, sigma, theta, prior, 1e-4, 1)
-    means = np.array([c[1] for c in comps])
-    mean = w @ means
-    cov = sum(wi * (c[2] + np.outer(m - mean, m - mean))
-              for wi, c, m in zip(w, comps, means, strict=True))
+    mixed, w, means, covs, _, mean, cov = _mixture_and_by_hand(t, ox, oy, z, sigma, theta,
+                                                                prior, 1e-4, 1)
     sd = np.sqrt(np.diag(cov))
     assert np.all(np.abs(mixed.state[0] - mean) <= 0.1 * sd), (mixed.state[0], mean)
     # the errors stated: the moments' covariance widened until its 95 % ellipsoid holds 95 %
     # of the mixture, by Monte Carlo over the mixture done by hand
-    draws = _mixture_draws(w, means, [c[2] for c in comps], 200_000)
+    draws = _mixture_draws(w, means, covs, 200_000)
     scale = _quantile_95(draws - mean, cov) / chi2.ppf(0.95, 4)
     # (the mixture refines the most probable components of each level and takes the others
     # linearised about the trajectory they extend, the lightest pooled)
@@ -193,22 +198,6 @@ def test_the_mixture_averages_its_components_by_prior_and_likelihood():
 
 
 
-def _two_turns(K=40, dt=10.0, seed=1):
-    """``_geometry``'s own-ship and target, the target turning twice: 50 deg at 35 % of the
-    time, -60 deg at 70 %."""
-    rng = np.random.default_rng(seed)
-    t, ox, oy, _, sigma, theta = _geometry(K, dt, seed)
-    vx, vy = np.full(K, 3.0), np.full(K, -2.0)
-    for share, angle in ((0.35, 50.0), (0.7, -60.0)):
-        c, s = math.cos(math.radians(angle)), math.sin(math.radians(angle))
-        after = t >= share * t[-1]
-        vx[after], vy[after] = c * vx[after] + s * vy[after], -s * vx[after] + c * vy[after]
-    x = 3000.0 + np.concatenate([[0.0], np.cumsum(vx[:-1] * dt)])
-    y = 2500.0 + np.concatenate([[0.0], np.cumsum(vy[:-1] * dt)])
-    z = np.arctan2(x - ox, y - oy) + sigma * rng.standard_normal(K)
-    return t, ox, oy, z, sigma, theta
-
-
 def test_the_mixture_averages_over_sets_of_several_manoeuvres():
     """Two turns: the mixture (a search extending each level's three most probable sets)
     against Bayesian model averaging done by hand over every set of up to three manoeuvres
@@ -216,14 +205,11 @@ def test_the_mixture_averages_over_sets_of_several_manoeuvres():
     mean number of manoeuvres within 0.05 and the state within a tenth of its sd. A search
     that counted its level's mass for sets it did not reach (scaling a level's extensions by
     the level's mass over its bases') said 1.6 manoeuvres for 1.36."""
-    t, ox, oy, z, sigma, theta = _two_turns()
+    t, ox, oy, z, sigma, theta = _geometry(turns=((0.35, 50.0), (0.7, -60.0)))
     prior = manoeuvres.ManoeuvrePrior(10.0, 2.0, (30.0, 120.0), step_s=50.0)
-    mixed, comps, w, counts = _mixture_and_by_hand(t, ox, oy, z, sigma, theta, prior, 1e-4, 3)
+    mixed, w, _, _, counts, mean, cov = _mixture_and_by_hand(t, ox, oy, z, sigma, theta,
+                                                              prior, 1e-4, 3)
     assert w[counts == 2].sum() > 0.2  # two manoeuvres weigh: the search must reach them
-    means = np.array([c[1] for c in comps])
-    mean = w @ means
-    cov = sum(wi * (c[2] + np.outer(m - mean, m - mean))
-              for wi, c, m in zip(w, comps, means, strict=True))
     assert mixed.n_manoeuvres[0] == pytest.approx(w @ counts, abs=0.05)
     assert np.all(np.abs(mixed.state[0] - mean) <= 0.1 * np.sqrt(np.diag(cov))), (
         mixed.state[0], mean)

@@ -8,10 +8,12 @@ import pandas as pd
 import pytest
 
 import tma
+from tests.families.bearings2d.recorded_geometry import source_options
 from tma.errors import ConfigError, InputError
 from tma.families import build_estimator
 from tma.families.bearings2d.log import BearingsLog, read_bearings_log, write_bearings_log
 from tma.families.bearings2d.platforms import observer_now, position_at
+from tma.sources.mcap import read_mcap
 
 START = pd.Timestamp("2026-05-01T10:00:00Z")
 ORIGIN = (50.7, -1.2)
@@ -369,7 +371,6 @@ def test_named_platforms_are_matched_by_name_and_named_once(tmp_path):
                        r"platforms: 'buoy_7'\): name each platform's file after it"):
         tma.read_log(tmp_path / "bearings.csv", navigation=[tmp_path / "buoy_7.csv"])
     name = ship["platform"].iloc[0]
-    fixes.to_csv(tmp_path / "a.csv", index=False)
     fixes.assign(platform=name).to_csv(tmp_path / "b.csv", index=False)
     fixes.to_csv(tmp_path / f"{name}.csv", index=False)
     with pytest.raises(InputError, match=rf"platform '{name}' is named by two navigation "
@@ -401,3 +402,7 @@ def test_several_own_ship_topics_and_a_navigation_file_are_refused_in_one_line(t
                        r"several platforms, but own-ship comes from navigation=: drop one"):
         tma.read_log(tmp_path / "ns.mcap", navigation=tmp_path / "nav.csv",
                      ownship={"topic": topic})
+    # the reader of one recording (read_mcap): refused in one line too (was a TypeError)
+    with pytest.raises(InputError, match=r"ownship\.topic=.* names the own-ship topics of "
+                       r"several platforms, where one recording is read: .*tma\.read_log"):
+        read_mcap(tmp_path / "ns.mcap", source_options({"ownship": {"topic": topic}}))

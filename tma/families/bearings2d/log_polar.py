@@ -20,6 +20,8 @@ answers of ``lm`` are stated in Cartesian coordinates.
 
 import numpy as np
 
+from tma.maths.angles import wrap_to_pi
+
 
 def to_log_polar(state, own_p, own_v):
     """u (..., 4) of Cartesian states (..., 4: x, y, vx, vy; m, m/s) relative to the
@@ -56,8 +58,9 @@ def log_polar_statement(mean, cov, own_p, own_v, points, points_q95):
     for k in range(4):
         delta = np.zeros(4)
         delta[k] = step[k]
-        jacobian[:, k] = (to_log_polar(mean + delta, own_p, own_v)
-                          - to_log_polar(mean - delta, own_p, own_v)) / (2 * step[k])
+        d = to_log_polar(mean + delta, own_p, own_v) - to_log_polar(mean - delta, own_p, own_v)
+        d[0] = wrap_to_pi(d[0])  # (a bearing due south steps across +-pi)
+        jacobian[:, k] = d / (2 * step[k])
     cov_u = jacobian @ cov @ jacobian.T
     vals, vecs = np.linalg.eigh(0.5 * (cov_u + cov_u.T))
     root = vecs * np.sqrt(np.maximum(vals, 0.0))

@@ -157,16 +157,14 @@ def _insert(cells, b, nb, code, row):
 
 
 def component(t, own_x, own_y, measured_rad, theta_cv, levels, sigma_rad, start=None,
-              prior_state=None, prior_sd=None):
+              prior_state=None):
     """One track's component under the process levels ``levels`` (K,: the density q_k of the
     step into each epoch, m^2/s^3), refined to its MAP trajectory from the constant-velocity
     ``theta_cv`` (4,) or the trajectory ``start`` (K, 4), with bearing noise ``sigma_rad``
-    and the weak prior about ``prior_state`` (4,; default: the start at the first epoch; its
-    sd per position and velocity axis ``prior_sd`` (m, m/s), default the mixture's diffuse
-    one):
+    and the weak prior about ``prior_state`` (4,; default: the start at the first epoch):
     (log likelihood of the bearings, the prior integrated out, up to a constant that depends
-    on sigma alone, so that components under different priors compare (``range_bank``); state
-    at the last bearing (4,), its covariance (4, 4), the MAP trajectory (K, 4)). What
+    on sigma alone; state at the last bearing (4,), its covariance (4, 4), the MAP trajectory
+    (K, 4)). What
     ``mixture_tracks`` computes for each component it refines, for tests and diagnosis."""
     t = np.ascontiguousarray(t, dtype=float)
     K = t.size
@@ -179,8 +177,7 @@ def component(t, own_x, own_y, measured_rad, theta_cv, levels, sigma_rad, start=
         nom[:] = start
     prior = np.array(nom[0] if prior_state is None else prior_state, dtype=float)
     start_range = math.hypot(theta_cv[0] - own_x[0], theta_cv[1] - own_y[0])
-    p0 = np.array([max(PRIOR_RANGES * start_range, MIN_PRIOR_M), PRIOR_SPEED_M_S]
-                  if prior_sd is None else prior_sd, dtype=float) ** 2 / s2
+    p0 = np.array([max(PRIOR_RANGES * start_range, MIN_PRIOR_M) ** 2, PRIOR_SPEED_M_S**2]) / s2
     T = np.diff(t, prepend=t[0])
     lam = np.asarray(levels, dtype=float) / s2
     Q = np.column_stack([lam * T**3 / 3.0, lam * T**2 / 2.0, lam * T])

@@ -11,6 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from tma.families.bearings2d.benchmark import _num  # noqa: E402
 from tma.families.bearings2d.metrics import REGIONS, TABLE_COLUMNS  # noqa: E402
 from tma.families.bearings2d.status import STATUSES  # noqa: E402
 from tma.tables.write import fixed_layout, save_figure, table_subplots, write_table  # noqa: E402
@@ -37,10 +38,6 @@ REGION_NOTE = "\n".join(
 
 def _pct(rate, lo, hi):
     return f"{100 * rate:.1f} % ({100 * lo:.1f}-{100 * hi:.1f})"
-
-
-def _num(x, fmt="{:.3g}"):
-    return "-" if pd.isna(x) else fmt.format(x)
 
 
 # the statuses' names in the table's status column

@@ -47,6 +47,7 @@ import numpy as np
 
 from tma.config import param, require
 from tma.families.bearings2d.manoeuvre_prior import ManoeuvrePrior, burst_step_noise
+from tma.maths.angles import wrap_to_180
 
 MANOEUVRE_STREAM, WANDER_STREAM = 2, 3  # spawn-key elements under the shard's (shard,)
 DURATIONS = 3  # a declared prior's durations: the means of the thirds of their distribution
@@ -303,7 +304,7 @@ def _burst_paths(cfg: ManoeuvreConfig, prior: ManoeuvrePrior, x0, y0, course0, s
     turn = np.rad2deg(np.arctan2(vx[rows, k1], vy[rows, k1]) - np.arctan2(vx[rows, k0],
                                                                           vy[rows, k0]))
     last = {"manoeuvre_start_s": last_start, "manoeuvre_end_s": last_end,
-            "course_change_deg": np.where(on, (turn + 180.0) % 360.0 - 180.0, np.nan),
+            "course_change_deg": np.where(on, wrap_to_180(turn), np.nan),
             "speed_change_rel": np.where(on, np.hypot(vx[rows, k1], vy[rows, k1]) / before
                                          - 1.0, np.nan),
             "n_manoeuvres": count.astype(np.int64)}
