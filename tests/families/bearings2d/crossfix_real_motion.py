@@ -28,7 +28,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from tests.families.bearings2d.real_motion import QUANTITIES, figures, wilson_clustered
+from tests.families.bearings2d.real_motion import (
+    QUANTITIES,
+    figures,
+    interval_zs,
+    wilson_clustered,
+)
 from tma.ais.recording import recording_of
 from tma.ais.triples import TripleRules, find_triples, select
 from tma.families import build_estimator
@@ -75,7 +80,8 @@ def run_triples(workdir, estimator: dict, sigma_deg=None, recording: str = "sole
     (``platforms`` 2) and from the reference alone (1), ``sigma_deg`` declared (None: sigma
     estimated). One row per triple, draw and number of platforms: ``case`` (recording/triple
     index), ``target_mmsi`` (the cluster), ``kind``, ``status``, the errors, and ``z_range``,
-    ``z_course``, ``z_speed``, ``z_bearing`` (error / stated sd, NaN where no finite sd) as
+    ``z_course``, ``z_speed``, ``z_bearing`` (error / stated sd, NaN where no finite sd) and
+    ``iz_range``, ``iz_course``, ``iz_speed`` (in units of the answer's own intervals) as
     ``real_motion.run_cases`` gives them."""
     workdir = Path(workdir)
     workdir.mkdir(parents=True, exist_ok=True)
@@ -120,6 +126,7 @@ def _judged(out: dict, d: int, truth: dict) -> dict:
            "speed": get["speed_sd_m_s"], "bearing": get["bearing_sd_deg"]}
     with np.errstate(divide="ignore", invalid="ignore"):
         zs = {f"z_{q}": float(errors[q] / sds[q]) for q in errors}
+    zs |= interval_zs(get, errors)
     zs = {k: v if np.isfinite(v) else np.nan for k, v in zs.items()}
     return {"status": str(get["status"]), "range_m": truth["range_m"],
             "range_error": errors["range"] / truth["range_m"],

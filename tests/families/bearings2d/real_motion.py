@@ -30,7 +30,9 @@ from scipy.stats import t as student_t
 
 from tests.families.bearings2d.recorded_geometry import ingest
 from tma.families import build_estimator
+from tma.families.bearings2d.calibration import interval_z
 from tma.families.bearings2d.log import read_bearings_log
+from tma.families.bearings2d.status import INTERVAL_COLUMNS
 from tma.io.dataset import Dataset
 from tma.maths.angles import wrap_to_180
 from tma.maths.stats import wilson_interval
@@ -103,18 +105,36 @@ def _estimate_case(workdir: Path, case, estimator: dict, sigma_deg) -> dict:
               "z_course": course_err / get["course_sd_deg"],
               "z_speed": speed_err / get["speed_sd_m_s"],
               "z_bearing": bearing_err / get["bearing_sd_deg"]}
+    zs |= interval_zs(get, {"range": range_err, "course": course_err, "speed": speed_err})
     zs = {k: v if np.isfinite(v) else np.nan for k, v in zs.items()}
     three = [abs(zs[k]) for k in ("z_range", "z_course", "z_speed")]
+    three_iz = [abs(zs[f"iz_{q}"]) for q in ("range", "course", "speed")]
     return {
         "case": case.case, "kind": case.kind, "target_mmsi": int(case.target_mmsi),
         "own_mmsi": int(case.own_mmsi), "status": str(get["status"]),
         "range_m": case.range_m, "range_error": range_err / case.range_m,
-        "range_sd": get["range_sd_m"] / get["range_now_m"], "course_error_deg": course_err,
+        "range_sd": get["range_sd_m"] / get["range_now_m"],
+        "range_half_1sd_interval": (get["range_hi1_m"] - get["range_lo1_m"]) / 2
+        / get["range_now_m"], "course_error_deg": course_err,
         "course_sd_deg": get["course_sd_deg"], "speed_error_m_s": speed_err,
         "speed_sd_m_s": get["speed_sd_m_s"],
-        "z": np.inf if any(np.isnan(three)) else max(three), **zs,
+        "z": np.inf if any(np.isnan(three)) else max(three),
+        "iz": np.inf if any(np.isnan(three_iz)) else max(three_iz), **zs,
         "leg_start_s": get["leg_start_s"], "motion_p_value": get["motion_p_value"],
     }
+
+
+ESTIMATED = {"range": "range_now_m", "course": "course_deg", "speed": "speed_m_s"}
+
+
+def interval_zs(get: dict, errors: dict) -> dict:
+    """``iz_range``, ``iz_course``, ``iz_speed``: one answer's errors (``errors``: quantity
+    -> estimate - truth, deg for course) in units of its own intervals
+    (``calibration.interval_z``; ``get``: the answer's columns by name)."""
+    return {f"iz_{q}": float(interval_z(get[ESTIMATED[q]], errors[q],
+                                        *(get[c] for c in INTERVAL_COLUMNS[q]),
+                                        circular=q == "course"))
+            for q in ESTIMATED}
 
 
 def criteria(results: pd.DataFrame) -> dict:
@@ -251,6 +271,16 @@ def figures(results: pd.DataFrame) -> dict:
               vessel[po])
     out["beyond_5_sd"] = int((worst > 5).sum())
     out["beyond_5_sd_share_ci"] = wilson_clustered(worst > 5, ok_vessel)
+    # the same in units of the answers' own intervals (interval_z)
+    iz = np.abs(results.loc[ok, [f"iz_{q}" for q in QUANTITIES]].to_numpy(dtype=float))
+    iz = np.where(np.isnan(iz), np.inf, iz)
+    worst_iz = iz.max(axis=1, initial=0.0)
+    out["median_max_iz"] = float(np.median(worst_iz)) if len(worst_iz) else np.nan
+    out["median_max_iz_ci"] = median_boot(worst_iz, ok_vessel)
+    for k in (1, 2):
+        for j, q in enumerate(QUANTITIES):
+            share(f"{q}_in_{k}_sd_interval", iz[:, j] <= k, ok_vessel)
+    out["beyond_5_sd_intervals"] = int((worst_iz > 5).sum())
     return out
 
 
@@ -261,6 +291,18 @@ def two_sided(f: dict) -> dict:
     out |= {f"{q}_within_2_sd": f[f"{q}_within_2_sd"] >= TWO_SIDED["within_2_sd"]
             for q in QUANTITIES}
     out["beyond_5_sd"] = f["beyond_5_sd"] <= TWO_SIDED["beyond_5_sd"]
+    return out
+
+
+def two_sided_intervals(f: dict) -> dict:
+    """``TWO_SIDED``'s checks read on the answers' own intervals (``figures``'
+    ``median_max_iz``, ``<q>_in_2_sd_interval``, ``beyond_5_sd_intervals``): name ->
+    whether it holds."""
+    lo, hi = TWO_SIDED["median_max_z"]
+    out = {"median_max_iz": lo <= f["median_max_iz"] <= hi}
+    out |= {f"{q}_in_2_sd_interval": f[f"{q}_in_2_sd_interval"] >= TWO_SIDED["within_2_sd"]
+            for q in QUANTITIES}
+    out["beyond_5_sd_intervals"] = f["beyond_5_sd_intervals"] <= TWO_SIDED["beyond_5_sd"]
     return out
 
 
@@ -324,7 +366,8 @@ def describe(f: dict) -> list[str]:
         return f"{f[key]:.1%} ({lo:.0%}-{hi:.0%})" if np.isfinite(f[key]) else "-"
 
     lo, hi = f["median_max_z_ci"]
-    failed = [k for k, ok in two_sided(f).items() if not ok]
+    ilo, ihi = f["median_max_iz_ci"]
+    failed = [k for k, ok in (two_sided(f) | two_sided_intervals(f)).items() if not ok]
     return [
         f"{f['rows']} answers ({f['pairs']} pairs x {f['draws']} draws, {f['vessels']} target "
         f"vessels): ok {pc('ok')}, ok or position_only {pc('ok_or_position_only')}",
@@ -332,6 +375,10 @@ def describe(f: dict) -> list[str]:
         f" beyond 5 sd {f['beyond_5_sd']}; all three within 3 sd {pc('within_3_sd')}",
         *(f"  {q:6} within 1 sd {pc(f'{q}_within_1_sd'):19} within 2 sd "
           f"{pc(f'{q}_within_2_sd')}" for q in QUANTITIES),
+        f"in the answers' own intervals: median largest |z| {f['median_max_iz']:.2f} "
+        f"({ilo:.2f}-{ihi:.2f}); beyond 5 {f['beyond_5_sd_intervals']}",
+        *(f"  {q:6} in the 1-sd interval {pc(f'{q}_in_1_sd_interval'):19} in the 2-sd "
+          f"{pc(f'{q}_in_2_sd_interval')}" for q in QUANTITIES),
         f"position_only: range within 2 sd {pc('position_only_range_within_2_sd')}, bearing "
         f"{pc('position_only_bearing_within_2_sd')}",
         "checks: " + ("all hold" if not failed else "FAIL " + ", ".join(failed)),

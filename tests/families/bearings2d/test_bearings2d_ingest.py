@@ -27,6 +27,7 @@ from tma.errors import ConfigError, InputError
 from tma.families.bearings2d import contact_plots
 from tma.families.bearings2d.log import write_bearings_log
 from tma.families.bearings2d.scenario import Config, simulate_shard
+from tma.families.bearings2d.status import INTERVAL_COLUMNS
 from tma.io.atomic import sha256_file
 from tma.sources import kinds
 
@@ -84,6 +85,14 @@ def test_csv_ingest_estimate_report(tmp_path, monkeypatch):
     np.testing.assert_allclose(report.sqrt_ka_deg, 0.2, rtol=0.15)
     assert report.converged.all()
     assert "±" in (tmp_path / "tables" / "rec-lm.md").read_text()
+    # beside each number its 2-sd interval (the CSV has the 1-sd one too), ordered
+    lo2, lo1, hi1, hi2 = (report[c].to_numpy() for c in INTERVAL_COLUMNS["range"])
+    assert np.all((lo2 < lo1) & (lo1 < hi1) & (hi1 < hi2)), report[INTERVAL_COLUMNS["range"]]
+    assert np.all((lo1 < report.range_now_m) & (report.range_now_m < hi1))
+    assert f"{report.range_now_m[0]:.0f} ± {report.range_sd_m[0]:.0f} [{lo2[0]:.0f}, " \
+           f"{hi2[0]:.0f}]" in md
+    csv = pd.read_csv(tmp_path / "tables" / "rec-lm.csv")
+    assert all(c in csv for ends in INTERVAL_COLUMNS.values() for c in ends)
 
 
 def test_mcap_ingest_in_own_schema(tmp_path):

@@ -8,6 +8,11 @@ Over the ``ok`` tracks of one estimator on one dataset, in the cell ``all`` and 
   stated sd (the course error wrapped to [-180, 180) deg), and the shares with |z| <= 1 and
   |z| <= 2: 68.3 and 95.4 % for honest Gaussian errors; the targets 60-76 % and 92-98 %
   (``WITHIN_TARGETS``);
+- per quantity, the same shares of the truth within the answer's own central intervals
+  that hold what 1 and 2 sd of a Gaussian hold (``status.INTERVAL_COLUMNS``: a single
+  Gaussian's are its estimate +- 1 and 2 sd, a mixture's its own quantiles, asymmetric and
+  wider than 2 sd where its tails are heavy), by the interval z of ``interval_z`` (|z| <= 1:
+  inside the 1-sd interval); the same targets;
 - the 4D consistency: the share whose NEES (theta_hat - theta)^T Sigma^-1 (theta_hat - theta)
   lies at or below the chi-square(4) 95 % point (target 88-98 %, ``CONSISTENT_TARGET``), and
   the mean NEES beside the central 95 % interval of the mean of N chi-square(4) draws
@@ -28,12 +33,15 @@ import numpy as np
 import pandas as pd
 
 from tma.families.bearings2d.metrics import NEES_95, THETA, errors_now, normalised_error
+from tma.families.bearings2d.status import INTERVAL_COLUMNS
+from tma.maths.angles import wrap_to_180
 from tma.maths.stats import chi2_mean_interval, rate_columns
 
 # quantity: (error column of ``errors_now``, the estimate's stated one-sigma error)
 QUANTITIES = {"range": ("range_err_m", "range_sd_m"),
               "course": ("course_err_deg", "course_sd_deg"),
               "speed": ("speed_err_m_s", "speed_sd_m_s")}
+ESTIMATES = {"range": "range_now_m", "course": "course_deg", "speed": "speed_m_s"}
 WITHIN_TARGETS = {1: (0.60, 0.76), 2: (0.92, 0.98)}  # |z| <= k sd: honest 68.3 %, 95.4 %
 CONSISTENT_TARGET = (0.88, 0.98)  # NEES <= chi-square(4) 95 % point: honest 95 %
 GRADED_MIN_OK = 100  # ok tracks a cell needs to be graded
@@ -47,14 +55,49 @@ COLUMNS = [
     *ROW_KEYS, "cell_group", "cell", "n_tracks", "n_ok", "graded",
     *[f"{q}_within_{k}sd{s}" for q in QUANTITIES for k in WITHIN_TARGETS
       for s in ("", "_lo", "_hi")],
+    *[f"{q}_interval_within_{k}sd{s}" for q in QUANTITIES for k in WITHIN_TARGETS
+      for s in ("", "_lo", "_hi")],
     "consistent", "consistent_lo", "consistent_hi", "mean_nees", "mean_nees_lo",
     "mean_nees_hi", "outside",
 ]
 
 
+def interval_z(estimate, error, lo2, lo1, hi1, hi2, circular=False) -> np.ndarray:
+    """The error ``error`` = estimate - truth in units of the answer's central intervals
+    (``lo1``-``hi1`` holding what 1 sd of a Gaussian holds, ``lo2``-``hi2`` what 2 sd hold):
+    0 at the middle of the 1-sd interval, 1 and -1 at its lower and upper ends (the truth
+    below it: the estimate too high), 2 and -2 at the 2-sd interval's, linear between them
+    and on beyond with the outer pieces' slope. For a Gaussian answer (its estimate +- 1 and
+    2 sd) exactly the error over the sd, so that |z| <= 1 and 2 say whether the truth lies
+    inside each interval. ``circular``: degrees on a circle (course), the ends read
+    clockwise from the lower one and the error wrapped to the nearest turn. NaN where an
+    end is."""
+    est, err = np.asarray(estimate, dtype=float), np.asarray(error, dtype=float)
+    lo2, lo1, hi1, hi2 = (np.asarray(a, dtype=float) for a in (lo2, lo1, hi1, hi2))
+    if circular:  # offsets from the estimate, each end reached clockwise from the last
+        lo1 = wrap_to_180(lo1 - est)
+        hi1 = lo1 + (hi1 - est - lo1) % 360.0
+        lo2 = lo1 - (est + lo1 - lo2) % 360.0
+        hi2 = hi1 + (hi2 - est - hi1) % 360.0
+        truth = -err
+    else:
+        truth = est - err
+    mid = 0.5 * (lo1 + hi1)
+    d = mid - truth  # (as the error: positive where the truth lies below)
+    if circular:
+        d = wrap_to_180(d)
+    up1, up2, down1, down2 = hi1 - mid, hi2 - mid, mid - lo1, mid - lo2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        below = np.where(d <= down1, d / down1, 1.0 + (d - down1) / (down2 - down1))
+        above = np.where(-d <= up1, d / up1, -1.0 + (d + up1) / (up2 - up1))
+    return np.where(d >= 0, below, above)
+
+
 def track_calibration(estimates: pd.DataFrame, truth: pd.DataFrame) -> pd.DataFrame:
     """Per track of ``estimates``: ``status``, ``range_z``, ``course_z``, ``speed_z``
-    (estimate - truth at the last bearing over the stated sd), ``nees`` (NaN where the
+    (estimate - truth at the last bearing over the stated sd), ``range_iz``, ``course_iz``,
+    ``speed_iz`` (the same error in units of the stated intervals, ``interval_z``; NaN
+    where the estimates have none), ``nees`` (NaN where the
     estimate has none), ``range_true_m``, and ``n_manoeuvres`` (where the truth has it) and
     ``p_manoeuvre`` (where the estimates have it)."""
     errors = errors_now(estimates, truth)  # (checks that the truth holds every track)
@@ -63,6 +106,10 @@ def track_calibration(estimates: pd.DataFrame, truth: pd.DataFrame) -> pd.DataFr
     for q, (err, sd) in QUANTITIES.items():
         with np.errstate(divide="ignore", invalid="ignore"):
             out[f"{q}_z"] = errors[err].to_numpy() / estimates[sd].to_numpy(dtype=float)
+        ends = INTERVAL_COLUMNS[q]
+        out[f"{q}_iz"] = (interval_z(estimates[ESTIMATES[q]], errors[err],
+                                     *(estimates[c] for c in ends), circular=q == "course")
+                          if all(c in estimates for c in ends) else np.nan)
     merged = estimates.merge(truth[["track_id", *THETA]], on="track_id", how="left",
                              suffixes=("", "_true"))
     out["nees"] = normalised_error(merged)
@@ -135,6 +182,7 @@ def cell_row(tracks: pd.DataFrame, mask) -> dict:
            "graded": bool(ok.sum() >= GRADED_MIN_OK)}
     for q in QUANTITIES:
         row.update(within_shares(tracks[f"{q}_z"].to_numpy()[ok], q))
+        row.update(within_shares(tracks[f"{q}_iz"].to_numpy()[ok], f"{q}_interval"))
     row.update(nees_figures(tracks["nees"].to_numpy()[ok]))
     return row
 
@@ -147,10 +195,14 @@ def outside_targets(row: dict) -> list[str]:
         return []
     checks = [(f"{q}_within_{k}sd", f"{q} within {k} sd", WITHIN_TARGETS[k])
               for q in QUANTITIES for k in WITHIN_TARGETS]
+    checks += [(f"{q}_interval_within_{k}sd", f"{q} in its {k}-sd interval", WITHIN_TARGETS[k])
+               for q in QUANTITIES for k in WITHIN_TARGETS]
     checks.append(("consistent", "consistent", CONSISTENT_TARGET))
     out = []
     for key, name, (lo, hi) in checks:
         share = row[key]
+        if np.isnan(share):  # (no intervals stated)
+            continue
         if share < lo or share > hi:
             side, bound = ("<", lo) if share < lo else (">", hi)
             out.append(f"{name} {_beside(100 * share, 100 * bound)} % {side} {100 * bound:g} %")
@@ -216,9 +268,15 @@ def _mean_nees(row) -> str:
     return f"{mean:.3g} ({lo:.3g}-{hi:.3g}){side}"
 
 
-def _within(table, k) -> list[str]:
+def _within(table, k, kind="") -> list[str]:
     return [" / ".join(_pct(v) for v in row) for row in
-            table[[f"{q}_within_{k}sd" for q in QUANTITIES]].to_numpy()]
+            table[[f"{q}{kind}_within_{k}sd" for q in QUANTITIES]].to_numpy()]
+
+
+def _in_intervals(table) -> list[str]:
+    return ["; ".join(f"{_pct(row[f'{q}_interval_within_1sd'])} / "
+                      f"{_pct(row[f'{q}_interval_within_2sd'])}" for q in QUANTITIES)
+            for _, row in table.iterrows()]
 
 
 def shown_rows(table: pd.DataFrame) -> pd.DataFrame:
@@ -229,6 +287,7 @@ def shown_rows(table: pd.DataFrame) -> pd.DataFrame:
         "ok": rows["n_ok"],
         "within 1 sd %: range / course / speed": _within(rows, 1),
         "within 2 sd %: range / course / speed": _within(rows, 2),
+        "in the 1-sd / 2-sd intervals %: range; course; speed": _in_intervals(rows),
         "consistent (ok) %": [f"{_pct(a)} ({_pct(b)}-{_pct(c)})" if pd.notna(a) else "-"
                               for a, b, c in rows[["consistent", "consistent_lo",
                                                    "consistent_hi"]].to_numpy()],
@@ -253,6 +312,7 @@ def shown_cells(table: pd.DataFrame) -> pd.DataFrame:
         "mean NEES (95 % if honest)": [_mean_nees(r) for _, r in rows.iterrows()],
         "within 1 / 2 sd %: range, course, speed": [
             f"{a}; {b}" for a, b in zip(_within(rows, 1), _within(rows, 2), strict=True)],
+        "in the 1-sd / 2-sd intervals %: range; course; speed": _in_intervals(rows),
         "outside": [v or ("-" if not g else "none") for v, g in
                     rows[["outside", "graded"]].to_numpy()],
     })

@@ -86,8 +86,9 @@ class JudgedFit:
     bearing ``start``), which tracks the trend test reads (``tested``) and its p-value
     (``motion_p``), the manoeuvre mixture's ``p_manoeuvre``, ``tail_scale``, ``p_omitted``
     and ``n_manoeuvres`` (``ncv.MotionFit``; NaN, and 1 for ``tail_scale``, where none),
-    the trajectory tables ``paths``, and the tracks whose range own-ship's motion leaves
-    ``undetermined``."""
+    the trajectory tables ``paths``, the tracks whose range own-ship's motion leaves
+    ``undetermined``, and the mixture's ``intervals`` (n, 3, 4: range, course, speed now;
+    NaN where none: a single Gaussian's are its estimate +- 1 and 2 sd)."""
 
     theta: np.ndarray
     converged: np.ndarray
@@ -106,4 +107,5 @@ class JudgedFit:
     p_omitted: np.ndarray
     n_manoeuvres: np.ndarray
     undetermined: np.ndarray
+    intervals: np.ndarray
     paths: list = field(default_factory=list)

@@ -62,7 +62,12 @@ from tma.families.bearings2d.manoeuvre_prior import (  # noqa: F401 (the prior's
     cell_priors,
     window_s,
 )
-from tma.families.bearings2d.mixture_tails import tail_points, tail_scale
+from tma.families.bearings2d.mixture_tails import (
+    INTERVAL_LEVELS,
+    quantity_intervals,
+    tail_points,
+    tail_scale,
+)
 from tma.families.bearings2d.ncv import (
     MAX_PASSES,
     MIN_PRIOR_M,
@@ -114,11 +119,12 @@ def _from_earlier_base(cells, bases, bi, b, nb, code):
 @njit(error_model="numpy", depends=(_from_earlier_base, _filter, _fit, finish_track,
                                          start_track, backward_pass,
                                          shock_posterior, state_with_shock, tail_scale,
+                                         quantity_intervals,
                                          _extension, blank_path, smoothed_positions))
 def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q, taus, starts,
                    ends, durations, burst, p_none, epochs, shocks, scale2, p0_pos, max_iter, tol_m,
                    state, P_last, e, cost, passes, p_manoeuvre, p_omitted, n_manoeuvres, u,
-                   u_q95, widen, path, path_cov):
+                   u_q95, widen, now_x, now_y, levels, intervals, path, path_cov):
     """Per track i the mixture of the module docstring: wander ``q`` (n,, units of s^2),
     each cell's manoeuvre start ``taus`` (n, J) and the epoch after it ``starts`` (n, J),
     each burst's last epoch ``ends`` (n, J, D),
@@ -130,7 +136,9 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
     of s^2; the innovations and squared bearing residuals of the most probable refined
     component; the Gauss-Newton passes of the no-manoeuvre fit, -1: failed), the posterior
     probability of a manoeuvre in the window, the share of the posterior left out, the
-    posterior mean number of manoeuvres, the tail factor ``widen`` and the most probable
+    posterior mean number of manoeuvres, the tail factor ``widen``, the ``intervals`` (n, 3,
+    len(levels)) of range from ``now_x``, ``now_y`` (n,), course and speed now
+    (``mixture_tails.quantity_intervals``) and the most probable
     refined component's positions ``path`` (n, K, 2; NaN outside the track) with, where
     ``path_cov`` has epochs (n, K, 3), their smoothed covariances under that component's
     manoeuvres (``kalman.smoothed_positions``, units of s^2)."""
@@ -168,6 +176,7 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
         start_track(i, t, lo, hi, theta, noms[0], state, P_last, e)
         cost[i], p_manoeuvre[i], p_omitted[i], n_manoeuvres[i] = np.nan, np.nan, np.nan, np.nan
         widen[i] = 1.0
+        intervals[i] = np.nan
         blank_path(i, path, path_cov)
         s2 = scale2[i]
         p0[0] = p0_pos[i] * p0_pos[i] / s2
@@ -381,6 +390,8 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
                                            * (means[c, b] - m0[b]) / s2)
                 P0[a, b] = v / mass
         widen[i] = tail_scale(weights, means, covs, used, m0, P0, s2, u, u_q95)
+        quantity_intervals(weights, means, covs, used, s2, now_x[i], now_y[i], levels,
+                           intervals[i])
         p_manoeuvre[i] = 1.0 - weights[0] / mass
         n_manoeuvres[i] = mean_count / mass
         p_omitted[i] = (1.0 / (1.0 + math.exp(math.log(mass) + top - omitted))
@@ -400,14 +411,17 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
 
 
 def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_psd,
-            prior: ManoeuvrePrior, sigma_rad, path_cov=False) -> MotionFit:
+            prior: ManoeuvrePrior, sigma_rad, path_cov=False, now_xy=None) -> MotionFit:
     """The state at each track's last bearing under NCV wander ``accel_psd`` (m^2/s^3, (n,)
     or scalar) and the manoeuvres of ``prior``, from the constant-velocity start
     ``theta_cv`` (n, 4): its ``ncv.MotionFit`` with the mixture's own
     ``p_manoeuvre`` (the posterior probability of a manoeuvre since the first bearing),
     ``p_omitted`` (the share of the posterior the mixture leaves out), ``n_manoeuvres``
     (their posterior mean number), ``tail_scale`` (the factor its covariance was widened
-    by, ``mixture_tails.tail_scale``) and ``path_m`` (n, K, 2: the most probable
+    by, ``mixture_tails.tail_scale``), ``intervals`` (n, 3, 4: the central intervals of
+    range from ``now_xy`` (two (n,) arrays, m; None: own-ship at the last bearing), course and
+    speed now that hold 68.3 and 95.4 %, ``mixture_tails.quantity_intervals``) and ``path_m``
+    (n, K, 2: the most probable
     trajectory's positions, NaN outside the track); with ``path_cov``, ``path_cov_m2`` (n, K,
     3: their smoothed covariances xx, xy, yy in m^2 under that trajectory's manoeuvres).
 
@@ -444,7 +458,9 @@ def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_p
            "innovations": np.empty((n, K)), "cost_rad2": np.empty(n),
            "passes": np.zeros(n, dtype=np.int64), "p_manoeuvre": np.empty(n),
            "p_omitted": np.empty(n), "n_manoeuvres": np.empty(n), "tail_scale": np.ones(n),
-           "path_m": np.empty((n, K, 2))}
+           "intervals": np.empty((n, 3, len(INTERVAL_LEVELS))), "path_m": np.empty((n, K, 2))}
+    now_x, now_y = ((np.asarray(own_x, float)[last], np.asarray(own_y, float)[last])
+                    if now_xy is None else now_xy)
     if path_cov:
         out["path_cov_m2"] = np.empty((n, K, 3))
     mixture_tracks(t, np.ascontiguousarray(own_x, float), np.ascontiguousarray(own_y, float),
@@ -454,6 +470,7 @@ def mixture(t, own_x, own_y, measured_rad, valid, first, last, theta_cv, accel_p
                    REFINE_TOL_M, out["state"], out["cov"],
                    out["innovations"], out["cost_rad2"], out["passes"], out["p_manoeuvre"],
                    out["p_omitted"], out["n_manoeuvres"], *tail_points(), out["tail_scale"],
-                   out["path_m"],
+                   np.ascontiguousarray(now_x, float), np.ascontiguousarray(now_y, float),
+                   np.array(INTERVAL_LEVELS), out["intervals"], out["path_m"],
                    out.get("path_cov_m2", np.empty((n, 0, 3))))
     return in_units(out, sigma2, t[last], theta_cv)

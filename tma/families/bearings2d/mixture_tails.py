@@ -78,3 +78,111 @@ def tail_scale(weights, means, covs, used, mean, P, s2, u, u_q95):
             scale = d[k] / u_q95
             return scale if scale > 1.0 + 1e-9 else 1.0
     return 1.0
+
+
+# The central intervals of the quantities a user reads: the probabilities a Gaussian holds
+# within 1 and 2 sd (68.3 and 95.4 %), so that a Gaussian's are exactly its estimate +- 1 and
+# 2 sd, and a mixture's hold what they say however heavy its tails
+INTERVAL_LEVELS = (0.5 * math.erfc(2.0 / math.sqrt(2.0)), 0.5 * math.erfc(1.0 / math.sqrt(2.0)),
+                   0.5 * math.erfc(-1.0 / math.sqrt(2.0)), 0.5 * math.erfc(-2.0 / math.sqrt(2.0)))
+QUANTITIES = ("range", "course", "speed")  # (the rows of quantity_intervals' out)
+
+
+@njit(error_model="numpy")
+def _mixture_quantile(w, mu, sd, count, p):
+    """The ``p`` quantile of the one-dimensional Gaussian mixture of the first ``count``
+    weights ``w`` (summing to 1), means ``mu`` and sds ``sd`` (> 0): Newton's method on its
+    distribution function, kept inside a bracket that halves where a step would leave it,
+    to 1e-12 in probability (60 steps at most)."""
+    lo, hi = np.inf, -np.inf
+    for c in range(count):
+        lo = min(lo, mu[c] - 9.0 * sd[c])
+        hi = max(hi, mu[c] + 9.0 * sd[c])
+    x = 0.5 * (lo + hi)
+    for _ in range(60):
+        f, d = -p, 0.0
+        for c in range(count):
+            u = (x - mu[c]) / sd[c]
+            f += w[c] * 0.5 * math.erfc(-u / math.sqrt(2.0))
+            d += w[c] * math.exp(-0.5 * u * u) / (sd[c] * math.sqrt(2.0 * math.pi))
+        if abs(f) < 1e-12:
+            break
+        if f < 0.0:
+            lo = x
+        else:
+            hi = x
+        step = x - f / d if d > 0.0 else np.nan
+        x = step if lo < step < hi else 0.5 * (lo + hi)
+    return x
+
+
+@njit(error_model="numpy")
+def quantity_intervals(weights, means, covs, used, s2, now_x, now_y, levels, out):
+    """The ``levels`` quantiles (``INTERVAL_LEVELS``) of range (m, from the point ``now_x``,
+    ``now_y``), course (rad, clockwise from north; unwrapped about the course of the
+    mixture's mean velocity) and speed (m/s) now under a Gaussian mixture of states (x, y
+    (m), vx, vy (m/s)): ``weights`` of the first ``used`` components, ``means``, ``covs`` in
+    units of ``s2``. Each component's quantities are Gaussian to first order (its mean's
+    value and the sd its covariance gives through their gradient, as a single Gaussian's
+    stated sd), so the mixture's are mixtures of those; ``out`` (3, len(levels)): rows
+    range, course, speed. A component with no spread in a quantity counts at 1e-9 of its
+    value's scale."""
+    total = 0.0
+    for c in range(used):
+        total += weights[c]
+    w, mu, sd = np.empty(used), np.empty((3, used)), np.empty((3, used))
+    vx0, vy0 = 0.0, 0.0
+    for c in range(used):
+        vx0 += weights[c] * means[c, 2] / total
+        vy0 += weights[c] * means[c, 3] / total
+    course0 = math.atan2(vx0, vy0)
+    k = 0
+    for c in range(used):
+        if not weights[c] > 1e-9 * total:
+            continue
+        w[k] = weights[c]
+        dx, dy = means[c, 0] - now_x, means[c, 1] - now_y
+        vx, vy = means[c, 2], means[c, 3]
+        r, v = math.hypot(dx, dy), math.hypot(vx, vy)
+        P = covs[c]
+        # gradients: range (dx, dy) / r on the position; course (vy, -vx) / v^2 and speed
+        # (vx, vy) / v on the velocity
+        var_r = (dx * dx * P[0, 0] + 2.0 * dx * dy * P[0, 1] + dy * dy * P[1, 1]) / (r * r)
+        var_c = (vy * vy * P[2, 2] - 2.0 * vx * vy * P[2, 3] + vx * vx * P[3, 3]) / v**4
+        var_s = (vx * vx * P[2, 2] + 2.0 * vx * vy * P[2, 3] + vy * vy * P[3, 3]) / (v * v)
+        course = math.atan2(vx, vy) - course0
+        course -= 2.0 * math.pi * math.floor((course + math.pi) / (2.0 * math.pi))
+        mu[0, k], mu[1, k], mu[2, k] = math.log(r), course0 + course, v
+        sd[0, k] = math.sqrt(max(var_r * s2, 0.0)) / r + 1e-9
+        sd[1, k] = math.sqrt(max(var_c * s2, 0.0)) + 1e-9
+        sd[2, k] = math.sqrt(max(var_s * s2, 0.0)) + 1e-9 * v
+        k += 1
+    kept = 0.0
+    for c in range(k):
+        kept += w[c]
+    for c in range(k):
+        w[c] /= kept
+    for a in range(3):
+        for j in range(levels.size):
+            out[a, j] = _mixture_quantile(w, mu[a], sd[a], k, levels[j])
+    for j in range(levels.size):
+        out[0, j] = math.exp(out[0, j])
+
+
+@njit(error_model="numpy")
+def gaussian_intervals(states, covs, now_x, now_y, levels, out):
+    """``quantity_intervals`` of one Gaussian per track: ``states`` (n, 4: x, y (m), vx, vy
+    (m/s) now), ``covs`` (n, 4, 4, m and m/s), from the points ``now_x``, ``now_y`` (n,);
+    ``out`` (n, 3, len(levels)), NaN where the state or covariance is not finite."""
+    weight = np.ones(1)
+    for i in range(states.shape[0]):
+        finite = True
+        for a in range(4):
+            finite &= np.isfinite(states[i, a])
+            for b in range(4):
+                finite &= np.isfinite(covs[i, a, b])
+        if not finite:
+            out[i] = np.nan
+            continue
+        quantity_intervals(weight, states[i:i + 1], covs[i:i + 1], 1, 1.0, now_x[i], now_y[i],
+                           levels, out[i])

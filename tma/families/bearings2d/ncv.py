@@ -195,8 +195,9 @@ class MotionFit:
     track) and, where asked, ``path_cov_m2`` (n, K, 3: their smoothed covariances xx, xy, yy,
     m^2). A mixture's own (None from ``ncv.smooth``): ``p_manoeuvre`` (posterior probability
     of a manoeuvre in the window), ``p_omitted`` (the share of the posterior it leaves out),
-    ``n_manoeuvres`` (their posterior mean number) and ``tail_scale`` (the factor its
-    covariance was widened by)."""
+    ``n_manoeuvres`` (their posterior mean number), ``tail_scale`` (the factor its
+    covariance was widened by) and ``intervals`` (n, 3, 4: range, course, speed now, the
+    central intervals holding 68.3 and 95.4 % of the mixture, ``manoeuvres.mixture``)."""
 
     state: np.ndarray
     cov: np.ndarray
@@ -212,6 +213,7 @@ class MotionFit:
     p_omitted: np.ndarray | None = None
     n_manoeuvres: np.ndarray | None = None
     tail_scale: np.ndarray | None = None
+    intervals: np.ndarray | None = None
 
 
 def theta_of_state(state, P, t_now):
@@ -236,7 +238,8 @@ def in_units(out, sigma2, t_now, theta_cv) -> MotionFit:
     if "path_cov_m2" in out:
         out["path_cov_m2"] *= sigma2[:, None, None]
     fail = ~np.isfinite(theta_cv).all(axis=1)
-    for key in ("state", "cov", "innovations", "theta", "cov_theta", "path_m", "path_cov_m2"):
+    for key in ("state", "cov", "innovations", "theta", "cov_theta", "path_m", "path_cov_m2",
+                "intervals"):
         if key in out:
             out[key][fail] = np.nan
     return MotionFit(**out)

@@ -53,6 +53,7 @@ import math
 
 import numpy as np
 
+from tma.families.bearings2d.mixture_tails import INTERVAL_LEVELS, gaussian_intervals
 from tma.maths.angles import bearing_from_north, course_from_velocity, wrap_to_180
 from tma.maths.linalg import scaled_inverse
 from tma.runtime.jit import njit
@@ -282,7 +283,7 @@ def noise_fit(cost_rad2, dof, sigma_deg):
 
 def assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t_now_s, own_x_now_m,
            own_y_now_m, cfg, motion_tested=False, undetermined=False,
-           moving=False, tail_scale=1.0) -> dict:
+           moving=False, tail_scale=1.0, intervals=None) -> dict:
     """Status and one-sigma errors per track (see the module docstring).
 
     The covariance of theta is jtj^-1 sigma2 (``sigma2`` rad^2 per track); ``fit_p``: the
@@ -297,7 +298,10 @@ def assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t_now_s,
     the factor by which the covariance of a mixture's answer was widened so that its 95 %
     ellipsoid holds 95 % of the mixture (``mixture_tails.tail_scale``): whether range is
     determined is judged on the covariance before it (the answer's core), whether course and
-    speed are on the errors stated (those a reader reads); ``cfg`` holds
+    speed are on the errors stated (those a reader reads); ``intervals`` (n, 3, 4; None or
+    NaN rows: none): a mixture's central intervals of range, course and speed now that hold
+    68.3 and 95.4 % (``mixture_tails.quantity_intervals``), stated as they are (a single
+    Gaussian's from its covariance: ``interval_columns``); ``cfg`` holds
     ``singular_rcond``, ``fit_alpha``, ``motion_alpha``, ``max_range_rel_sd``,
     ``max_course_sd_deg``, ``max_speed_rel_sd``. Returns output columns."""
     finite = np.isfinite(theta).all(axis=1)
@@ -330,10 +334,53 @@ def assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t_now_s,
         "bearing_now_deg": np.rad2deg(bearing) % 360.0, "bearing_sd_deg": np.rad2deg(sd[:, 1]),
         "course_deg": np.rad2deg(course), "course_sd_deg": np.rad2deg(sd[:, 2]),
         "speed_m_s": speed, "speed_sd_m_s": sd[:, 3],
+        **interval_columns(theta, cov, t_now_s, own_x_now_m, own_y_now_m, sd[:, [0, 2, 3]],
+                           intervals),
         "sigma_used_deg": np.rad2deg(np.sqrt(sigma2)),
         "fit_p_value": fit_p,
         "status": status,
     }
+
+
+INTERVAL_COLUMNS = {"range": ("range_lo2_m", "range_lo1_m", "range_hi1_m", "range_hi2_m"),
+                    "course": ("course_lo2_deg", "course_lo1_deg", "course_hi1_deg",
+                               "course_hi2_deg"),
+                    "speed": ("speed_lo2_m_s", "speed_lo1_m_s", "speed_hi1_m_s",
+                              "speed_hi2_m_s")}
+
+
+def interval_columns(theta, cov, t_now_s, now_x_m, now_y_m, sd, intervals=None) -> dict:
+    """The central intervals of range (m), course (deg, clockwise from north) and speed
+    (m/s) now that hold what 1 and 2 sd of a Gaussian hold (68.3 and 95.4 %):
+    ``INTERVAL_COLUMNS``, lower and upper ends, of the answer ``theta`` (n, 4) with
+    covariance ``cov`` (n, 4, 4) at ``t_now_s`` from the points ``now_x_m``, ``now_y_m``:
+    its course and speed +- 1 and 2 sd, its range r exp(+-k sd / r) (log-normal: a bearings-
+    only range is known in ratio, and is positive), ``mixture_tails.gaussian_intervals``;
+    ``intervals`` (n, 3, 4; rad for course), where finite, a mixture's own instead
+    (``mixture_tails.quantity_intervals``: asymmetric and wider than 2 sd where its tails
+    are heavy). None where the one-sigma error ``sd`` (n, 3: range, course, speed) is none;
+    a course interval of 360 deg or more (any course) is none; course ends in [0, 360)."""
+    n = theta.shape[0]
+    A = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
+    A[:, 0, 2] = A[:, 1, 3] = t_now_s  # the state now = A theta
+    bounds = np.empty((n, 3, len(INTERVAL_LEVELS)))
+    gaussian_intervals(np.einsum("nij,nj->ni", A, theta), A @ cov @ np.swapaxes(A, 1, 2),
+                       np.broadcast_to(np.asarray(now_x_m, float), (n,)).copy(),
+                       np.broadcast_to(np.asarray(now_y_m, float), (n,)).copy(),
+                       np.array(INTERVAL_LEVELS), bounds)
+    if intervals is not None:
+        own = np.isfinite(intervals).all(axis=(1, 2))
+        bounds[own] = intervals[own]
+    bounds[~np.isfinite(sd)] = np.nan
+    course = bounds[:, 1]
+    with np.errstate(invalid="ignore"):
+        for lo, hi in ((0, 3), (1, 2)):
+            course[course[:, hi] - course[:, lo] >= 2.0 * np.pi, lo:hi + 1:hi - lo] = np.nan
+    columns = {}
+    for a, (name, names) in enumerate(INTERVAL_COLUMNS.items()):
+        values = np.rad2deg(bounds[:, a]) % 360.0 if name == "course" else bounds[:, a]
+        columns.update({c: values[:, j] for j, c in enumerate(names)})
+    return columns
 
 
 # -- what an output shows as an answer -------------------------------------------------------

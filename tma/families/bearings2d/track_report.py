@@ -23,7 +23,12 @@ from tma.families.bearings2d.drawn_tracks import (
 )
 from tma.families.bearings2d.map_mcap import write_map_mcap
 from tma.families.bearings2d.platforms import platforms_seen
-from tma.families.bearings2d.status import STATUSES, heading_undetermined, not_an_answer
+from tma.families.bearings2d.status import (
+    INTERVAL_COLUMNS,
+    STATUSES,
+    heading_undetermined,
+    not_an_answer,
+)
 from tma.families.bearings2d.truth_report import (
     coverage_text,
     dataset_truth,
@@ -41,7 +46,8 @@ log = logging.getLogger(__name__)
 
 
 REPORT_COLUMNS = ["range_now_m", "range_sd_m", "bearing_now_deg", "bearing_sd_deg",
-                  "course_deg", "course_sd_deg", "speed_m_s", "speed_sd_m_s", "sigma_used_deg",
+                  "course_deg", "course_sd_deg", "speed_m_s", "speed_sd_m_s",
+                  *(c for ends in INTERVAL_COLUMNS.values() for c in ends), "sigma_used_deg",
                   "fit_p_value", "motion_p_value", "accel_psd_m2_s3", "leg_start_s", "status"]
 
 
@@ -124,10 +130,11 @@ def _resting_on(row) -> str:
 # what a report shows of an estimate: blank, all of it, where it is no answer
 # (``status.not_an_answer``); its heading (course, speed) blank where the status says that it
 # is not determined (``status.HEADING_UNDETERMINED``: ``position_only``, ``unobservable``)
-HEADING_COLUMNS = ["course_deg", "course_sd_deg", "speed_m_s", "speed_sd_m_s"]
+HEADING_COLUMNS = ["course_deg", "course_sd_deg", "speed_m_s", "speed_sd_m_s",
+                   *INTERVAL_COLUMNS["course"], *INTERVAL_COLUMNS["speed"]]
 ESTIMATE_COLUMNS = ["x_now_m", "x_sd_m", "y_now_m", "y_sd_m", "lat_now_deg", "lon_now_deg",
-                    "range_now_m", "range_sd_m", "bearing_now_deg", "bearing_sd_deg",
-                    *HEADING_COLUMNS]
+                    "range_now_m", "range_sd_m", *INTERVAL_COLUMNS["range"], "bearing_now_deg",
+                    "bearing_sd_deg", *HEADING_COLUMNS]
 END_BEARING_COLUMNS = ["end_bearing_deg", "end_bearing_sd_deg"]  # the estimate stage's
 NOT_DETERMINED = "not determined"  # a heading cell of the Markdown where it is blank so
 
@@ -213,7 +220,8 @@ def track_report(estimates: pd.DataFrame, epoch_utc_ns=None, origin_deg=None,
         "x_now_m": x_now, "x_sd_m": np.sqrt(cov[:, 0, 0]),
         "y_now_m": y_now, "y_sd_m": np.sqrt(cov[:, 1, 1]),
         "lat_now_deg": lat, "lon_now_deg": lon,
-        **{c: e[c] for c in REPORT_COLUMNS},
+        # (the intervals NaN in the estimates of a run written before they were)
+        **{c: e[c] if c in e else np.nan for c in REPORT_COLUMNS},
         "leg_start_utc": utc(e["leg_start_s"].to_numpy()),
         "sqrt_ka_deg": np.rad2deg(np.sqrt(e["cost_rad2"] / e["n_bearings"])),
         "converged": e["converged"].astype(bool),
@@ -227,8 +235,9 @@ def track_report(estimates: pd.DataFrame, epoch_utc_ns=None, origin_deg=None,
         # the estimates stay on the plane (0.0156 deg per km east-west of the origin at 60 N)
         report["bearing_now_deg"] = (report["bearing_now_deg"] - north_at_local(
             e["own_x_last_m"], e["own_y_last_m"], origin_deg)) % 360.0
-        report["course_deg"] = (report["course_deg"]
-                                - north_at_local(x_now, y_now, origin_deg)) % 360.0
+        north = north_at_local(x_now, y_now, origin_deg)
+        for column in ("course_deg", *INTERVAL_COLUMNS["course"]):
+            report[column] = (report[column] - north) % 360.0
     return report
 
 
@@ -242,12 +251,17 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str,
 
     headless = heading_undetermined(report["status"]) & report["range_now_m"].notna().to_numpy()
 
-    def pm(value, sd, fmt, heading=False):  # blank ("-") where the estimate is no answer
-        # (its note says), "not determined" where its heading is not (position_only)
-        return [f"{v:{fmt}} ± {e:{fmt}}" if np.isfinite(v) and np.isfinite(e) else
-                NOT_DETERMINED if heading and h else "-"
-                for (v, e), h in zip(report[[value, sd]].to_numpy(float), headless,
-                                     strict=True)]
+    def pm(value, sd, fmt, heading=False, quantity=None):  # blank ("-") where the
+        # estimate is no answer (its note says), "not determined" where its heading is not
+        # (position_only); [the 2-sd interval] where the answer states one
+        lo, hi = ((report[INTERVAL_COLUMNS[quantity][0]], report[INTERVAL_COLUMNS[quantity][3]])
+                  if quantity else (np.full(len(report), np.nan),) * 2)
+        return [(f"{v:{fmt}} ± {e:{fmt}}" + (f" [{a:{fmt}}, {b:{fmt}}]" if np.isfinite(a)
+                                              and np.isfinite(b) else "")) if np.isfinite(v)
+                and np.isfinite(e) else NOT_DETERMINED if heading and h else "-"
+                for (v, e), a, b, h in zip(report[[value, sd]].to_numpy(float),
+                                           np.asarray(lo, float), np.asarray(hi, float),
+                                           headless, strict=True)]
 
     def position():
         if not (report["lat_now_deg"].notna().any() if geographic is None else geographic):
@@ -263,10 +277,11 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str,
         "t now (s from start)": report["t_now_s"].map("{:.1f}".format),
         **({} if report["time_now_utc"].isna().all() else {"now (UTC)": report["time_now_utc"]}),
         **position(),
-        "range now (m)": pm("range_now_m", "range_sd_m", ".0f"),
+        "range now (m)": pm("range_now_m", "range_sd_m", ".0f", quantity="range"),
         "bearing now (deg)": pm("bearing_now_deg", "bearing_sd_deg", ".2f"),
-        "course (deg)": pm("course_deg", "course_sd_deg", ".1f", heading=True),
-        "speed (m/s)": pm("speed_m_s", "speed_sd_m_s", ".2f", heading=True),
+        "course (deg)": pm("course_deg", "course_sd_deg", ".1f", heading=True,
+                           quantity="course"),
+        "speed (m/s)": pm("speed_m_s", "speed_sd_m_s", ".2f", heading=True, quantity="speed"),
         **shown_columns(report),  # against the AIS truth, when the log has one
         "sqrt(Ka) (deg)": report["sqrt_ka_deg"].map("{:.3g}".format),
         "holds from": (report["leg_start_s"].map("t = {:.1f} s".format)
@@ -283,7 +298,12 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str,
              "sigma_used_deg of the CSV: nominal, or estimated from the bearings), which "
              "includes the "
              "target's own motion (accel_psd_m2_s3: a nearly-constant-velocity target) for "
-             "`lm`; 'holds from' is the first bearing the solution rests on. "
+             "`lm`; [a, b] is the interval that holds the truth 95.4 % of the time (what ±2 "
+             "sd hold of a Gaussian; the CSV also has the one of 68.3 %, ±1 sd): where the "
+             "answer averages over manoeuvres the bearings cannot rule out, its own, "
+             "asymmetric and wider than 2 sd in the direction a manoeuvre could have taken "
+             "the target, and the sd wider than its core; "
+             "'holds from' is the first bearing the solution rests on. "
              "Trust only `ok` tracks, and the position now of `position_only` ones (their course "
              f"and speed: '{NOT_DETERMINED}'); 'why' says what is wrong with the others, and "
              "why an estimate that is no answer (diverged, collapsed onto own-ship, without a "

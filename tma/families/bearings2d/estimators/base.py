@@ -212,7 +212,8 @@ class BearingsEstimator(Estimator):
         trust = assess(fit.theta, fit.jtj, fit.sigma2, fit.fit_p, fit.motion_p, fit.converged,
                        approximate, t[last], b.now_x, b.now_y, self.config,
                        motion_tested=fit.tested, undetermined=fit.undetermined,
-                       moving=motion.moving, tail_scale=fit.tail_scale)
+                       moving=motion.moving, tail_scale=fit.tail_scale,
+                       intervals=fit.intervals)
         # where the log's own last bearings point now, for status.not_an_answer's rule
         trust.update(self._end_bearing(b, np.sqrt(fit.sigma2)))
         return self._columns(b, motion, solution, log, fit, trust)
@@ -245,7 +246,8 @@ class BearingsEstimator(Estimator):
                          start=b.first, tested=np.zeros(n, dtype=bool),
                          motion_p=np.full(n, np.nan), p_manoeuvre=np.full(n, np.nan),
                          tail_scale=np.ones(n), p_omitted=np.full(n, np.nan),
-                         n_manoeuvres=np.full(n, np.nan), undetermined=np.zeros(n, dtype=bool))
+                         n_manoeuvres=np.full(n, np.nan), undetermined=np.zeros(n, dtype=bool),
+                         intervals=np.full((n, 3, 4), np.nan))
 
     def _follow(self, b: Bearings, motion: TargetMotion, solution: Solution,
                 log: BearingsLog, fit: JudgedFit):
@@ -303,8 +305,8 @@ class BearingsEstimator(Estimator):
                 fit.paths.append(estimated_path.path_table(
                     log.track_id[rows], t, motion_fit.path_m, motion_fit.path_cov_m2,
                     motion_fit.cov[:, :2, :2], np.searchsorted(t, leg_start[rows]), points))
-            for key in MIXTURE_COLUMNS:  # (a mixture's own: None from ncv.smooth)
-                if getattr(motion_fit, key) is not None:
+            for key in (*MIXTURE_COLUMNS, "intervals"):  # (a mixture's own: None from
+                if getattr(motion_fit, key) is not None:  # ncv.smooth)
                     getattr(fit, key)[rows] = getattr(motion_fit, key)
             if iterate:
                 fit.theta, fit.cost, fit.jtj, fit.sigma2, fit.fit_p = (
@@ -417,7 +419,8 @@ class BearingsEstimator(Estimator):
                     theta[rows], q)
             if prior is None or not iterate:
                 return ncv.smooth(*args, sigma_rad, iterate=iterate, path_cov=path_cov)
-            return manoeuvres.mixture(*args, prior, sigma_rad, path_cov=path_cov)
+            return manoeuvres.mixture(*args, prior, sigma_rad, path_cov=path_cov,
+                                      now_xy=(b.now_x[rows], b.now_y[rows]))
 
         fit = fit_of(part)
         wild = np.abs(np.nan_to_num(fit.innovations)) > GROSS_SIGMAS
