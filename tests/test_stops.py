@@ -135,7 +135,10 @@ def test_a_killed_command_leaves_no_process_and_a_rerun_frees_its_shared_memory(
     """Killed outright, a command says nothing; its server and workers die with it (a
     parent-death signal), and what its trackers could not free (killed with it) the next
     command removes, by tma's marker, and nothing else."""
-    stranger = os.path.join(SHM, "sem.loky-1-notours") if os.path.isdir(SHM) else None
+    # (its own name per test and process: the parametrisations may run at once in two
+    # pytest workers, and one's clean-up must not remove the other's)
+    stranger = (os.path.join(SHM, f"sem.loky-1-notours-{how}-{os.getpid()}")
+                if os.path.isdir(SHM) else None)
     if stranger:  # not tma's: never touched
         open(stranger, "w").close()
     try:

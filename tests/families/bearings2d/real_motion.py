@@ -8,7 +8,8 @@ estimator.initial_bearing_deg=null``, and judged against the AIS truth at the la
 
 Two sets of checks: issue 28's (``CRITERIA``: one noise draw per pair, one-sided) and issue
 36's (item 5, ``TWO_SIDED``): several noise draws per pair (``run_cases(draws=)``), per
-quantity and two-sided (``figures``, ``two_sided``), with intervals clustered by target
+quantity and two-sided (``figures``, ``two_sided``; the median in units of the answers' own
+intervals, ``two_sided_intervals`` the rest in those units), with intervals clustered by target
 vessel, under the prior a recording gets (measured on both recordings, pooled) and under the
 prior measured on the other recording alone (leave one recording out: ``measured_prior``,
 ``priors``). The Solent's prior is measured on its committed subset (the case vessels only).
@@ -30,7 +31,7 @@ from scipy.stats import t as student_t
 
 from tests.families.bearings2d.recorded_geometry import ingest
 from tma.families import build_estimator
-from tma.families.bearings2d.calibration import interval_z
+from tma.families.bearings2d.calibration import ESTIMATES, SCALES, interval_z
 from tma.families.bearings2d.log import read_bearings_log
 from tma.families.bearings2d.status import INTERVAL_COLUMNS
 from tma.io.dataset import Dataset
@@ -124,17 +125,14 @@ def _estimate_case(workdir: Path, case, estimator: dict, sigma_deg) -> dict:
     }
 
 
-ESTIMATED = {"range": "range_now_m", "course": "course_deg", "speed": "speed_m_s"}
-
-
 def interval_zs(get: dict, errors: dict) -> dict:
     """``iz_range``, ``iz_course``, ``iz_speed``: one answer's errors (``errors``: quantity
     -> estimate - truth, deg for course) in units of its own intervals
     (``calibration.interval_z``; ``get``: the answer's columns by name)."""
-    return {f"iz_{q}": float(interval_z(get[ESTIMATED[q]], errors[q],
+    return {f"iz_{q}": float(interval_z(get[ESTIMATES[q]], errors[q],
                                         *(get[c] for c in INTERVAL_COLUMNS[q]),
-                                        circular=q == "course"))
-            for q in ESTIMATED}
+                                        scale=SCALES[q]))
+            for q in ESTIMATES}
 
 
 def criteria(results: pd.DataFrame) -> dict:
@@ -166,9 +164,12 @@ def holds(figures: dict) -> bool:
             and figures["steady_ok"] >= CRITERIA["steady_ok"])
 
 
-# issue 36, item 5: two-sided, per quantity, on several noise draws per pair
+# issue 36, item 5: two-sided, per quantity, on several noise draws per pair. The median is
+# read in units of the answers' own intervals (calibration.interval_z): in units of the sd,
+# which a mixture's tails widen beyond its core, honest answers give 0.57 (lm on its own
+# model; test_bearings2d_intervals), in units of the intervals 1.02
 TWO_SIDED = {
-    "median_max_z": (1.0, 1.6),  # median over ok tracks of the largest |z| (honest: 1.26)
+    "median_max_iz": (1.0, 1.6),  # median over ok tracks of the largest |z| (honest: 1.0-1.3)
     "within_2_sd": 0.90,  # each of range, course and speed, of the ok tracks
     "beyond_5_sd": 0,  # ok tracks with any |z| above 5
 }
@@ -234,13 +235,16 @@ def figures(results: pd.DataFrame) -> dict:
 
     Keys: ``ok`` and ``ok_or_position_only`` (shares of all rows); of the ok rows,
     ``median_max_z`` (the median of the largest |z| of range, course and speed: about 1.26
-    where the errors are honest and the three independent), ``<q>_within_1_sd`` and
+    where the errors are Gaussian, honest and the three independent; 0.57 for honest
+    mixtures, whose sd is wider than their core), ``<q>_within_1_sd`` and
     ``<q>_within_2_sd`` for q in range, course, speed (honest: 68.3 and 95.4 %),
     ``within_3_sd`` (all three), ``beyond_5_sd`` (any |z| above 5: a count; its share's
     interval as ``beyond_5_sd_share_ci``); of the position_only rows,
     ``position_only_range_within_2_sd`` and ``position_only_bearing_within_2_sd`` (range and
-    bearing now); each share and the median with ``<key>_ci`` (lo, hi). Also ``rows``,
-    ``pairs``, ``draws``, ``vessels`` (clusters) and ``ok_rows``."""
+    bearing now); the same in units of the answers' own intervals (``iz``: ``median_max_iz``,
+    ``<q>_in_1_sd_interval``, ``<q>_in_2_sd_interval``, ``beyond_5_sd_intervals``); each
+    share and median with ``<key>_ci`` (lo, hi). Also ``rows``, ``pairs``, ``draws``,
+    ``vessels`` (clusters) and ``ok_rows``."""
     status = results.status.to_numpy()
     vessel = results.target_mmsi.to_numpy()
     ok = status == "ok"
@@ -285,9 +289,10 @@ def figures(results: pd.DataFrame) -> dict:
 
 
 def two_sided(f: dict) -> dict:
-    """Each check of ``TWO_SIDED`` on ``figures``' ``f``: name -> whether it holds."""
-    lo, hi = TWO_SIDED["median_max_z"]
-    out = {"median_max_z": lo <= f["median_max_z"] <= hi}
+    """Each check of ``TWO_SIDED`` on ``figures``' ``f``: name -> whether it holds (the
+    median in units of the intervals, the shares and the 5-sd count in units of the sd)."""
+    lo, hi = TWO_SIDED["median_max_iz"]
+    out = {"median_max_iz": lo <= f["median_max_iz"] <= hi}
     out |= {f"{q}_within_2_sd": f[f"{q}_within_2_sd"] >= TWO_SIDED["within_2_sd"]
             for q in QUANTITIES}
     out["beyond_5_sd"] = f["beyond_5_sd"] <= TWO_SIDED["beyond_5_sd"]
@@ -295,13 +300,10 @@ def two_sided(f: dict) -> dict:
 
 
 def two_sided_intervals(f: dict) -> dict:
-    """``TWO_SIDED``'s checks read on the answers' own intervals (``figures``'
-    ``median_max_iz``, ``<q>_in_2_sd_interval``, ``beyond_5_sd_intervals``): name ->
-    whether it holds."""
-    lo, hi = TWO_SIDED["median_max_z"]
-    out = {"median_max_iz": lo <= f["median_max_iz"] <= hi}
-    out |= {f"{q}_in_2_sd_interval": f[f"{q}_in_2_sd_interval"] >= TWO_SIDED["within_2_sd"]
-            for q in QUANTITIES}
+    """``TWO_SIDED``'s one-sided checks read on the answers' own intervals (``figures``'
+    ``<q>_in_2_sd_interval``, ``beyond_5_sd_intervals``): name -> whether it holds."""
+    out = {f"{q}_in_2_sd_interval": f[f"{q}_in_2_sd_interval"] >= TWO_SIDED["within_2_sd"]
+           for q in QUANTITIES}
     out["beyond_5_sd_intervals"] = f["beyond_5_sd_intervals"] <= TWO_SIDED["beyond_5_sd"]
     return out
 

@@ -10,11 +10,12 @@ range, course and speed, none beyond 5 sd, at least half of the steady targets o
 Issue 36, item 5 (``DRAWS`` noise draws per pair, sigma estimated as the README's command
 does): two-sided and per quantity, under the pooled prior and under the prior measured on the
 other recording alone (leave one recording out): the median over ``ok`` tracks of the largest
-|z| of range, course and speed in 1.0-1.6 (honest: 1.26; below, errors wider than the
+|z| of range, course and speed in 1.0-1.6, read in units of the answers' own central intervals
+(the mixture's own, which its heavy tails do not widen at the core: honest answers give 1.02
+on lm's own model, where in units of the sd they give 0.57; below, errors wider than the
 bearings allow), each quantity within 2 sd on at least 90 % of them, none beyond 5 sd; and a
-prior ten times too poor fails them on the side of overconfidence. The same answers' central
-intervals (the mixture's own, which its heavy tails do not widen at the core) hold the truth
-as the sd's checks ask, one-sided, and are sharper."""
+prior ten times too poor fails them on the side of overconfidence. The intervals also hold
+the truth as the sd's one-sided checks ask, and are sharper than the sd."""
 
 import numpy as np
 import pytest
@@ -92,18 +93,20 @@ def _shown(f: dict) -> dict:
 
 
 # Issue 36's two-sided checks do not all hold yet (figures of 2026-11-28, docs/manoeuvres.md):
-# in units of the sd the median largest |z| is 0.35-0.71, where honest mixtures give 0.57 on
-# lm's own model (test_bearings2d_intervals); in units of the answers' own intervals 0.48-1.01
-# (test_lm_states_intervals_that_hold_real_ships_and_are_sharper). Strict: the day they hold,
-# these fail until the marks go.
-TOO_WIDE = "median largest |z| below 1.0: the ok answers' errors are wider than needed"
-KNOWN = {(r, p): TOO_WIDE for r in RECORDINGS for p in ("pooled", "left out")}
+# the median largest |z| in units of the answers' own intervals is 1.01 on the Solent under
+# the prior left out, 0.86 under the pooled one and 0.53 / 0.47 on New York (lm's own model:
+# 1.02): wider than their targets needed. Strict: the day they hold, these fail until the
+# marks go.
+TOO_WIDE = ("median largest |z| in units of the answers' intervals below 1.0: wider than the "
+            "targets needed (the prior's wander and manoeuvres, more than these pairs made)")
+KNOWN = {("solent", "pooled"): TOO_WIDE, ("nyharbor", "pooled"): TOO_WIDE,
+         ("nyharbor", "left out"): TOO_WIDE}
 
 
 @DRAWN
 @pytest.mark.parametrize("recording, prior", [
-    pytest.param(r, p, marks=pytest.mark.xfail(strict=True, raises=AssertionError,
-                                                 reason=KNOWN[r, p]))
+    pytest.param(r, p, marks=[pytest.mark.xfail(strict=True, raises=AssertionError,
+                                                  reason=KNOWN[r, p])] if (r, p) in KNOWN else [])
     for r in RECORDINGS for p in ("pooled", "left out")])
 def test_lm_is_honest_both_ways_on_real_ship_motion(tmp_path_factory, recording, prior):
     """Issue 36, item 5: every check of ``TWO_SIDED`` (the message names those that fail)."""
@@ -123,8 +126,7 @@ def test_lm_states_intervals_that_hold_real_ships_and_are_sharper(tmp_path_facto
     checks; and they are sharper than the sd: the median largest |z| in their units is above
     the sd's (the sd carries the mixture's heavy tails; the intervals its core)."""
     f = _figures(tmp_path_factory, recording, prior)
-    failed = [name for name, held in two_sided_intervals(f).items()
-              if not held and name != "median_max_iz"]
+    failed = [name for name, held in two_sided_intervals(f).items() if not held]
     assert not failed, f"{failed} fail: {_shown(f)}"
     assert f["median_max_iz"] > f["median_max_z"], _shown(f)
 
@@ -134,13 +136,13 @@ def test_lm_states_intervals_that_hold_real_ships_and_are_sharper(tmp_path_facto
 def test_a_prior_ten_times_too_poor_fails_the_checks(tmp_path_factory, recording):
     """The checks see the prior: with ten times less wander and ten times fewer manoeuvres
     than measured, the ``ok`` answers are too sure of themselves and a check says so (a
-    quantity within 2 sd on under 90 %, a track beyond 5 sd, or a median largest |z| above
-    1.6)."""
+    quantity within 2 sd on under 90 %, a track beyond 5 sd, or a median largest |z| in
+    units of the intervals above 1.6)."""
     f = _figures(tmp_path_factory, recording, "pooled x0.1")
     overconfident = [name for name, held in two_sided(f).items()
-                     if not held and name != "median_max_z"]
-    if f["median_max_z"] > TWO_SIDED["median_max_z"][1]:
-        overconfident.append("median_max_z")
+                     if not held and name != "median_max_iz"]
+    if f["median_max_iz"] > TWO_SIDED["median_max_iz"][1]:
+        overconfident.append("median_max_iz")
     assert overconfident, f"no check fails: {_shown(f)}"
 
 

@@ -34,14 +34,15 @@ import pandas as pd
 
 from tma.families.bearings2d.metrics import NEES_95, THETA, errors_now, normalised_error
 from tma.families.bearings2d.status import INTERVAL_COLUMNS
-from tma.maths.angles import wrap_to_180
 from tma.maths.stats import chi2_mean_interval, rate_columns
 
 # quantity: (error column of ``errors_now``, the estimate's stated one-sigma error)
 QUANTITIES = {"range": ("range_err_m", "range_sd_m"),
               "course": ("course_err_deg", "course_sd_deg"),
               "speed": ("speed_err_m_s", "speed_sd_m_s")}
+# quantity: the estimate's column, and the scale its intervals are read on (``interval_z``)
 ESTIMATES = {"range": "range_now_m", "course": "course_deg", "speed": "speed_m_s"}
+SCALES = {"range": "log", "course": "circular", "speed": "linear"}
 WITHIN_TARGETS = {1: (0.60, 0.76), 2: (0.92, 0.98)}  # |z| <= k sd: honest 68.3 %, 95.4 %
 CONSISTENT_TARGET = (0.88, 0.98)  # NEES <= chi-square(4) 95 % point: honest 95 %
 GRADED_MIN_OK = 100  # ok tracks a cell needs to be graded
@@ -62,35 +63,52 @@ COLUMNS = [
 ]
 
 
-def interval_z(estimate, error, lo2, lo1, hi1, hi2, circular=False) -> np.ndarray:
-    """The error ``error`` = estimate - truth in units of the answer's central intervals
-    (``lo1``-``hi1`` holding what 1 sd of a Gaussian holds, ``lo2``-``hi2`` what 2 sd hold):
-    0 at the middle of the 1-sd interval, 1 and -1 at its lower and upper ends (the truth
-    below it: the estimate too high), 2 and -2 at the 2-sd interval's, linear between them
-    and on beyond with the outer pieces' slope. For a Gaussian answer (its estimate +- 1 and
-    2 sd) exactly the error over the sd, so that |z| <= 1 and 2 say whether the truth lies
-    inside each interval. ``circular``: degrees on a circle (course), the ends read
-    clockwise from the lower one and the error wrapped to the nearest turn. NaN where an
-    end is."""
-    est, err = np.asarray(estimate, dtype=float), np.asarray(error, dtype=float)
-    lo2, lo1, hi1, hi2 = (np.asarray(a, dtype=float) for a in (lo2, lo1, hi1, hi2))
-    if circular:  # offsets from the estimate, each end reached clockwise from the last
-        lo1 = wrap_to_180(lo1 - est)
-        hi1 = lo1 + (hi1 - est - lo1) % 360.0
-        lo2 = lo1 - (est + lo1 - lo2) % 360.0
-        hi2 = hi1 + (hi2 - est - hi1) % 360.0
-        truth = -err
-    else:
-        truth = est - err
+def _piecewise_z(truth, lo2, lo1, hi1, hi2):
+    """``interval_z`` on a line: 0 at the middle of lo1-hi1, 1 and -1 at its ends, 2 and -2
+    at lo2 and hi2, linear between them and on beyond with the outer pieces' slope."""
     mid = 0.5 * (lo1 + hi1)
     d = mid - truth  # (as the error: positive where the truth lies below)
-    if circular:
-        d = wrap_to_180(d)
     up1, up2, down1, down2 = hi1 - mid, hi2 - mid, mid - lo1, mid - lo2
     with np.errstate(divide="ignore", invalid="ignore"):
         below = np.where(d <= down1, d / down1, 1.0 + (d - down1) / (down2 - down1))
         above = np.where(-d <= up1, d / up1, -1.0 + (d + up1) / (up2 - up1))
     return np.where(d >= 0, below, above)
+
+
+def interval_z(estimate, error, lo2, lo1, hi1, hi2, scale="linear") -> np.ndarray:
+    """The error ``error`` = estimate - truth in units of the answer's central intervals
+    (``lo1``-``hi1`` holding what 1 sd of a Gaussian holds, ``lo2``-``hi2`` what 2 sd hold):
+    0 at the middle of the 1-sd interval, 1 and -1 at its lower and upper ends (the truth
+    below it: the estimate too high), 2 and -2 at the 2-sd interval's, linear between them
+    and on beyond with the outer pieces' slope; so |z| <= 1 and 2 say whether the truth lies
+    inside each interval. ``scale``: ``linear``; ``log`` (range: read in its logarithm, as
+    its intervals are stated); ``circular`` (course, deg: the ends read clockwise from
+    ``lo2``, a truth outside the 2-sd arc beyond its nearer end; a 2-sd interval of a whole
+    turn, blank, holds every course: a truth outside the 1-sd interval reads -+1.5). For a
+    Gaussian answer (course or speed +- 1 and 2 sd) exactly the error over the sd; for a range
+    r exp(+-k sd / r), log(estimate / truth) over sd / r. NaN where an end is (but a whole
+    turn's)."""
+    est, err = np.asarray(estimate, dtype=float), np.asarray(error, dtype=float)
+    truth = est - err
+    ends = [np.asarray(a, dtype=float) for a in (lo2, lo1, hi1, hi2)]
+    if scale == "log":
+        with np.errstate(divide="ignore", invalid="ignore"):
+            truth, *ends = (np.log(np.where(v > 0, v, np.nan)) for v in (truth, *ends))
+        return _piecewise_z(truth, *ends)
+    if scale != "circular":
+        return _piecewise_z(truth, *ends)
+    lo2, lo1, hi1, hi2 = ends
+    whole = np.isnan(lo2) & np.isnan(hi2) & np.isfinite(lo1) & np.isfinite(hi1)
+    start = np.where(whole, lo1, lo2)  # offsets clockwise from here
+    a = (lo1 - start) % 360.0
+    b = a + (hi1 - lo1) % 360.0
+    c = np.where(whole, 360.0, b + (hi2 - hi1) % 360.0)
+    t = (truth - start) % 360.0
+    # outside the 2-sd arc: beyond its nearer end
+    pos = np.where((t <= c) | (t - c <= 360.0 - t), t, t - 360.0)
+    z = _piecewise_z(pos, np.zeros_like(a), a, b, c)
+    outside_core = (t > b) & whole
+    return np.where(outside_core, np.where(t - b <= 360.0 - t, -1.5, 1.5), z)
 
 
 def track_calibration(estimates: pd.DataFrame, truth: pd.DataFrame) -> pd.DataFrame:
@@ -108,7 +126,7 @@ def track_calibration(estimates: pd.DataFrame, truth: pd.DataFrame) -> pd.DataFr
             out[f"{q}_z"] = errors[err].to_numpy() / estimates[sd].to_numpy(dtype=float)
         ends = INTERVAL_COLUMNS[q]
         out[f"{q}_iz"] = (interval_z(estimates[ESTIMATES[q]], errors[err],
-                                     *(estimates[c] for c in ends), circular=q == "course")
+                                     *(estimates[c] for c in ends), scale=SCALES[q])
                           if all(c in estimates for c in ends) else np.nan)
     merged = estimates.merge(truth[["track_id", *THETA]], on="track_id", how="left",
                              suffixes=("", "_true"))

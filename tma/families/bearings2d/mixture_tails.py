@@ -85,7 +85,6 @@ def tail_scale(weights, means, covs, used, mean, P, s2, u, u_q95):
 # 2 sd, and a mixture's hold what they say however heavy its tails
 INTERVAL_LEVELS = (0.5 * math.erfc(2.0 / math.sqrt(2.0)), 0.5 * math.erfc(1.0 / math.sqrt(2.0)),
                    0.5 * math.erfc(-1.0 / math.sqrt(2.0)), 0.5 * math.erfc(-2.0 / math.sqrt(2.0)))
-QUANTITIES = ("range", "course", "speed")  # (the rows of quantity_intervals' out)
 
 
 @njit(error_model="numpy")
@@ -93,9 +92,12 @@ def _mixture_quantile(w, mu, sd, count, p):
     """The ``p`` quantile of the one-dimensional Gaussian mixture of the first ``count``
     weights ``w`` (summing to 1), means ``mu`` and sds ``sd`` (> 0): Newton's method on its
     distribution function, kept inside a bracket that halves where a step would leave it,
-    to 1e-12 in probability (60 steps at most)."""
+    to 1e-12 in probability (60 steps at most). NaN where a mean or sd is not finite (a
+    quantity the component does not determine: no quantile of the mixture either)."""
     lo, hi = np.inf, -np.inf
     for c in range(count):
+        if not (np.isfinite(mu[c]) and np.isfinite(sd[c])):
+            return np.nan
         lo = min(lo, mu[c] - 9.0 * sd[c])
         hi = max(hi, mu[c] + 9.0 * sd[c])
     x = 0.5 * (lo + hi)
@@ -124,9 +126,11 @@ def quantity_intervals(weights, means, covs, used, s2, now_x, now_y, levels, out
     (m), vx, vy (m/s)): ``weights`` of the first ``used`` components, ``means``, ``covs`` in
     units of ``s2``. Each component's quantities are Gaussian to first order (its mean's
     value and the sd its covariance gives through their gradient, as a single Gaussian's
-    stated sd), so the mixture's are mixtures of those; ``out`` (3, len(levels)): rows
-    range, course, speed. A component with no spread in a quantity counts at 1e-9 of its
-    value's scale."""
+    stated sd; range in its logarithm), so the mixture's are mixtures of those, and one
+    component's are ``status.interval_columns``' closed form; ``out`` (3, len(levels)): rows
+    range, course, speed, speed at least 0. A component with no spread in a quantity counts
+    at 1e-9 of its value's scale; one at the point (range 0) or at rest (speed 0) leaves the
+    quantities its gradient does not reach NaN."""
     total = 0.0
     for c in range(used):
         total += weights[c]
@@ -167,22 +171,5 @@ def quantity_intervals(weights, means, covs, used, s2, now_x, now_y, levels, out
             out[a, j] = _mixture_quantile(w, mu[a], sd[a], k, levels[j])
     for j in range(levels.size):
         out[0, j] = math.exp(out[0, j])
+        out[2, j] = max(out[2, j], 0.0)
 
-
-@njit(error_model="numpy")
-def gaussian_intervals(states, covs, now_x, now_y, levels, out):
-    """``quantity_intervals`` of one Gaussian per track: ``states`` (n, 4: x, y (m), vx, vy
-    (m/s) now), ``covs`` (n, 4, 4, m and m/s), from the points ``now_x``, ``now_y`` (n,);
-    ``out`` (n, 3, len(levels)), NaN where the state or covariance is not finite."""
-    weight = np.ones(1)
-    for i in range(states.shape[0]):
-        finite = True
-        for a in range(4):
-            finite &= np.isfinite(states[i, a])
-            for b in range(4):
-                finite &= np.isfinite(covs[i, a, b])
-        if not finite:
-            out[i] = np.nan
-            continue
-        quantity_intervals(weight, states[i:i + 1], covs[i:i + 1], 1, 1.0, now_x[i], now_y[i],
-                           levels, out[i])

@@ -53,7 +53,6 @@ import math
 
 import numpy as np
 
-from tma.families.bearings2d.mixture_tails import INTERVAL_LEVELS, gaussian_intervals
 from tma.maths.angles import bearing_from_north, course_from_velocity, wrap_to_180
 from tma.maths.linalg import scaled_inverse
 from tma.runtime.jit import njit
@@ -301,7 +300,7 @@ def assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t_now_s,
     speed are on the errors stated (those a reader reads); ``intervals`` (n, 3, 4; None or
     NaN rows: none): a mixture's central intervals of range, course and speed now that hold
     68.3 and 95.4 % (``mixture_tails.quantity_intervals``), stated as they are (a single
-    Gaussian's from its covariance: ``interval_columns``); ``cfg`` holds
+    Gaussian's from its sd: ``interval_columns``); ``cfg`` holds
     ``singular_rcond``, ``fit_alpha``, ``motion_alpha``, ``max_range_rel_sd``,
     ``max_course_sd_deg``, ``max_speed_rel_sd``. Returns output columns."""
     finite = np.isfinite(theta).all(axis=1)
@@ -334,7 +333,7 @@ def assess(theta, jtj, sigma2, fit_p, motion_p, converged, approximate, t_now_s,
         "bearing_now_deg": np.rad2deg(bearing) % 360.0, "bearing_sd_deg": np.rad2deg(sd[:, 1]),
         "course_deg": np.rad2deg(course), "course_sd_deg": np.rad2deg(sd[:, 2]),
         "speed_m_s": speed, "speed_sd_m_s": sd[:, 3],
-        **interval_columns(theta, cov, t_now_s, own_x_now_m, own_y_now_m, sd[:, [0, 2, 3]],
+        **interval_columns(np.column_stack([rng, course, speed]), sd[:, [0, 2, 3]],
                            intervals),
         "sigma_used_deg": np.rad2deg(np.sqrt(sigma2)),
         "fit_p_value": fit_p,
@@ -349,27 +348,25 @@ INTERVAL_COLUMNS = {"range": ("range_lo2_m", "range_lo1_m", "range_hi1_m", "rang
                               "speed_hi2_m_s")}
 
 
-def interval_columns(theta, cov, t_now_s, now_x_m, now_y_m, sd, intervals=None) -> dict:
+def interval_columns(now, sd, intervals=None) -> dict:
     """The central intervals of range (m), course (deg, clockwise from north) and speed
     (m/s) now that hold what 1 and 2 sd of a Gaussian hold (68.3 and 95.4 %):
-    ``INTERVAL_COLUMNS``, lower and upper ends, of the answer ``theta`` (n, 4) with
-    covariance ``cov`` (n, 4, 4) at ``t_now_s`` from the points ``now_x_m``, ``now_y_m``:
-    its course and speed +- 1 and 2 sd, its range r exp(+-k sd / r) (log-normal: a bearings-
-    only range is known in ratio, and is positive), ``mixture_tails.gaussian_intervals``;
-    ``intervals`` (n, 3, 4; rad for course), where finite, a mixture's own instead
-    (``mixture_tails.quantity_intervals``: asymmetric and wider than 2 sd where its tails
-    are heavy). None where the one-sigma error ``sd`` (n, 3: range, course, speed) is none;
-    a course interval of 360 deg or more (any course) is none; course ends in [0, 360)."""
-    n = theta.shape[0]
-    A = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
-    A[:, 0, 2] = A[:, 1, 3] = t_now_s  # the state now = A theta
-    bounds = np.empty((n, 3, len(INTERVAL_LEVELS)))
-    gaussian_intervals(np.einsum("nij,nj->ni", A, theta), A @ cov @ np.swapaxes(A, 1, 2),
-                       np.broadcast_to(np.asarray(now_x_m, float), (n,)).copy(),
-                       np.broadcast_to(np.asarray(now_y_m, float), (n,)).copy(),
-                       np.array(INTERVAL_LEVELS), bounds)
-    if intervals is not None:
-        own = np.isfinite(intervals).all(axis=(1, 2))
+    ``INTERVAL_COLUMNS``, lower and upper ends. Of a single Gaussian answer, whose range,
+    course (rad) and speed now are ``now`` (n, 3) with one-sigma errors ``sd`` (n, 3): its
+    course and speed +- 1 and 2 sd (speed at least 0) and its range r exp(+-k sd / r)
+    (log-normal: a bearings-only range is known in ratio, and is positive); ``intervals``
+    (n, 3, 4; rad for course), where a quantity's are finite, a mixture's own instead
+    (``mixture_tails.quantity_intervals``, whose one component gives the same: asymmetric
+    and wider than 2 sd where its tails are heavy, and the estimate, the mixture's mean, may
+    lie outside them where it is skewed). None where the sd is; a course interval of 360 deg
+    or more (any course) is none; course ends in [0, 360)."""
+    k = np.array([-2.0, -1.0, 1.0, 2.0])
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        bounds = np.stack([now[:, 0, None] * np.exp(k * (sd[:, 0] / now[:, 0])[:, None]),
+                           now[:, 1, None] + k * sd[:, 1, None],
+                           np.maximum(now[:, 2, None] + k * sd[:, 2, None], 0.0)], axis=1)
+    if intervals is not None:  # (per quantity: one a component leaves undetermined, the sd's)
+        own = np.isfinite(intervals).all(axis=2)
         bounds[own] = intervals[own]
     bounds[~np.isfinite(sd)] = np.nan
     course = bounds[:, 1]
