@@ -100,10 +100,11 @@ def test_a_mixtures_intervals_hold_what_they_say(course_deg):
 
 
 def test_one_components_intervals_are_the_closed_form_a_single_answer_states():
-    """``quantity_intervals`` of one component against ``status.interval_columns``' closed
-    form from the sd its gradient gives: course and speed +- 1 and 2 sd (speed at least 0),
-    range r exp(+-k sd / r); a component at rest leaves course and speed NaN (the closed form
-    then stands in), one with a NaN covariance everything."""
+    """``quantity_intervals`` of one component, stated by ``status.interval_columns``,
+    against its closed form from the sd the component's gradient gives: course and speed +-
+    1 and 2 sd, range r exp(+-k sd / r) (both within the plausible targets'); a component at
+    rest leaves course and speed NaN (the closed form then stands in), one with a NaN
+    covariance everything."""
     rng = np.random.default_rng(3)
     for _ in range(40):
         r, bearing = rng.uniform(500.0, 5e4), rng.uniform(-np.pi, np.pi)
@@ -120,13 +121,11 @@ def test_one_components_intervals_are_the_closed_form_a_single_answer_states():
         g_c = np.array([state[3], -state[2]]) / speed**2
         g_s = state[2:] / speed
         sd = np.sqrt([g_r @ cov[:2, :2] @ g_r, g_c @ cov[2:, 2:] @ g_c, g_s @ cov[2:, 2:] @ g_s])
-        columns = interval_columns(np.array([[r, course, speed]]), sd[None])
-        for a, q in enumerate(INTERVAL_COLUMNS):
-            ends = np.array([columns[c][0] for c in INTERVAL_COLUMNS[q]])
-            ours = np.degrees(out[a]) % 360.0 if q == "course" else out[a]
-            if q == "course" and np.isnan(ends).any():  # (a whole turn: none stated)
-                continue
-            np.testing.assert_allclose(ours, ends, rtol=1e-7, atol=1e-6, err_msg=q)
+        closed = interval_columns(np.array([[r, course, speed]]), sd[None])
+        ours = interval_columns(np.array([[r, course, speed]]), sd[None], out[None])
+        for q, names in INTERVAL_COLUMNS.items():
+            for c in names:
+                np.testing.assert_allclose(ours[c], closed[c], rtol=1e-7, atol=1e-6, err_msg=q)
     rest = state.copy()
     rest[2:] = 0.0
     quantity_intervals(np.ones(1), rest[None], cov[None], 1, 1.0, now[0], now[1], LEVELS, out)
@@ -219,3 +218,19 @@ def test_on_its_own_model_the_median_error_reads_as_honest_only_in_the_intervals
     known = np.isfinite(z).all(axis=1)
     by_sd, by_interval = np.median(z[known].max(axis=1)), np.median(iz[known].max(axis=1))
     assert by_sd < 0.75 and 0.95 <= by_interval <= 1.6, (by_sd, by_interval)
+
+
+def test_intervals_stay_within_the_plausible_targets():
+    """An undetermined range (sd near the range itself, an unobservable track's) or speed
+    states no end beyond the ranges and speeds of plausible targets (10 m to 2,000 km, 0 to
+    343 m/s: ``status.not_an_answer``'s): 2347 +- 1807 m once read [1e-6 m, 1.9e9 m]."""
+    from tma.families.bearings2d.status import MAX_RANGE_M, MAX_SPEED_M_S, MIN_RANGE_M
+
+    now = np.array([[2347.0, 0.5, 3.0], [5e4, 0.5, 300.0]])
+    sd = np.array([[1807.0 * 20, 0.1, 5.0], [5e4, 0.1, 40.0]])
+    columns = interval_columns(now, sd)
+    ranges = np.column_stack([columns[c] for c in INTERVAL_COLUMNS["range"]])
+    speeds = np.column_stack([columns[c] for c in INTERVAL_COLUMNS["speed"]])
+    assert ranges.min() == MIN_RANGE_M and ranges.max() == MAX_RANGE_M
+    assert speeds.min() == 0.0 and speeds.max() == MAX_SPEED_M_S
+    assert np.all(np.diff(ranges, axis=1) >= 0) and np.all(np.diff(speeds, axis=1) >= 0)

@@ -353,21 +353,26 @@ def interval_columns(now, sd, intervals=None) -> dict:
     (m/s) now that hold what 1 and 2 sd of a Gaussian hold (68.3 and 95.4 %):
     ``INTERVAL_COLUMNS``, lower and upper ends. Of a single Gaussian answer, whose range,
     course (rad) and speed now are ``now`` (n, 3) with one-sigma errors ``sd`` (n, 3): its
-    course and speed +- 1 and 2 sd (speed at least 0) and its range r exp(+-k sd / r)
+    course and speed +- 1 and 2 sd and its range r exp(+-k sd / r)
     (log-normal: a bearings-only range is known in ratio, and is positive); ``intervals``
     (n, 3, 4; rad for course), where a quantity's are finite, a mixture's own instead
     (``mixture_tails.quantity_intervals``, whose one component gives the same: asymmetric
     and wider than 2 sd where its tails are heavy, and the estimate, the mixture's mean, may
-    lie outside them where it is skewed). None where the sd is; a course interval of 360 deg
-    or more (any course) is none; course ends in [0, 360)."""
+    lie outside them where it is skewed). Range ends within ``MIN_RANGE_M`` and
+    ``MAX_RANGE_M``, speed ends within 0 and ``MAX_SPEED_M_S`` (the plausible targets'). None
+    where the sd is; a course interval of 360 deg or more (any course) is none; course ends
+    in [0, 360)."""
     k = np.array([-2.0, -1.0, 1.0, 2.0])
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         bounds = np.stack([now[:, 0, None] * np.exp(k * (sd[:, 0] / now[:, 0])[:, None]),
                            now[:, 1, None] + k * sd[:, 1, None],
-                           np.maximum(now[:, 2, None] + k * sd[:, 2, None], 0.0)], axis=1)
+                           now[:, 2, None] + k * sd[:, 2, None]], axis=1)
     if intervals is not None:  # (per quantity: one a component leaves undetermined, the sd's)
         own = np.isfinite(intervals).all(axis=2)
         bounds[own] = intervals[own]
+    # within the plausible targets' (an undetermined range's would reach 1e46 m)
+    bounds[:, 0] = np.clip(bounds[:, 0], MIN_RANGE_M, MAX_RANGE_M)
+    bounds[:, 2] = np.clip(bounds[:, 2], 0.0, MAX_SPEED_M_S)
     bounds[~np.isfinite(sd)] = np.nan
     course = bounds[:, 1]
     with np.errstate(invalid="ignore"):
