@@ -250,6 +250,16 @@ def test_the_trial_table_scores_each_contact_and_the_map_shows_its_ship(trial, t
         assert np.allclose(err / table[sd], table[f"{q}_z"], equal_nan=True)
     md = (tmp_path / "tables" / "trial-lm.md").read_text()
     assert "1 of the 1 `ok` ones are covered" in md and "against the AIS of its trial" in md
+    # in units of the answer's own intervals: |z| <= 2 exactly where the truth is inside
+    # [a, b] (the AIS is dense: no truth uncertainty to fold in)
+    for q, unit in (("range", "m"), ("course", "deg"), ("speed", "m_s")):
+        lo, hi, truth = (table[f"{q}_lo2_{unit}"], table[f"{q}_hi2_{unit}"],
+                         table[f"true_{q}_{unit}"])
+        shown = table[f"{q}_iz"].notna()
+        inside = ((truth - lo) % 360 <= (hi - lo) % 360) if q == "course" else (
+            (lo <= truth) & (truth <= hi))
+        assert shown.any() and ((table[f"{q}_iz"].abs() <= 2) == inside)[shown].all(), q
+    assert "z in [a, b] range / course / speed" in md
     manifest = json.loads((tmp_path / "data" / "datasets" / "trial" / "manifest.json")
                           .read_text())
     assert manifest["truth"]["kind"] == "nmea" and manifest["truth"]["with_truth"] == 2
@@ -265,7 +275,8 @@ def test_the_trial_table_scores_each_contact_and_the_map_shows_its_ship(trial, t
     assert np.allclose([f["latitude"] for f in fixes], t2.lat_deg)
     # the Python API returns the same columns
     results = tma.estimate(tma.read_log("trial.csv", truth="trial_ais.nmea"))
-    for column in ("truth_mmsi", "true_range_m", "range_z", "course_z", "speed_z", "nees"):
+    for column in ("truth_mmsi", "true_range_m", "range_z", "course_z", "speed_z", "range_iz",
+                   "course_iz", "nees"):
         assert np.allclose(results[column].astype(float), table[column], equal_nan=True), column
     assert list(results["covered"]) == list(table["covered"])
 

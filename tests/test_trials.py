@@ -391,6 +391,7 @@ def test_a_campaign_pools_each_logs_verdicts_in_one_table(trial, tmp_path, monke
         assert (row.contacts, row.ok, row.covered) == (len(report), len(ok),
                                                        int(ok.covered.sum()))
         assert np.isclose(row.range_z_mean, ok.range_z.mean())
+        assert np.isclose(row.range_in_interval, np.mean(ok.range_iz.abs() <= 2))
         assert np.allclose([row.covered_lo, row.covered_hi], _wilson(row.covered, row.ok))
     proc = run_stage_here("table", "input=logs", *data_paths(tmp_path), *QUIET, check=False)
     assert proc.returncode == 0, proc.stderr

@@ -13,9 +13,11 @@ The campaign table (``campaign_table``), one row per log and one ``pooled``, ove
 contacts with a truth: how many contacts, with a truth, ``ok``; the ``ok`` share; the covered
 share of the ``ok`` ones (their truth within the estimate's 95 % region) with its 95 % Wilson
 interval (honest errors cover 95 %); per quantity (range, course, speed) the mean and the
-standard deviation of the ``ok`` contacts' z-scores (honest errors: 0 and 1) and how many lie
-beyond 3 (course and speed: not of a contact whose truth's velocity is uncertain by about its
-size, sparse AIS: ``truth_report.vague_velocity``, a z-score against it tests nothing); the
+standard deviation of the ``ok`` contacts' z-scores (honest errors: 0 and 1), how many lie
+beyond 3, and the share whose truth lies inside the answer's own 95.4 % interval
+(``<q>_in_interval``: honest answers 95.4 %) (course and speed: not of a contact whose
+truth's velocity is uncertain by about its size, sparse AIS:
+``truth_report.vague_velocity``, a z-score against it tests nothing); the
 gross errors: ``ok`` contacts whose normalised error (NEES) exceeds the
 chi-square(4) 99.9 % point, which honest errors pass once in a thousand. The plot
 (``write_campaign``) sets the pooled z-scores' histograms against the standard normal and
@@ -117,6 +119,10 @@ def _row(name: str, report: pd.DataFrame) -> dict:
         row[f"{q}_z_mean"] = float(z.mean()) if z.size else np.nan
         row[f"{q}_z_sd"] = float(z.std(ddof=1)) if z.size > 1 else np.nan
         row[f"{q}_z_beyond_3"] = int((np.abs(z) > Z_GROSS).sum())
+        # the truth inside the answer's own 95.4 % interval (truth_report's interval z)
+        iz = report.loc[use, f"{q}_iz"].to_numpy(float) if f"{q}_iz" in report else []
+        iz = np.asarray(iz)[np.isfinite(iz)]
+        row[f"{q}_in_interval"] = float(np.mean(np.abs(iz) <= 2.0)) if iz.size else np.nan
     nees = report.loc[ok, "nees"].to_numpy(float) if "nees" in report else np.array([])
     row["gross_errors"] = int((nees > NEES_999).sum())
     return row
@@ -163,7 +169,8 @@ def _markdown(table: pd.DataFrame) -> str:
             f"{m:+.2f} / {s:.2f}" if np.isfinite(s) else f"{m:+.2f} / -")
 
     head = ["log", "contacts", "with truth", "ok", "covered (95 % interval)",
-            *[f"z {q} mean / sd" for q in QUANTITIES], "beyond 3 sd (r / c / s)", "gross errors"]
+            *[f"z {q} mean / sd" for q in QUANTITIES], "beyond 3 sd (r / c / s)",
+            "in [a, b] (r / c / s)", "gross errors"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for _, row in table.iterrows():
         if isinstance(row.get("note"), str) and row["note"]:
@@ -175,10 +182,11 @@ def _markdown(table: pd.DataFrame) -> str:
                    f"({pct(row['covered_lo'])}-{pct(row['covered_hi'])})")
         name = f"**{row['log']}**" if row["log"] == "pooled" else f"`{row['log']}`"
         beyond = " / ".join(str(row[f"{q}_z_beyond_3"]) for q in QUANTITIES)
+        inside = " / ".join(pct(row.get(f"{q}_in_interval", np.nan)) for q in QUANTITIES)
         lines.append("| " + " | ".join([
             name, str(row["contacts"]), str(row["with_truth"]),
             f"{row['ok']} ({pct(row['ok_share'])})", covered,
-            *[z(row, q) for q in QUANTITIES], beyond, str(row["gross_errors"])]) + " |")
+            *[z(row, q) for q in QUANTITIES], beyond, inside, str(row["gross_errors"])]) + " |")
     return "\n".join(lines)
 
 
@@ -196,7 +204,9 @@ def write_campaign(table: pd.DataFrame, contacts: pd.DataFrame, tables_dir, name
              "and velocity (honest errors cover 95 %; the interval is Wilson's); z: (estimate "
              "- truth) / one sigma of the `ok` contacts (honest errors: mean 0, sd 1; |z| > 3 "
              "counted per range / course / speed; course and speed not of a contact whose "
-             "truth's velocity is uncertain by about its size); gross errors: `ok` contacts whose "
+             "truth's velocity is uncertain by about its size); in [a, b]: the share of the "
+             "`ok` contacts whose truth lies inside the answer's own 95.4 % interval (the "
+             "tables' [a, b]; honest answers: 95 %); gross errors: `ok` contacts whose "
              "normalised error exceeds the chi-square(4) 99.9 % point. "
              f"`{name}.png`: the pooled z-scores against the standard normal, and each log's "
              "covered share.\n\n")

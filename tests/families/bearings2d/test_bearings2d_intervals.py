@@ -15,7 +15,12 @@ from scipy.optimize import brentq
 from scipy.stats import norm
 
 import tma
-from tma.families.bearings2d.calibration import WITHIN_TARGETS, interval_z, track_calibration
+from tma.families.bearings2d.calibration import (
+    WITHIN_TARGETS,
+    interval_z,
+    track_calibration,
+    widened_intervals,
+)
 from tma.families.bearings2d.mixture_tails import (
     INTERVAL_LEVELS,
     _mixture_quantile,
@@ -234,3 +239,27 @@ def test_intervals_stay_within_the_plausible_targets():
     assert ranges.min() == MIN_RANGE_M and ranges.max() == MAX_RANGE_M
     assert speeds.min() == 0.0 and speeds.max() == MAX_SPEED_M_S
     assert np.all(np.diff(ranges, axis=1) >= 0) and np.all(np.diff(speeds, axis=1) >= 0)
+
+
+@pytest.mark.parametrize("scale, estimate, sd", [("linear", 6.0, 0.8), ("circular", 355.0, 4.0),
+                                                 ("log", 2e4, 1.5e3)])
+def test_a_truths_own_error_widens_the_intervals_as_it_widens_the_sd(scale, estimate, sd):
+    """A sparse AIS's truth error (sd ``extra``) folded into a single answer's intervals: the
+    interval z is then the error over hypot(sd, extra), as the sd's z is (range: in its
+    logarithm, extra over the range); none added, the intervals unchanged; an arc grown to a
+    whole turn is blank (the 2-sd one alone, or both)."""
+    k = np.array([-2.0, -1.0, 1.0, 2.0])
+    if scale == "log":
+        ends = estimate * np.exp(k * sd / estimate)
+    else:
+        ends = (estimate + k * sd) % 360.0 if scale == "circular" else estimate + k * sd
+    np.testing.assert_allclose(widened_intervals(*ends, 0.0, scale), ends)
+    extra, error = 0.5 * sd, 1.3 * sd
+    z = interval_z(estimate, error, *widened_intervals(*ends, extra, scale), scale=scale)
+    expected = (math.log(estimate / (estimate - error)) / (math.hypot(sd, extra) / estimate)
+                if scale == "log" else error / math.hypot(sd, extra))
+    assert z == pytest.approx(expected, rel=1e-9)
+    if scale == "circular":  # (2 x 2 x 100 deg: the 2-sd arc; 2 x 200: the 1-sd one too)
+        lo2, lo1, hi1, hi2 = widened_intervals(*ends, 100.0, scale)
+        assert np.isnan([lo2, hi2]).all() and np.isfinite([lo1, hi1]).all()
+        assert np.isnan(widened_intervals(*ends, 200.0, scale)).all()

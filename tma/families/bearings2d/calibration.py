@@ -111,6 +111,41 @@ def interval_z(estimate, error, lo2, lo1, hi1, hi2, scale="linear") -> np.ndarra
     return np.where(outside_core, np.where(t - b <= 360.0 - t, -1.5, 1.5), z)
 
 
+def widened_intervals(lo2, lo1, hi1, hi2, extra_sd, scale="linear") -> list:
+    """The intervals (lower and upper ends of the 2- and 1-sd ones) of an answer compared
+    with a truth of its own one-sigma error ``extra_sd`` (a sparse AIS's; 0: exact): each
+    end's distance from the 1-sd interval's middle d_k grown to sqrt(d_k^2 + (k extra)^2),
+    on the ``scale`` ``interval_z`` reads them on (``log``: ``extra_sd`` in metres over the
+    middle's range; ``circular``: degrees, the ends clockwise from ``lo2``). A Gaussian
+    answer's +- k sd become +- k hypot(sd, extra_sd), as its z divides by. Returns
+    [lo2, lo1, hi1, hi2]."""
+    ends = [np.asarray(a, dtype=float) for a in (lo2, lo1, hi1, hi2)]
+    extra = np.asarray(extra_sd, dtype=float)
+    if scale == "circular":
+        lo2, lo1, hi1, hi2 = ends
+        mid = lo1 + ((hi1 - lo1) % 360.0) / 2
+        dist = [(mid - lo2) % 360.0, (mid - lo1) % 360.0, (hi1 - mid) % 360.0,
+                (hi2 - mid) % 360.0]
+        grown = [np.hypot(d, k * extra) for d, k in zip(dist, (2.0, 1.0, 1.0, 2.0),
+                                                        strict=True)]
+        with np.errstate(invalid="ignore"):  # an arc of a whole turn or more: none (blank)
+            whole2 = grown[0] + grown[3] >= 360.0
+            whole1 = grown[1] + grown[2] >= 360.0
+        out = [(mid + s * g) % 360.0 for s, g in zip((-1.0, -1.0, 1.0, 1.0), grown, strict=True)]
+        return [np.where(whole2 | whole1, np.nan, out[0]), np.where(whole1, np.nan, out[1]),
+                np.where(whole1, np.nan, out[2]), np.where(whole2 | whole1, np.nan, out[3])]
+    if scale == "log":
+        with np.errstate(divide="ignore", invalid="ignore"):
+            logs = [np.log(e) for e in ends]
+            mid = 0.5 * (logs[1] + logs[2])
+            extra = extra / np.exp(mid)
+        return [np.exp(mid + np.sign(v - mid) * np.hypot(v - mid, k * extra))
+                for v, k in zip(logs, (2.0, 1.0, 1.0, 2.0), strict=True)]
+    mid = 0.5 * (ends[1] + ends[2])
+    return [mid + np.sign(v - mid) * np.hypot(v - mid, k * extra)
+            for v, k in zip(ends, (2.0, 1.0, 1.0, 2.0), strict=True)]
+
+
 def track_calibration(estimates: pd.DataFrame, truth: pd.DataFrame) -> pd.DataFrame:
     """Per track of ``estimates``: ``status``, ``range_z``, ``course_z``, ``speed_z``
     (estimate - truth at the last bearing over the stated sd), ``range_iz``, ``course_iz``,

@@ -6,7 +6,9 @@ the ship (``truth_mmsi``, ``truth_match``: ``given`` or ``bearings``, ``truth_rm
 well its AIS fits the contact's bearings), its true range, bearing, course and speed and
 position (``true_*``), the errors of the estimate (estimate - truth: ``range_err_m``,
 ``bearing_err_deg``, ``course_err_deg`` wrapped to [-180, 180), ``speed_err_m_s``), their
-z-scores (error / the estimate's one-sigma error: ``range_z``...) and ``covered``: whether the
+z-scores (error / the estimate's one-sigma error: ``range_z``...), the same errors in units of
+the answer's own intervals (``range_iz``, ``course_iz``, ``speed_iz``: ``calibration.interval_z``;
+|z| <= 2: the truth inside the 95.4 % interval) and ``covered``: whether the
 truth lies in the estimate's 95 % region, the normalised error (theta_hat - theta)^T Sigma^-1
 (theta_hat - theta) of theta = (x0, y0, vx, vy) (``nees``) below the chi-square(4) 95 % point:
 the test the simulated tables' ``consistent (ok)`` column counts, so an ``ok`` contact
@@ -18,9 +20,10 @@ fits, ambiguous, an AIS gap: the manifest says why) have these columns blank.
 import numpy as np
 import pandas as pd
 
+from tma.families.bearings2d.calibration import SCALES, interval_z, widened_intervals
 from tma.families.bearings2d.drawn_tracks import theta_covariance
 from tma.families.bearings2d.metrics import NEES_95, THETA, normalised_error
-from tma.families.bearings2d.status import kinematics_now
+from tma.families.bearings2d.status import INTERVAL_COLUMNS, kinematics_now
 from tma.maths.angles import wrap_to_180
 from tma.maths.geo import north_at_local
 from tma.maths.stats import wilson_interval
@@ -30,10 +33,12 @@ QUANTITIES = {"range": ("range_now_m", "range_sd_m", "m"),
               "bearing": ("bearing_now_deg", "bearing_sd_deg", "deg"),
               "course": ("course_deg", "course_sd_deg", "deg"),
               "speed": ("speed_m_s", "speed_sd_m_s", "m_s")}
+INTERVAL_QUANTITIES = ("range", "course", "speed")  # (those with intervals)
 COLUMNS = ["truth_mmsi", "truth_match", "truth_rms_deg", "true_x_m", "true_y_m",
            *[f"true_{q}_{u}" for q, (_, _, u) in QUANTITIES.items()],
            *[f"{q}_err_{u}" for q, (_, _, u) in QUANTITIES.items()],
-           *[f"{q}_z" for q in QUANTITIES], "nees", "covered"]
+           *[f"{q}_z" for q in QUANTITIES], *[f"{q}_iz" for q in INTERVAL_QUANTITIES],
+           "nees", "covered"]
 
 
 def dataset_truth(dataset):
@@ -87,6 +92,11 @@ def with_truth(report: pd.DataFrame, estimates: pd.DataFrame, truth: pd.DataFram
         with np.errstate(divide="ignore", invalid="ignore"):
             out[f"{q}_err_{unit}"] = err
             out[f"{q}_z"] = err / np.hypot(report[sd].to_numpy(float), truth_sd[q])
+        if q in INTERVAL_QUANTITIES:  # the same in units of the answer's own intervals
+            ends = [report[c].to_numpy(float) if c in report else np.full(len(report), np.nan)
+                    for c in INTERVAL_COLUMNS[q]]
+            out[f"{q}_iz"] = interval_z(report[column].to_numpy(float), err, *widened_intervals(
+                *ends, truth_sd[q], SCALES[q]), scale=SCALES[q])
     filled = df.assign(**{f"{c}_true": df[f"{c}_true"].fillna(0.0) for c in THETA})
     nees = np.where(has, normalised_error(filled), np.nan)
     if own:  # where the truth is uncertain: e^T (Sigma + Sigma_truth)^-1 e
@@ -189,7 +199,9 @@ def coverage_text(report: pd.DataFrame) -> str:
     return (f"Against the AIS truth: {c['with_truth']} of {c['contacts']} contacts have a truth; "
             f"{c['covered']} of the {c['ok']} `ok` ones are covered by their errors "
             f"({100 * c['share']:.0f} %, 95 % interval {100 * c['share_lo']:.0f}-"
-            f"{100 * c['share_hi']:.0f} %; honest errors cover 95 %).{own}")
+            f"{100 * c['share_hi']:.0f} %; honest errors cover 95 %). 'z in [a, b]': the "
+            f"error in units of the answer's own intervals, ±1 and ±2 at the ends of its "
+            f"68.3 and 95.4 % ones (|z| <= 2: the truth inside [a, b]).{own}")
 
 
 def shown_columns(report: pd.DataFrame) -> dict:
@@ -210,5 +222,8 @@ def shown_columns(report: pd.DataFrame) -> dict:
         "z range / course / speed": [
             "-" if pd.isna(a) else f"{cell(a, '+.1f')} / {cell(b, '+.1f')} / {cell(c, '+.1f')}"
             for a, b, c in report[["range_z", "course_z", "speed_z"]].to_numpy()],
+        "z in [a, b] range / course / speed": [
+            "-" if pd.isna(a) else f"{cell(a, '+.1f')} / {cell(b, '+.1f')} / {cell(c, '+.1f')}"
+            for a, b, c in report[[f"{q}_iz" for q in INTERVAL_QUANTITIES]].to_numpy()],
         "covered": ["-" if pd.isna(v) else ("yes" if v else "no") for v in report["covered"]],
     }
