@@ -10,9 +10,9 @@ Over the ``ok`` tracks of one estimator on one dataset, in the cell ``all`` and 
   (``WITHIN_TARGETS``);
 - per quantity, the same shares of the truth within the answer's own central intervals
   that hold what 1 and 2 sd of a Gaussian hold (``status.INTERVAL_COLUMNS``: a single
-  Gaussian's are its estimate +- 1 and 2 sd, a mixture's its own quantiles, asymmetric and
-  wider than 2 sd where its tails are heavy), by the interval z of ``interval_z`` (|z| <= 1:
-  inside the 1-sd interval); the same targets;
+  Gaussian's are its estimate +- 1 and 2 sd (range log-normal), a mixture's its own
+  quantiles, asymmetric and mostly narrower than the sd's, which its tails widen), by the
+  interval z of ``interval_z`` (|z| <= 1: inside the 1-sd interval); the same targets;
 - the 4D consistency: the share whose NEES (theta_hat - theta)^T Sigma^-1 (theta_hat - theta)
   lies at or below the chi-square(4) 95 % point (target 88-98 %, ``CONSISTENT_TARGET``), and
   the mean NEES beside the central 95 % interval of the mean of N chi-square(4) draws

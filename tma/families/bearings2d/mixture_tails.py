@@ -81,8 +81,9 @@ def tail_scale(weights, means, covs, used, mean, P, s2, u, u_q95):
 
 
 # The central intervals of the quantities a user reads: the probabilities a Gaussian holds
-# within 1 and 2 sd (68.3 and 95.4 %), so that a Gaussian's are exactly its estimate +- 1 and
-# 2 sd, and a mixture's hold what they say however heavy its tails
+# within 1 and 2 sd (68.3 and 95.4 %), so that a single Gaussian's course and speed are
+# exactly its estimate +- 1 and 2 sd, and a mixture's hold what they say however heavy its
+# tails
 INTERVAL_LEVELS = (0.5 * math.erfc(2.0 / math.sqrt(2.0)), 0.5 * math.erfc(1.0 / math.sqrt(2.0)),
                    0.5 * math.erfc(-1.0 / math.sqrt(2.0)), 0.5 * math.erfc(-2.0 / math.sqrt(2.0)))
 

@@ -356,9 +356,10 @@ def interval_columns(now, sd, intervals=None) -> dict:
     course and speed +- 1 and 2 sd and its range r exp(+-k sd / r)
     (log-normal: a bearings-only range is known in ratio, and is positive); ``intervals``
     (n, 3, 4; rad for course), where a quantity's are finite, a mixture's own instead
-    (``mixture_tails.quantity_intervals``, whose one component gives the same: asymmetric
-    and wider than 2 sd where its tails are heavy, and the estimate, the mixture's mean, may
-    lie outside them where it is skewed). Range ends within ``MIN_RANGE_M`` and
+    (``mixture_tails.quantity_intervals``, whose one component gives the same: asymmetric,
+    reaching farther on the side a manoeuvre could have taken the target, mostly narrower
+    than the sd's, which its tails widen; the estimate, the mixture's mean, may lie outside
+    them where it is skewed). Range ends within ``MIN_RANGE_M`` and
     ``MAX_RANGE_M``, speed ends within 0 and ``MAX_SPEED_M_S`` (the plausible targets'). None
     where the sd is; a course interval of 360 deg or more (any course) is none; course ends
     in [0, 360)."""
