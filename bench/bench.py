@@ -825,6 +825,12 @@ def bench_long_logs(n_tracks: int, sigma_deg: float):
     """Issue 36, item 6: the promise on logs of 30 minutes, 2 hours and 6 hours of targets
     that move as the recorded-log prior says (the issue's scenario)."""
     import tma
+    from tma.families.bearings2d.calibration import (
+        QUANTITIES,
+        _pct,
+        cell_row,
+        track_calibration,
+    )
     from tma.families.bearings2d.metrics import NEES_95
 
     print(f"(n) logs of minutes and hours: {n_tracks} targets per duration from the recorded-"
@@ -864,6 +870,14 @@ def bench_long_logs(n_tracks: int, sigma_deg: float):
                   f"; the answer "
                   f"rests on the last {np.nanmedian(span) / 60:.0f} min (median); "
                   f"{1e3 * cpu / n_tracks:.0f} ms CPU per track")
+            # per quantity, the truth in the ok answers' own intervals and within their sd
+            cal = track_calibration(r.tma.estimates, truth)
+            row = cell_row(cal, np.ones(len(cal), dtype=bool))
+            print(f"                  the {row['n_ok']} ok, in the 1-sd / 2-sd intervals "
+                  "(within 1 / 2 sd): " + "; ".join(
+                      f"{q} " + " / ".join(_pct(row[f"{q}_interval_within_{k}sd"]) for k in (1, 2))
+                      + " (" + " / ".join(_pct(row[f"{q}_within_{k}sd"]) for k in (1, 2)) + ") %"
+                      for q in QUANTITIES))
 
 
 OWN_MODEL_SEED = 7

@@ -31,9 +31,9 @@ from scipy.stats import t as student_t
 
 from tests.families.bearings2d.recorded_geometry import ingest
 from tma.families import build_estimator
-from tma.families.bearings2d.calibration import ESTIMATES, SCALES, interval_z
+from tma.families.bearings2d import calibration
+from tma.families.bearings2d.calibration import WITHIN_TARGETS
 from tma.families.bearings2d.log import read_bearings_log
-from tma.families.bearings2d.status import INTERVAL_COLUMNS
 from tma.io.dataset import Dataset
 from tma.maths.angles import wrap_to_180
 from tma.maths.stats import wilson_interval
@@ -109,7 +109,6 @@ def _estimate_case(workdir: Path, case, estimator: dict, sigma_deg) -> dict:
     zs |= interval_zs(get, {"range": range_err, "course": course_err, "speed": speed_err})
     zs = {k: v if np.isfinite(v) else np.nan for k, v in zs.items()}
     three = [abs(zs[k]) for k in ("z_range", "z_course", "z_speed")]
-    three_iz = [abs(zs[f"iz_{q}"]) for q in ("range", "course", "speed")]
     return {
         "case": case.case, "kind": case.kind, "target_mmsi": int(case.target_mmsi),
         "own_mmsi": int(case.own_mmsi), "status": str(get["status"]),
@@ -119,8 +118,7 @@ def _estimate_case(workdir: Path, case, estimator: dict, sigma_deg) -> dict:
         / get["range_now_m"], "course_error_deg": course_err,
         "course_sd_deg": get["course_sd_deg"], "speed_error_m_s": speed_err,
         "speed_sd_m_s": get["speed_sd_m_s"],
-        "z": np.inf if any(np.isnan(three)) else max(three),
-        "iz": np.inf if any(np.isnan(three_iz)) else max(three_iz), **zs,
+        "z": np.inf if any(np.isnan(three)) else max(three), **zs,
         "leg_start_s": get["leg_start_s"], "motion_p_value": get["motion_p_value"],
     }
 
@@ -128,11 +126,8 @@ def _estimate_case(workdir: Path, case, estimator: dict, sigma_deg) -> dict:
 def interval_zs(get: dict, errors: dict) -> dict:
     """``iz_range``, ``iz_course``, ``iz_speed``: one answer's errors (``errors``: quantity
     -> estimate - truth, deg for course) in units of its own intervals
-    (``calibration.interval_z``; ``get``: the answer's columns by name)."""
-    return {f"iz_{q}": float(interval_z(get[ESTIMATES[q]], errors[q],
-                                        *(get[c] for c in INTERVAL_COLUMNS[q]),
-                                        scale=SCALES[q]))
-            for q in ESTIMATES}
+    (``calibration.interval_zs``; ``get``: the answer's columns by name)."""
+    return {f"iz_{q}": float(iz) for q, iz in calibration.interval_zs(get, errors).items()}
 
 
 def criteria(results: pd.DataFrame) -> dict:
@@ -165,11 +160,15 @@ def holds(figures: dict) -> bool:
 
 
 # issue 36, item 5: two-sided, per quantity, on several noise draws per pair. The median is
-# read in units of the answers' own intervals (calibration.interval_z): in units of the sd,
-# which a mixture's tails widen beyond its core, honest answers give 0.57 (lm on its own
-# model; test_bearings2d_intervals), in units of the intervals 1.02
+# read in units of the answers' own intervals (calibration.interval_z), its band the issue's
+# (1.0-1.6 about the 1.26 of three independent Gaussian |z|) scaled to what honest answers of
+# this kind give: 1.02 on lm's own model (2,000 targets; test_bearings2d_intervals holds its
+# 800 inside the band). In units of the sd, which a mixture's tails widen beyond its core,
+# honest answers give 0.57, below any band about 1.26.
+GAUSSIAN_MEDIAN_MAX_Z, OWN_MODEL_MEDIAN_MAX_IZ = 1.26, 1.02
 TWO_SIDED = {
-    "median_max_iz": (1.0, 1.6),  # median over ok tracks of the largest |z| (honest: 1.0-1.3)
+    "median_max_iz": tuple(round(v * OWN_MODEL_MEDIAN_MAX_IZ / GAUSSIAN_MEDIAN_MAX_Z, 2)
+                           for v in (1.0, 1.6)),  # (0.81, 1.3): median over ok tracks
     "within_2_sd": 0.90,  # each of range, course and speed, of the ok tracks
     "beyond_5_sd": 0,  # ok tracks with any |z| above 5
 }
@@ -248,9 +247,7 @@ def figures(results: pd.DataFrame) -> dict:
     status = results.status.to_numpy()
     vessel = results.target_mmsi.to_numpy()
     ok = status == "ok"
-    z = np.abs(results.loc[ok, [f"z_{q}" for q in QUANTITIES]].to_numpy(dtype=float))
-    z = np.where(np.isnan(z), np.inf, z)  # an ok answer without a finite sd is no honest one
-    worst, ok_vessel = z.max(axis=1, initial=0.0), vessel[ok]
+    ok_vessel = vessel[ok]
     out = {"rows": len(results), "pairs": results.case.nunique(),
            "draws": results.draw.nunique(), "vessels": len(np.unique(vessel)),
            "ok_rows": int(ok.sum())}
@@ -259,14 +256,22 @@ def figures(results: pd.DataFrame) -> dict:
         out[key] = float(np.mean(success)) if len(success) else np.nan
         out[f"{key}_ci"] = wilson_clustered(success, clusters)
 
+    def of_ok(prefix, median_key, within_key):
+        """The ok rows' |z| (columns ``<prefix>_<q>``; an ok answer without a finite one is
+        no honest one) and their largest: the median and the shares within 1 and 2."""
+        z = np.abs(results.loc[ok, [f"{prefix}_{q}" for q in QUANTITIES]].to_numpy(float))
+        z = np.where(np.isnan(z), np.inf, z)
+        worst = z.max(axis=1, initial=0.0)
+        out[median_key] = float(np.median(worst)) if len(worst) else np.nan
+        out[f"{median_key}_ci"] = median_boot(worst, ok_vessel)
+        for k in (1, 2):
+            for j, q in enumerate(QUANTITIES):
+                share(within_key.format(q=q, k=k), z[:, j] <= k, ok_vessel)
+        return worst
+
     share("ok", ok, vessel)
     share("ok_or_position_only", ok | (status == "position_only"), vessel)
-    out["median_max_z"] = float(np.median(worst)) if len(worst) else np.nan
-    out["median_max_z_ci"] = median_boot(worst, ok_vessel)
-    for j, q in enumerate(QUANTITIES):
-        share(f"{q}_within_1_sd", z[:, j] <= 1, ok_vessel)
-    for j, q in enumerate(QUANTITIES):
-        share(f"{q}_within_2_sd", z[:, j] <= 2, ok_vessel)
+    worst = of_ok("z", "median_max_z", "{q}_within_{k}_sd")
     share("within_3_sd", worst <= 3, ok_vessel)
     po = status == "position_only"  # its answer is a position: range and bearing now
     for q in ("range", "bearing"):
@@ -275,16 +280,9 @@ def figures(results: pd.DataFrame) -> dict:
               vessel[po])
     out["beyond_5_sd"] = int((worst > 5).sum())
     out["beyond_5_sd_share_ci"] = wilson_clustered(worst > 5, ok_vessel)
-    # the same in units of the answers' own intervals (interval_z)
-    iz = np.abs(results.loc[ok, [f"iz_{q}" for q in QUANTITIES]].to_numpy(dtype=float))
-    iz = np.where(np.isnan(iz), np.inf, iz)
-    worst_iz = iz.max(axis=1, initial=0.0)
-    out["median_max_iz"] = float(np.median(worst_iz)) if len(worst_iz) else np.nan
-    out["median_max_iz_ci"] = median_boot(worst_iz, ok_vessel)
-    for k in (1, 2):
-        for j, q in enumerate(QUANTITIES):
-            share(f"{q}_in_{k}_sd_interval", iz[:, j] <= k, ok_vessel)
-    out["beyond_5_sd_intervals"] = int((worst_iz > 5).sum())
+    # the same in units of the answers' own intervals (calibration.interval_z)
+    worst = of_ok("iz", "median_max_iz", "{q}_in_{k}_sd_interval")
+    out["beyond_5_sd_intervals"] = int((worst > 5).sum())
     return out
 
 
@@ -300,10 +298,15 @@ def two_sided(f: dict) -> dict:
 
 
 def two_sided_intervals(f: dict) -> dict:
-    """``TWO_SIDED``'s one-sided checks read on the answers' own intervals (``figures``'
-    ``<q>_in_2_sd_interval``, ``beyond_5_sd_intervals``): name -> whether it holds."""
-    out = {f"{q}_in_2_sd_interval": f[f"{q}_in_2_sd_interval"] >= TWO_SIDED["within_2_sd"]
-           for q in QUANTITIES}
+    """``TWO_SIDED``'s per-quantity checks read on the answers' own intervals (``figures``'
+    ``<q>_in_2_sd_interval``, ``beyond_5_sd_intervals``), and two-sided at 1 sd: each
+    quantity's share in its 1-sd interval, with its clustered interval, not wholly outside
+    ``calibration.WITHIN_TARGETS[1]`` (60-76 %): name -> whether it holds."""
+    lo, hi = WITHIN_TARGETS[1]
+    out = {f"{q}_in_1_sd_interval": f[f"{q}_in_1_sd_interval_ci"][1] >= lo
+           and f[f"{q}_in_1_sd_interval_ci"][0] <= hi for q in QUANTITIES}
+    out |= {f"{q}_in_2_sd_interval": f[f"{q}_in_2_sd_interval"] >= TWO_SIDED["within_2_sd"]
+            for q in QUANTITIES}
     out["beyond_5_sd_intervals"] = f["beyond_5_sd_intervals"] <= TWO_SIDED["beyond_5_sd"]
     return out
 

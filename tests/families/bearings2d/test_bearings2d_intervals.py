@@ -3,7 +3,9 @@
 mixture's against Monte Carlo of its exact range, course and speed; a single Gaussian's
 against its one-sigma errors; ``calibration.interval_z`` against its definition; and on
 targets drawn from ``lm``'s own model, the truth inside them at their nominal rates both
-ways, where the one-sigma errors of the same answers are too wide at 1 sd."""
+ways, pooled, where the answer says a manoeuvre is unlikely and within 30 km (not yet where
+it is sure one was made: a strict xfail), where the one-sigma errors of the same answers are
+too wide at 1 sd."""
 
 import math
 
@@ -14,10 +16,15 @@ from hypothesis import strategies as st
 from scipy.optimize import brentq
 from scipy.stats import norm
 
-import tma
+from tests.families.bearings2d.conftest import OWN_MODEL
+from tests.families.bearings2d.real_motion import TWO_SIDED
+from tests.families.bearings2d.test_bearings2d_manoeuvre_model import _mixture_draws
 from tma.families.bearings2d.calibration import (
     WITHIN_TARGETS,
+    cell_row,
+    cells,
     interval_z,
+    outside_targets,
     track_calibration,
     widened_intervals,
 )
@@ -60,16 +67,6 @@ def _quantities(states, now):
         states[:, 2], states[:, 3])
 
 
-def _draws(weights, means, covs, n, seed=0):
-    rng = np.random.default_rng(seed)
-    which = rng.choice(len(weights), size=n, p=weights / weights.sum())
-    out = np.empty((n, 4))
-    for c in range(len(weights)):
-        rows = which == c
-        out[rows] = rng.multivariate_normal(means[c], covs[c], size=rows.sum())
-    return out
-
-
 @pytest.mark.parametrize("course_deg", [60.0, 359.0])
 def test_a_mixtures_intervals_hold_what_they_say(course_deg):
     """A target 20 km away: a core (range known to 3 %, course to 1 deg) and, at 12 %, a
@@ -92,15 +89,18 @@ def test_a_mixtures_intervals_hold_what_they_say(course_deg):
     s2 = 1e-5  # (covariances in units of the noise variance, as the kernel's)
     out = np.empty((3, 4))
     quantity_intervals(weights, means, covs / s2, 2, s2, now[0], now[1], LEVELS, out)
-    draws = _draws(weights, means, covs, 400_000)
+    draws = _mixture_draws(weights, means, covs, 400_000)
     rng_m, course, speed = _quantities(draws, now)
     course0 = math.degrees(math.atan2(*(weights @ means)[2:]))
     course = course0 + (course - course0 + 180.0) % 360.0 - 180.0
-    for a, values in enumerate((rng_m, course, speed)):
+    # (the first-order statement of each component: range and course within 0.5 % of the
+    # 2-sd interval's width, speed, curved most, within 2 %; measured 0.1 and 1.1-1.4 %)
+    for a, (values, tol) in enumerate(((rng_m, 0.005), (course, 0.005), (speed, 0.02))):
         ref = np.quantile(values, LEVELS)
         ours = np.degrees(out[a]) if a == 1 else out[a]
-        np.testing.assert_allclose(ours, ref, atol=0.02 * (ref[3] - ref[0]))
-    # heavy-tailed: the 2-sd interval is wider than twice the 1-sd one on the tail's side
+        np.testing.assert_allclose(ours, ref, atol=tol * (ref[3] - ref[0]))
+    # heavy-tailed: on the tail's side the 2-sd end lies farther beyond the 1-sd end than
+    # the whole 1-sd interval is wide, twice over
     assert out[1, 3] - out[1, 2] > 2.0 * (out[1, 2] - out[1, 1])
 
 
@@ -122,6 +122,7 @@ def test_one_components_intervals_are_the_closed_form_a_single_answer_states():
         out = np.empty((3, 4))
         quantity_intervals(np.ones(1), state[None], cov[None] / 4.0, 1, 4.0, now[0], now[1],
                            LEVELS, out)
+        assert np.isfinite(out).all()  # (else interval_columns would fall back to its own)
         g_r = (state[:2] - now) / r
         g_c = np.array([state[3], -state[2]]) / speed**2
         g_s = state[2:] / speed
@@ -185,50 +186,74 @@ def test_the_interval_z_on_a_circle_and_in_logarithms():
 
 
 @pytest.fixture(scope="module")
-def own_model():
-    """``lm`` on 800 targets drawn from its own model (bursts, 3 manoeuvres an hour)."""
-    ds = tma.simulate("bearings2d", n_tracks=800, sigma_deg=0.5, seed=7, shard_size=800,
-                      target={"manoeuvres": {"rate_per_h": 3.0, "shape": "burst"}})
-    result = tma.estimate(ds)
+def own_model(own_model_runs):
+    """``lm`` on 800 targets drawn from its own model (bursts, 3 manoeuvres an hour): per
+    track ``calibration.track_calibration``."""
+    ds, result = own_model_runs["burst"]
     return track_calibration(result.tma.estimates, ds.truth)
 
 
-def test_on_its_own_model_the_intervals_hold_the_truth_at_their_rates(own_model):
-    """The ok answers' truth inside each quantity's 1-sd interval on 60-76 % and inside its
-    2-sd interval on at least 90 %, where the same answers' +- 1 sd holds it on more than
-    76 % for course and speed (the sd is the heavy-tailed mixture's, wider than its core)."""
-    ok = own_model[own_model.status == "ok"]
-    assert len(ok) >= 350
-    lo, hi = WITHIN_TARGETS[1]
-    for q in ("range", "course", "speed"):
-        known = np.isfinite(ok[f"{q}_z"].to_numpy())  # (a truth and an sd)
-        inside = np.abs(ok[f"{q}_iz"].to_numpy()[known])
-        assert known.sum() >= 350 and np.isfinite(inside).all(), q
-        assert lo <= np.mean(inside <= 1) <= hi, (q, np.mean(inside <= 1))
-        assert np.mean(inside <= 2) >= 0.90, (q, np.mean(inside <= 2))
-    for q in ("course", "speed"):
-        assert np.mean(np.abs(ok[f"{q}_z"]) <= 1) > hi, q
+def _outside(own_model, group, cell):
+    """A cell's figures of the intervals outside their targets (``outside_targets``)."""
+    (mask,) = [m for g, c, m in cells(own_model) if (g, c) == (group, cell)]
+    row = cell_row(own_model, mask)
+    assert row["graded"], (group, cell, row["n_ok"])
+    return row, [o for o in outside_targets(row) if "interval" in o]
 
 
+@OWN_MODEL
+@pytest.mark.parametrize("group, cell", [("all", "all"), ("p_manoeuvre", "<0.5"),
+                                         ("range_km", "<15"), ("range_km", "15-30")])
+def test_on_its_own_model_the_intervals_hold_the_truth_at_their_rates(own_model, group,
+                                                                      cell):
+    """Two-sided, per quantity: the ok answers' truth inside each quantity's 1-sd interval on
+    60-76 % and inside its 2-sd interval on 92-98 %, pooled, where the answer says a
+    manoeuvre is unlikely and where the target is within 30 km (graded cells of at least 100
+    ok answers; the cells by manoeuvres made are not what a posterior promises: those that
+    made none hold more, docs/manoeuvres.md); pooled, the same answers' +- 1 sd holds course
+    and speed on more than 76 % (the sd is the heavy-tailed mixture's, wider than its
+    core)."""
+    row, outside = _outside(own_model, group, cell)
+    assert not outside, outside
+    if group == "all":
+        assert all(row[f"{q}_within_1sd"] > WITHIN_TARGETS[1][1] for q in ("course", "speed"))
+
+
+@OWN_MODEL
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+    "where the answer is sure a manoeuvre was made its intervals are too narrow (the "
+    "components' overconfidence after manoeuvres and the weights of which manoeuvres: "
+    "docs/manoeuvres.md)"))
+def test_on_its_own_model_the_intervals_hold_where_a_manoeuvre_was_surely_made(own_model):
+    """The same where ``p_manoeuvre`` > 0.99 (and beyond 30 km): not yet."""
+    for group, cell in (("p_manoeuvre", ">0.99"), ("range_km", ">30")):
+        _, outside = _outside(own_model, group, cell)
+        assert not outside, outside
+
+
+@OWN_MODEL
 def test_on_its_own_model_the_median_error_reads_as_honest_only_in_the_intervals(own_model):
     """Issue 36, item 5's reading, where the model is right by construction: the median over
-    the ok answers of the largest |z| of range, course and speed lies at the issue's band
-    (1.0-1.6; 1.02 on 2,000 such targets, 0.996 on these 800: held to 0.95) in units of the
-    intervals, and far below it in units of the sd, which a mixture's tails widen beyond its
-    core (so the real pairs' 0.35-0.71 in units of the sd are no proof of a prior too
-    rich)."""
+    the ok answers of the largest |z| of range, course and speed lies in the real-motion
+    checks' band (``real_motion.TWO_SIDED``, the issue's 1.0-1.6 scaled to 1.02, what 2,000
+    such targets give; these 800: 0.996) in units of the intervals, and far below it in
+    units of the sd, which a mixture's tails widen beyond its core (so the real pairs'
+    0.35-0.71 in units of the sd are no proof of a prior too rich)."""
     ok = own_model[own_model.status == "ok"]
     z = np.abs(ok[["range_z", "course_z", "speed_z"]].to_numpy())
     iz = np.abs(ok[["range_iz", "course_iz", "speed_iz"]].to_numpy())
     known = np.isfinite(z).all(axis=1)
+    assert known.sum() >= 350 and np.isfinite(iz[known]).all()
     by_sd, by_interval = np.median(z[known].max(axis=1)), np.median(iz[known].max(axis=1))
-    assert by_sd < 0.75 and 0.95 <= by_interval <= 1.6, (by_sd, by_interval)
+    lo, hi = TWO_SIDED["median_max_iz"]
+    assert by_sd < lo and lo <= by_interval <= hi, (by_sd, by_interval)
 
 
 def test_intervals_stay_within_the_plausible_targets():
-    """An undetermined range (sd near the range itself, an unobservable track's) or speed
-    states no end beyond the ranges and speeds of plausible targets (10 m to 2,000 km, 0 to
-    343 m/s: ``status.not_an_answer``'s): 2347 +- 1807 m once read [1e-6 m, 1.9e9 m]."""
+    """An undetermined range (an unobservable track's: here an sd 15 times the range, and
+    one equal to it) or speed states no end beyond the ranges and speeds of plausible targets
+    (10 m to 2,000 km, 0 to 343 m/s: ``status.not_an_answer``'s): an unobservable track's
+    2347 +- 1807 m once read [1e-6 m, 1.9e9 m]."""
     from tma.families.bearings2d.status import MAX_RANGE_M, MAX_SPEED_M_S, MIN_RANGE_M
 
     now = np.array([[2347.0, 0.5, 3.0], [5e4, 0.5, 300.0]])

@@ -12,17 +12,19 @@ from scipy.stats import chi2
 
 from tma.families.bearings2d import manoeuvres, mixture_tails, ncv
 
+TURN = (270.0 / 390.0, 60.0)  # (of the default 40 bearings 10 s apart: at 270 s)
 
-def _geometry(K=40, dt=10.0, seed=1, turn_at=None, turns=()):
+
+def _geometry(K=40, dt=10.0, seed=1, turns=()):
     """Own-ship on two legs at 10 m/s (turning at a third of the time), a target 4 km away;
-    with ``turn_at`` (s) the target turns 60 deg there, with ``turns`` ((share of the time,
-    deg), ...) by each angle there in turn. Bearings with 0.3 deg noise."""
+    with ``turns`` ((share of the time, deg), ...) the target turns by each angle there in
+    turn (``TURN``: 60 deg at 270 s of 390). Bearings with 0.3 deg noise."""
     rng = np.random.default_rng(seed)
     t = np.arange(K) * dt
     ox = np.where(t < t[-1] / 3, 0.0, 10.0 * (t - t[-1] / 3))
     oy = np.minimum(t, t[-1] / 3) * 10.0
     vx, vy = np.full(K, 3.0), np.full(K, -2.0)
-    turns = [(turn_at, 60.0)] if turn_at is not None else [(f * t[-1], a) for f, a in turns]
+    turns = [(f * t[-1], a) for f, a in turns]
     for at, angle in turns:
         c, s = math.cos(math.radians(angle)), math.sin(math.radians(angle))
         after = t >= at
@@ -138,9 +140,9 @@ def _mixture_and_by_hand(t, ox, oy, z, sigma, theta, prior, q, most):
     return mixed, w, means, covs, np.array(counts), mean, cov
 
 
-@pytest.mark.parametrize("turn_at", [None, 270.0])
-def test_each_component_matches_a_dense_least_squares_solution(turn_at):
-    t, ox, oy, z, sigma, theta = _geometry(turn_at=turn_at)
+@pytest.mark.parametrize("turns", [(), (TURN,)], ids=["steady", "a turn"])
+def test_each_component_matches_a_dense_least_squares_solution(turns):
+    t, ox, oy, z, sigma, theta = _geometry(turns=turns)
     p0 = np.array([(ncv.PRIOR_RANGES * math.hypot(theta[0] - ox[0], theta[1] - oy[0])) ** 2,
                    ncv.PRIOR_SPEED_M_S**2])
     patterns = [_levels(t, 1e-4), _levels(t, 1e-4, tau=250.0, q_burst=0.1, duration=60.0)]
@@ -156,7 +158,7 @@ def test_each_component_matches_a_dense_least_squares_solution(turn_at):
     # the likelihoods agree up to one constant (sigma's and the prior's), so do their
     # differences: the components' weights to 1 %
     assert ours[1] - ours[0] == pytest.approx(ref[1] - ref[0], abs=0.01)
-    if turn_at is not None:  # a turn there: the burst component explains the bearings far better
+    if turns:  # a turn there: the burst component explains the bearings far better
         assert ours[1] - ours[0] > 5
 
 
@@ -178,7 +180,7 @@ def test_the_mixture_averages_its_components_by_prior_and_likelihood():
     exp(-lambda cell), else one of the equally likely durations); at a low rate the
     configurations of two or more manoeuvres the mixture also weighs carry a few per cent,
     within the tolerance."""
-    t, ox, oy, z, sigma, theta = _geometry(turn_at=270.0)
+    t, ox, oy, z, sigma, theta = _geometry(turns=(TURN,))
     prior = manoeuvres.ManoeuvrePrior(0.5, 2.0, (30.0, 120.0), step_s=100.0)
     mixed, w, means, covs, _, mean, cov = _mixture_and_by_hand(t, ox, oy, z, sigma, theta,
                                                                 prior, 1e-4, 1)

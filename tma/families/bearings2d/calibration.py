@@ -146,6 +146,26 @@ def widened_intervals(lo2, lo1, hi1, hi2, extra_sd, scale="linear") -> list:
             for v, k in zip(ends, (2.0, 1.0, 1.0, 2.0), strict=True)]
 
 
+def interval_zs(answers, errors, truth_sd=None) -> dict:
+    """Per quantity (range, course, speed) the errors ``errors`` (quantity -> estimate -
+    truth; deg for course) of ``answers`` (a DataFrame, or a dict of one answer's columns)
+    in units of their own intervals (``interval_z``, each on its ``SCALES``); with
+    ``truth_sd`` (quantity -> the truth's own one-sigma error), the intervals widened by it
+    (``widened_intervals``). NaN where the answers state no intervals."""
+    out = {}
+    for q, scale in SCALES.items():
+        names = INTERVAL_COLUMNS[q]
+        if not all(c in answers for c in names):
+            out[q] = np.full(np.shape(errors[q]), np.nan)
+            continue
+        ends = [np.asarray(answers[c], dtype=float) for c in names]
+        if truth_sd is not None:
+            ends = widened_intervals(*ends, truth_sd[q], scale)
+        out[q] = interval_z(np.asarray(answers[ESTIMATES[q]], dtype=float), errors[q], *ends,
+                            scale=scale)
+    return out
+
+
 def track_calibration(estimates: pd.DataFrame, truth: pd.DataFrame) -> pd.DataFrame:
     """Per track of ``estimates``: ``status``, ``range_z``, ``course_z``, ``speed_z``
     (estimate - truth at the last bearing over the stated sd), ``range_iz``, ``course_iz``,
@@ -159,10 +179,10 @@ def track_calibration(estimates: pd.DataFrame, truth: pd.DataFrame) -> pd.DataFr
     for q, (err, sd) in QUANTITIES.items():
         with np.errstate(divide="ignore", invalid="ignore"):
             out[f"{q}_z"] = errors[err].to_numpy() / estimates[sd].to_numpy(dtype=float)
-        ends = INTERVAL_COLUMNS[q]
-        out[f"{q}_iz"] = (interval_z(estimates[ESTIMATES[q]], errors[err],
-                                     *(estimates[c] for c in ends), scale=SCALES[q])
-                          if all(c in estimates for c in ends) else np.nan)
+    in_intervals = interval_zs(estimates, {q: errors[err].to_numpy()
+                                           for q, (err, _) in QUANTITIES.items()})
+    for q, iz in in_intervals.items():
+        out[f"{q}_iz"] = iz
     merged = estimates.merge(truth[["track_id", *THETA]], on="track_id", how="left",
                              suffixes=("", "_true"))
     out["nees"] = normalised_error(merged)

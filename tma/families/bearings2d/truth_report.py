@@ -20,10 +20,10 @@ fits, ambiguous, an AIS gap: the manifest says why) have these columns blank.
 import numpy as np
 import pandas as pd
 
-from tma.families.bearings2d.calibration import SCALES, interval_z, widened_intervals
+from tma.families.bearings2d.calibration import SCALES, interval_zs
 from tma.families.bearings2d.drawn_tracks import theta_covariance
 from tma.families.bearings2d.metrics import NEES_95, THETA, normalised_error
-from tma.families.bearings2d.status import INTERVAL_COLUMNS, kinematics_now
+from tma.families.bearings2d.status import kinematics_now
 from tma.maths.angles import wrap_to_180
 from tma.maths.geo import north_at_local
 from tma.maths.stats import wilson_interval
@@ -33,7 +33,7 @@ QUANTITIES = {"range": ("range_now_m", "range_sd_m", "m"),
               "bearing": ("bearing_now_deg", "bearing_sd_deg", "deg"),
               "course": ("course_deg", "course_sd_deg", "deg"),
               "speed": ("speed_m_s", "speed_sd_m_s", "m_s")}
-INTERVAL_QUANTITIES = ("range", "course", "speed")  # (those with intervals)
+INTERVAL_QUANTITIES = tuple(SCALES)  # (those an answer states intervals of)
 COLUMNS = ["truth_mmsi", "truth_match", "truth_rms_deg", "true_x_m", "true_y_m",
            *[f"true_{q}_{u}" for q, (_, _, u) in QUANTITIES.items()],
            *[f"{q}_err_{u}" for q, (_, _, u) in QUANTITIES.items()],
@@ -92,11 +92,10 @@ def with_truth(report: pd.DataFrame, estimates: pd.DataFrame, truth: pd.DataFram
         with np.errstate(divide="ignore", invalid="ignore"):
             out[f"{q}_err_{unit}"] = err
             out[f"{q}_z"] = err / np.hypot(report[sd].to_numpy(float), truth_sd[q])
-        if q in INTERVAL_QUANTITIES:  # the same in units of the answer's own intervals
-            ends = [report[c].to_numpy(float) if c in report else np.full(len(report), np.nan)
-                    for c in INTERVAL_COLUMNS[q]]
-            out[f"{q}_iz"] = interval_z(report[column].to_numpy(float), err, *widened_intervals(
-                *ends, truth_sd[q], SCALES[q]), scale=SCALES[q])
+    # the same errors in units of the answer's own intervals, the truth's sd folded in
+    errors = {q: out[f"{q}_err_{QUANTITIES[q][2]}"].to_numpy(float) for q in INTERVAL_QUANTITIES}
+    for q, iz in interval_zs(report, errors, truth_sd).items():
+        out[f"{q}_iz"] = iz
     filled = df.assign(**{f"{c}_true": df[f"{c}_true"].fillna(0.0) for c in THETA})
     nees = np.where(has, normalised_error(filled), np.nan)
     if own:  # where the truth is uncertain: e^T (Sigma + Sigma_truth)^-1 e
