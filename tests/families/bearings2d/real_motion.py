@@ -225,6 +225,9 @@ def median_boot(values, cluster, boot: int = BOOT, seed: int = BOOT_SEED
     return float(lo), float(hi)
 
 
+KINDS = ("steady", "manoeuvring")  # build_cases' kinds of pair: the target held course or not
+
+
 def figures(results: pd.DataFrame) -> dict:
     """Issue 36's figures (item 5; item 4's share answered) of ``run_cases``' rows (one
     recording, any number of draws), each with a 95 % interval clustered by target vessel
@@ -243,7 +246,9 @@ def figures(results: pd.DataFrame) -> dict:
     bearing now); the same in units of the answers' own intervals (``iz``: ``median_max_iz``,
     ``<q>_in_1_sd_interval``, ``<q>_in_2_sd_interval``, ``beyond_5_sd_intervals``); each
     share and median with ``<key>_ci`` (lo, hi). Also ``rows``, ``pairs``, ``draws``,
-    ``vessels`` (clusters) and ``ok_rows``."""
+    ``vessels`` (clusters) and ``ok_rows``; and per kind of target (``KINDS``: suffix
+    ``_<kind>``) the ok rows and their vessels, the median largest |z| in the intervals and
+    each quantity's shares in its 1-sd and 2-sd interval (with ``_ci``)."""
     status = results.status.to_numpy()
     vessel = results.target_mmsi.to_numpy()
     ok = status == "ok"
@@ -283,6 +288,20 @@ def figures(results: pd.DataFrame) -> dict:
     # the same in units of the answers' own intervals (calibration.interval_z)
     worst = of_ok("iz", "median_max_iz", "{q}_in_{k}_sd_interval")
     out["beyond_5_sd_intervals"] = int((worst > 5).sum())
+    # by what the target did (the pooled figures mix steady targets, whose answers the
+    # manoeuvres they might have made widen, with turning ones, whose answers they narrow)
+    iz = np.abs(results.loc[ok, [f"iz_{q}" for q in QUANTITIES]].to_numpy(float))
+    iz = np.where(np.isnan(iz), np.inf, iz)
+    kinds = results.kind.to_numpy()[ok]
+    for kind in KINDS:
+        mine = kinds == kind
+        out[f"ok_rows_{kind}"] = int(mine.sum())
+        out[f"median_max_iz_{kind}"] = (float(np.median(worst[mine])) if mine.any()
+                                        else np.nan)
+        out[f"vessels_{kind}"] = len(np.unique(ok_vessel[mine]))
+        for k in (1, 2):
+            for j, q in enumerate(QUANTITIES):
+                share(f"{q}_in_{k}_sd_interval_{kind}", iz[mine, j] <= k, ok_vessel[mine])
     return out
 
 
@@ -384,6 +403,12 @@ def describe(f: dict) -> list[str]:
         f"({ilo:.2f}-{ihi:.2f}); beyond 5 {f['beyond_5_sd_intervals']}",
         *(f"  {q:6} in the 1-sd interval {pc(f'{q}_in_1_sd_interval'):19} in the 2-sd "
           f"{pc(f'{q}_in_2_sd_interval')}" for q in QUANTITIES),
+        *(f"{kind} targets' ok ({f[f'ok_rows_{kind}']}, {f[f'vessels_{kind}']} vessels): median "
+          f"largest |z| in the intervals {f[f'median_max_iz_{kind}']:.2f}; in the 1-sd / 2-sd "
+          "interval " + ", ".join(
+              f"{q} {f[f'{q}_in_1_sd_interval_{kind}']:.0%} / "
+              f"{pc(f'{q}_in_2_sd_interval_{kind}')}" for q in QUANTITIES)
+          for kind in KINDS),
         f"position_only: range within 2 sd {pc('position_only_range_within_2_sd')}, bearing "
         f"{pc('position_only_bearing_within_2_sd')}",
         "checks: " + ("all hold" if not failed else "FAIL " + ", ".join(failed)),

@@ -22,6 +22,8 @@ import numpy as np
 import pytest
 
 from tests.families.bearings2d.real_motion import (
+    KINDS,
+    QUANTITIES,
     TWO_SIDED,
     criteria,
     figures,
@@ -144,6 +146,41 @@ def test_a_prior_ten_times_too_poor_fails_the_checks(tmp_path_factory, recording
     if f["median_max_iz"] > TWO_SIDED["median_max_iz"][1]:
         overconfident.append("median_max_iz")
     assert overconfident, f"no check fails: {_shown(f)}"
+
+
+# New York's turning targets' ok answers put them too near (docs/manoeuvres.md, "By what the
+# target did"): range in the 2-sd interval on 65 and 76 %. Strict: the day it holds, these
+# fail until the marks go.
+TOO_NEAR = ("New York's turning targets' ok answers too near: range in the 2-sd interval "
+            "under 90 %")
+KIND_KNOWN = {("nyharbor", "pooled"): TOO_NEAR, ("nyharbor", "left out"): TOO_NEAR}
+
+
+@DRAWN
+@pytest.mark.parametrize("recording, prior", [
+    pytest.param(r, p, marks=[pytest.mark.xfail(strict=True, raises=AssertionError,
+                                                  reason=KIND_KNOWN[r, p])]
+                 if (r, p) in KIND_KNOWN else [])
+    for r in RECORDINGS for p in ("pooled", "left out")])
+def test_the_answers_hold_steady_and_turning_targets_alike(tmp_path_factory, recording,
+                                                           prior):
+    """The pooled figures split by what the target did (``real_motion.KINDS``): the kinds'
+    ok answers add up to the pooled ones and their shares average to the pooled shares;
+    each kind's 2-sd intervals hold the truth on at least 90 % per quantity (the pooled
+    check, per kind: a turning target's answer narrow where a steady one's is wide would
+    pass it pooled)."""
+    f = _figures(tmp_path_factory, recording, prior)
+    rows = {kind: f[f"ok_rows_{kind}"] for kind in KINDS}
+    assert sum(rows.values()) == f["ok_rows"]
+    for q in QUANTITIES:
+        for k in (1, 2):
+            pooled = sum(rows[kind] * f[f"{q}_in_{k}_sd_interval_{kind}"] for kind in KINDS
+                         if rows[kind]) / f["ok_rows"]
+            assert pooled == pytest.approx(f[f"{q}_in_{k}_sd_interval"], abs=1e-12)
+    failed = [f"{q}, {kind}: {f[f'{q}_in_2_sd_interval_{kind}']:.0%} of {rows[kind]}"
+              for kind in KINDS for q in QUANTITIES if rows[kind]
+              and f[f"{q}_in_2_sd_interval_{kind}"] < TWO_SIDED["within_2_sd"]]
+    assert not failed, failed
 
 
 def test_the_clustered_intervals_cover():
