@@ -288,8 +288,8 @@ def figures(results: pd.DataFrame) -> dict:
     # the same in units of the answers' own intervals (calibration.interval_z)
     worst = of_ok("iz", "median_max_iz", "{q}_in_{k}_sd_interval")
     out["beyond_5_sd_intervals"] = int((worst > 5).sum())
-    # by what the target did (the pooled figures mix steady targets, whose answers the
-    # manoeuvres they might have made widen, with turning ones, whose answers they narrow)
+    # by what the target did: the pooled figures mix the steady targets' answers, which the
+    # manoeuvres they might have made widen, with the turning targets', which may be narrow
     iz = np.abs(results.loc[ok, [f"iz_{q}" for q in QUANTITIES]].to_numpy(float))
     iz = np.where(np.isnan(iz), np.inf, iz)
     kinds = results.kind.to_numpy()[ok]
