@@ -104,11 +104,17 @@ TOO_WIDE = ("median largest |z| in units of the answers' intervals below the ban
 KNOWN = {("nyharbor", "pooled"): TOO_WIDE, ("nyharbor", "left out"): TOO_WIDE}
 
 
+def _pairs(known: dict) -> list:
+    """Every recording under the pooled and the left-out prior, those of ``known`` ((recording,
+    prior) -> why) marked as failing, strictly."""
+    return [pytest.param(r, p, marks=[pytest.mark.xfail(strict=True, raises=AssertionError,
+                                                        reason=known[r, p])]
+                         if (r, p) in known else [])
+            for r in RECORDINGS for p in ("pooled", "left out")]
+
+
 @DRAWN
-@pytest.mark.parametrize("recording, prior", [
-    pytest.param(r, p, marks=[pytest.mark.xfail(strict=True, raises=AssertionError,
-                                                  reason=KNOWN[r, p])] if (r, p) in KNOWN else [])
-    for r in RECORDINGS for p in ("pooled", "left out")])
+@pytest.mark.parametrize("recording, prior", _pairs(KNOWN))
 def test_lm_is_honest_both_ways_on_real_ship_motion(tmp_path_factory, recording, prior):
     """Issue 36, item 5: every check of ``TWO_SIDED`` (the message names those that fail)."""
     f = _figures(tmp_path_factory, recording, prior)
@@ -157,11 +163,7 @@ KIND_KNOWN = {("nyharbor", "pooled"): TOO_NEAR, ("nyharbor", "left out"): TOO_NE
 
 
 @DRAWN
-@pytest.mark.parametrize("recording, prior", [
-    pytest.param(r, p, marks=[pytest.mark.xfail(strict=True, raises=AssertionError,
-                                                  reason=KIND_KNOWN[r, p])]
-                 if (r, p) in KIND_KNOWN else [])
-    for r in RECORDINGS for p in ("pooled", "left out")])
+@pytest.mark.parametrize("recording, prior", _pairs(KIND_KNOWN))
 def test_the_answers_hold_steady_and_turning_targets_alike(tmp_path_factory, recording,
                                                            prior):
     """The pooled figures split by what the target did (``real_motion.KINDS``): the kinds'
