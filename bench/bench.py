@@ -833,12 +833,7 @@ def bench_long_logs(n_tracks: int, sigma_deg: float):
     """Issue 36, item 6: the promise on logs of 30 minutes, 2 hours and 6 hours of targets
     that move as the recorded-log prior says (the issue's scenario)."""
     import tma
-    from tma.families.bearings2d.calibration import (
-        QUANTITIES,
-        _pct,
-        cell_row,
-        track_calibration,
-    )
+    from tma.families.bearings2d.calibration import cell_row, shares_text, track_calibration
     from tma.families.bearings2d.metrics import NEES_95
 
     print(f"(n) logs of minutes and hours: {n_tracks} targets per duration from the recorded-"
@@ -882,13 +877,15 @@ def bench_long_logs(n_tracks: int, sigma_deg: float):
             cal = track_calibration(r.tma.estimates, truth)
             row = cell_row(cal, np.ones(len(cal), dtype=bool))
             print(f"                  the {row['n_ok']} ok, in the 1-sd / 2-sd intervals "
-                  "(within 1 / 2 sd): " + "; ".join(
-                      f"{q} " + " / ".join(_pct(row[f"{q}_interval_within_{k}sd"]) for k in (1, 2))
-                      + " (" + " / ".join(_pct(row[f"{q}_within_{k}sd"]) for k in (1, 2)) + ") %"
-                      for q in QUANTITIES))
+                  f"(within 1 / 2 sd): {shares_text(row)}")
 
 
 OWN_MODEL_SEED = 7
+OWN_MODEL_CASES = {  # (o): label -> the simulated targets' manoeuvres
+    "turn 3/h": {"rate_per_h": 3.0, "shape": "turn"},
+    "burst 3/h": {"rate_per_h": 3.0, "shape": "burst"},  # (and the true manoeuvres' component)
+    "burst 10/h": {**RECORDED_RATE_BURSTS, "shape": "burst"},
+}
 
 
 @quiet
@@ -897,37 +894,33 @@ def bench_own_model(n_tracks: int, sigma_deg: float):
     of the same declared prior, and the component of the true manoeuvres (module
     docstring, (o))."""
     import tma
-    from tma.families.bearings2d.calibration import cells, track_calibration
+    from tma.families.bearings2d.calibration import (
+        cell_row,
+        cells,
+        shares_text,
+        track_calibration,
+    )
     from tma.families.bearings2d.known_manoeuvres import true_manoeuvres_nees
     from tma.families.bearings2d.metrics import NEES_95
 
-    own = None
-
     print(f"(o) the estimators' own model: {n_tracks} targets, 3 manoeuvres/h declared, "
           f"{sigma_deg} deg, seed {OWN_MODEL_SEED}, lm with the declared prior; and bursts at "
-          "a recording's rate (10/h, velocity changes about its 4.6 m/s per axis)")
-    for shape, manoeuvres in (("turn", {"rate_per_h": 3.0}), ("burst", {"rate_per_h": 3.0}),
-                              ("burst", RECORDED_RATE_BURSTS)):
+          "a recording's rate (10/h, velocity changes about its 4.6 m/s per axis); per cell "
+          "the ok answers' shares in their 1-sd / 2-sd intervals (within 1 / 2 sd)")
+    runs = {}
+    for label, manoeuvres in OWN_MODEL_CASES.items():
         ds = tma.simulate("bearings2d", n_tracks=n_tracks, sigma_deg=sigma_deg,
                           seed=OWN_MODEL_SEED, shard_size=n_tracks,
-                          target={"manoeuvres": {**manoeuvres, "shape": shape}})
-        if shape == "burst" and manoeuvres["rate_per_h"] == 3.0:
-            own = ds  # the true manoeuvres' component below: on these
-        r = tma.estimate(ds)
-        estimates = r.attrs["tma"].tables["estimates"]
+                          target={"manoeuvres": manoeuvres})
+        estimates = tma.estimate(ds).attrs["tma"].tables["estimates"]
         tracks = track_calibration(estimates, ds.truth)
         ok = tracks.status.to_numpy() == "ok"
         nees = tracks.nees.to_numpy()
-        if own is ds:
-            own_ok, own_made = ok, tracks.n_manoeuvres.to_numpy()
-        print(f"    {shape:5s} {manoeuvres['rate_per_h']:g}/h: ok {ok.sum()} of {ok.size}; "
-              f"consistent "
+        runs[label] = ds, ok, tracks.n_manoeuvres.to_numpy()
+        row = cell_row(tracks, np.ones(len(tracks), dtype=bool))
+        print(f"    {label}: ok {ok.sum()} of {ok.size}; consistent "
               f"{_share(int((nees[ok] <= NEES_95).sum()), int(ok.sum()))}; ghosts (NEES > "
-              f"{GHOST_NEES:g}) {int((nees[ok] > GHOST_NEES).sum())}; within 1 / 2 sd "
-              + ", ".join(f"{q} {100 * np.mean(np.abs(z) <= 1):.1f} / "
-                          f"{100 * np.mean(np.abs(z) <= 2):.1f} %"
-                          for q in ("range", "course", "speed")
-                          for z in [tracks[f"{q}_z"].to_numpy()[ok]]))
+              f"{GHOST_NEES:g}) {int((nees[ok] > GHOST_NEES).sum())}; {shares_text(row)}")
         # the search's count against the truth's: equal on average for an exact posterior
         # (also within the cell of p_manoeuvre > 0.99, a function of the bearings alone)
         p = estimates.p_manoeuvre.to_numpy(dtype=float)
@@ -942,12 +935,12 @@ def bench_own_model(n_tracks: int, sigma_deg: float):
               f"{weighed[sure].mean():.3f} for {made[sure].mean():.3f}")
         for group, cell, mask in cells(tracks):
             if group in ("range_km", "manoeuvres", "p_manoeuvre"):
-                m = mask & ok
-                print(f"        {group} {cell}: ok {m.sum()}, consistent "
-                      f"{100 * np.mean(nees[m] <= NEES_95):.1f} %" if m.any() else
-                      f"        {group} {cell}: no ok")
-    # the true manoeuvres' component on the bursts' ok tracks (3/h)
-    ok, made = own_ok, own_made
+                row = cell_row(tracks, mask)
+                print(f"        {group} {cell}: ok {row['n_ok']}, consistent "
+                      f"{100 * row['consistent']:.1f} %; {shares_text(row)}" if row["n_ok"]
+                      else f"        {group} {cell}: no ok")
+    # the true manoeuvres' component on the 3/h bursts' ok tracks
+    own, ok, made = runs["burst 3/h"]
     true_nees = np.full((n_tracks, 2), np.nan)
     true_nees[ok] = true_manoeuvres_nees(own, np.flatnonzero(ok))
     for j, label in enumerate(("the true manoeuvres' component",
@@ -959,6 +952,7 @@ def bench_own_model(n_tracks: int, sigma_deg: float):
               + ", ".join(f"{k}: {100 * np.mean(nees[ok & sel] <= NEES_95):.1f} %"
                           for k, sel in (("0", made == 0), ("1", made == 1), ("2", made == 2),
                                          ("3+", made >= 3)) if (ok & sel).any()))
+
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -260,6 +260,15 @@ def cell_row(tracks: pd.DataFrame, mask) -> dict:
     return row
 
 
+def shares_text(row: dict) -> str:
+    """A cell ``row``'s (``cell_row``) shares per quantity as text: in the answers' 1-sd / 2-sd
+    intervals, and in brackets within 1 / 2 sd, in %."""
+    return "; ".join(
+        f"{q} " + " / ".join(_pct(row[f"{q}_interval_within_{k}sd"]) for k in (1, 2))
+        + " (" + " / ".join(_pct(row[f"{q}_within_{k}sd"]) for k in (1, 2)) + ") %"
+        for q in QUANTITIES)
+
+
 def outside_targets(row: dict) -> list[str]:
     """The figures of a graded cell ``row`` (``cell_row``) outside their targets, e.g.
     ``"consistent 67.1 % < 88 %"``: the shares within 1 and 2 sd per quantity and the 4D
