@@ -392,6 +392,9 @@ def test_a_campaign_pools_each_logs_verdicts_in_one_table(trial, tmp_path, monke
                                                        int(ok.covered.sum()))
         assert np.isclose(row.range_z_mean, ok.range_z.mean())
         assert np.isclose(row.range_in_interval, np.mean(ok.range_iz.abs() <= 2))
+        inside = int((ok.range_iz.abs() <= 2).sum())
+        assert np.allclose([row.range_in_interval_lo, row.range_in_interval_hi],
+                           _wilson(inside, int(ok.range_iz.notna().sum())))
         assert np.allclose([row.covered_lo, row.covered_hi], _wilson(row.covered, row.ok))
     proc = run_stage_here("table", "input=logs", *data_paths(tmp_path), *QUIET, check=False)
     assert proc.returncode == 0, proc.stderr

@@ -15,7 +15,8 @@ share of the ``ok`` ones (their truth within the estimate's 95 % region) with it
 interval (honest errors cover 95 %); per quantity (range, course, speed) the mean and the
 standard deviation of the ``ok`` contacts' z-scores (honest errors: 0 and 1), how many lie
 beyond 3, and the share whose truth lies inside the answer's own 95.4 % interval
-(``<q>_in_interval``: honest answers 95.4 %) (course and speed: not of a contact whose
+(``<q>_in_interval``, with its Wilson interval ``_lo``, ``_hi``: honest answers 95.4 %)
+(course and speed: not of a contact whose
 truth's velocity is uncertain by about its size, sparse AIS:
 ``truth_report.vague_velocity``, a z-score against it tests nothing); the
 gross errors: ``ok`` contacts whose normalised error (NEES) exceeds the
@@ -109,6 +110,7 @@ def _row(name: str, report: pd.DataFrame) -> dict:
     row = {"log": name, "contacts": len(report), "with_truth": int(has.sum()),
            "ok": n, "ok_share": _share(n, int(has.sum())), "covered": k,
            "covered_share": _share(k, n), "covered_lo": float(lo), "covered_hi": float(hi)}
+    from tma.families.bearings2d.calibration import within_shares
     from tma.families.bearings2d.truth_report import vague_velocity
 
     vague = vague_velocity(report)  # sparse AIS: a course/speed z against it tests nothing
@@ -119,10 +121,12 @@ def _row(name: str, report: pd.DataFrame) -> dict:
         row[f"{q}_z_mean"] = float(z.mean()) if z.size else np.nan
         row[f"{q}_z_sd"] = float(z.std(ddof=1)) if z.size > 1 else np.nan
         row[f"{q}_z_beyond_3"] = int((np.abs(z) > Z_GROSS).sum())
-        # the truth inside the answer's own 95.4 % interval (truth_report's interval z)
-        iz = report.loc[use, f"{q}_iz"].to_numpy(float) if f"{q}_iz" in report else []
-        iz = np.asarray(iz)[np.isfinite(iz)]
-        row[f"{q}_in_interval"] = float(np.mean(np.abs(iz) <= 2.0)) if iz.size else np.nan
+        # the truth inside the answer's own 95.4 % interval (truth_report's interval z), with
+        # its Wilson interval
+        iz = report.loc[use, f"{q}_iz"] if f"{q}_iz" in report else np.array([])
+        shares = within_shares(iz, q)
+        row.update({f"{q}_in_interval{end}": shares[f"{q}_within_2sd{end}"]
+                    for end in ("", "_lo", "_hi")})
     nees = report.loc[ok, "nees"].to_numpy(float) if "nees" in report else np.array([])
     row["gross_errors"] = int((nees > NEES_999).sum())
     return row
@@ -206,7 +210,7 @@ def write_campaign(table: pd.DataFrame, contacts: pd.DataFrame, tables_dir, name
              "counted per range / course / speed; course and speed not of a contact whose "
              "truth's velocity is uncertain by about its size); in [a, b]: the share of the "
              "`ok` contacts whose truth lies inside the answer's own 95.4 % interval (the "
-             "tables' [a, b]; honest answers: 95 %); gross errors: `ok` contacts whose "
+             "tables' [a, b]; honest answers: 95.4 %); gross errors: `ok` contacts whose "
              "normalised error exceeds the chi-square(4) 99.9 % point. "
              f"`{name}.png`: the pooled z-scores against the standard normal, and each log's "
              "covered share.\n\n")

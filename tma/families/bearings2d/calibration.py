@@ -86,8 +86,10 @@ def interval_z(estimate, error, lo2, lo1, hi1, hi2, scale="linear") -> np.ndarra
     ``lo2``, a truth outside the 2-sd arc beyond its nearer end; a 2-sd interval of a whole
     turn, blank, holds every course: a truth outside the 1-sd interval reads -+1.5). For a
     Gaussian answer (course or speed +- 1 and 2 sd) exactly the error over the sd; for a range
-    r exp(+-k sd / r), log(estimate / truth) over sd / r. NaN where an end is (but a whole
-    turn's)."""
+    r exp(+-k sd / r), log(estimate / truth) over sd / r; unless an end was clipped to what
+    is plausible (a speed's at 0, a range's at ``status.MIN_RANGE_M``..``MAX_RANGE_M``): then
+    z is read about the clipped interval's middle, and whether the truth lies inside each
+    interval is still exact. NaN where an end is (but a whole turn's)."""
     est, err = np.asarray(estimate, dtype=float), np.asarray(error, dtype=float)
     truth = est - err
     ends = [np.asarray(a, dtype=float) for a in (lo2, lo1, hi1, hi2)]
@@ -283,9 +285,7 @@ def outside_targets(row: dict) -> list[str]:
     out = []
     for key, name, (lo, hi) in checks:
         share = row[key]
-        if np.isnan(share):  # (no intervals stated)
-            continue
-        if share < lo or share > hi:
+        if share < lo or share > hi:  # (a NaN share, no intervals stated, is neither)
             side, bound = ("<", lo) if share < lo else (">", hi)
             out.append(f"{name} {_beside(100 * share, 100 * bound)} % {side} {100 * bound:g} %")
     return out
@@ -350,9 +350,9 @@ def _mean_nees(row) -> str:
     return f"{mean:.3g} ({lo:.3g}-{hi:.3g}){side}"
 
 
-def _within(table, k, kind="") -> list[str]:
+def _within(table, k) -> list[str]:
     return [" / ".join(_pct(v) for v in row) for row in
-            table[[f"{q}{kind}_within_{k}sd" for q in QUANTITIES]].to_numpy()]
+            table[[f"{q}_within_{k}sd" for q in QUANTITIES]].to_numpy()]
 
 
 def _in_intervals(table) -> list[str]:

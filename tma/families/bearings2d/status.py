@@ -377,8 +377,9 @@ def interval_columns(now, sd, intervals=None) -> dict:
     bounds[~np.isfinite(sd)] = np.nan
     course = bounds[:, 1]
     with np.errstate(invalid="ignore"):
-        for lo, hi in ((0, 3), (1, 2)):
-            course[course[:, hi] - course[:, lo] >= 2.0 * np.pi, lo:hi + 1:hi - lo] = np.nan
+        for ends in ([0, 3], [1, 2]):  # (the 2-sd interval's ends, then the 1-sd one's)
+            whole = course[:, ends[1]] - course[:, ends[0]] >= 2.0 * np.pi
+            course[np.ix_(whole, ends)] = np.nan
     columns = {}
     for a, (name, names) in enumerate(INTERVAL_COLUMNS.items()):
         values = np.rad2deg(bounds[:, a]) % 360.0 if name == "course" else bounds[:, a]

@@ -45,6 +45,7 @@ from tma.utc import format_utc
 log = logging.getLogger(__name__)
 
 
+INTERVALS = {c for ends in INTERVAL_COLUMNS.values() for c in ends}
 REPORT_COLUMNS = ["range_now_m", "range_sd_m", "bearing_now_deg", "bearing_sd_deg",
                   "course_deg", "course_sd_deg", "speed_m_s", "speed_sd_m_s",
                   *(c for ends in INTERVAL_COLUMNS.values() for c in ends), "sigma_used_deg",
@@ -221,7 +222,7 @@ def track_report(estimates: pd.DataFrame, epoch_utc_ns=None, origin_deg=None,
         "y_now_m": y_now, "y_sd_m": np.sqrt(cov[:, 1, 1]),
         "lat_now_deg": lat, "lon_now_deg": lon,
         # (the intervals NaN in the estimates of a run written before they were)
-        **{c: e[c] if c in e else np.nan for c in REPORT_COLUMNS},
+        **{c: e[c] if c in e or c not in INTERVALS else np.nan for c in REPORT_COLUMNS},
         "leg_start_utc": utc(e["leg_start_s"].to_numpy()),
         "sqrt_ka_deg": np.rad2deg(np.sqrt(e["cost_rad2"] / e["n_bearings"])),
         "converged": e["converged"].astype(bool),
@@ -302,7 +303,8 @@ def write_track_report(report: pd.DataFrame, tables_dir, name: str, source: str,
              "account (95.4 %, what ±2 sd hold of a Gaussian; the CSV also has the 68.3 % "
              "one): ± is often wider, as it carries the tails of manoeuvres the bearings "
              "cannot rule out, and [a, b] reaches farther on the side one could have taken "
-             "the target; the estimate, an average over those, may lie outside it (simulated "
+             "the target (a course's runs clockwise from a to b, across north where b < a); "
+             "the estimate, an average over those, may lie outside it (simulated "
              "targets: [a, b] holds the truth at its rate where a manoeuvre is unlikely, "
              "less often where one was surely made); "
              "'holds from' is the first bearing the solution rests on. "
