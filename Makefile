@@ -35,7 +35,7 @@ table: $(STAMP)  ## simulate -> estimate -> aggregate every default experiment i
 # this process, e.g. for a debugger
 TEST_JOBS ?= auto --maxprocesses=4
 test: $(STAMP)  ## run the test suite (pytest, one worker per core)
-	$(PY) -m pytest -q -n $(TEST_JOBS) --dist loadgroup $(ARGS)
+	$(PY) -m pytest -q -n $(TEST_JOBS) $(ARGS)
 
 lint: $(STAMP)  ## ruff
 	$(VENV)/bin/ruff check tma pipeline tests bench examples

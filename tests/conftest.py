@@ -116,3 +116,25 @@ def proto_message_class(schema_name: str):
             proto_schema(schema_name).descriptor_set).file:
         pool.Add(file)
     return message_factory.GetMessageClass(pool.FindMessageTypeByName(schema_name))
+
+
+def once_per_run(tmp_path_factory, name: str, compute):
+    """``compute()``'s result, computed once per test run whatever the pytest-xdist workers:
+    the first worker to ask computes it and pickles it under the run's shared base
+    temporary directory (under a lock), the others read it. (``xdist_group`` marks would
+    keep such tests on one worker, but pytest 9.2 drops the group from the node ids
+    xdist schedules by, pytest-dev/pytest-xdist#1386: they spread as if unmarked.)"""
+    import fcntl
+    import pickle
+
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):  # (each worker's base is one per run's child)
+        root = root.parent
+    path = root / f"once-{name}.pickle"
+    with open(root / f"once-{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if path.exists():
+            return pickle.loads(path.read_bytes())
+        value = compute()
+        path.write_bytes(pickle.dumps(value))
+        return value

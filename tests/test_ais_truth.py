@@ -276,7 +276,7 @@ def test_the_trial_table_scores_each_contact_and_the_map_shows_its_ship(trial, t
     # the Python API returns the same columns
     results = tma.estimate(tma.read_log("trial.csv", truth="trial_ais.nmea"))
     for column in ("truth_mmsi", "true_range_m", "range_z", "course_z", "speed_z", "range_iz",
-                   "course_iz", "nees"):
+                   "course_iz", "speed_iz", "nees"):
         assert np.allclose(results[column].astype(float), table[column], equal_nan=True), column
     assert list(results["covered"]) == list(table["covered"])
 

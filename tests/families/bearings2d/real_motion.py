@@ -32,7 +32,6 @@ from scipy.stats import t as student_t
 from tests.families.bearings2d.recorded_geometry import ingest
 from tma.families import build_estimator
 from tma.families.bearings2d import calibration
-from tma.families.bearings2d.calibration import WITHIN_TARGETS
 from tma.families.bearings2d.log import read_bearings_log
 from tma.io.dataset import Dataset
 from tma.maths.angles import wrap_to_180
@@ -293,6 +292,8 @@ def figures(results: pd.DataFrame) -> dict:
     iz = np.abs(results.loc[ok, [f"iz_{q}" for q in QUANTITIES]].to_numpy(float))
     iz = np.where(np.isnan(iz), np.inf, iz)
     kinds = results.kind.to_numpy()[ok]
+    if not set(kinds) <= set(KINDS):
+        raise ValueError(f"kinds of pair {sorted(set(kinds) - set(KINDS))} not in {KINDS}")
     for kind in KINDS:
         mine = kinds == kind
         out[f"ok_rows_{kind}"] = int(mine.sum())
@@ -318,13 +319,11 @@ def two_sided(f: dict) -> dict:
 
 def two_sided_intervals(f: dict) -> dict:
     """``TWO_SIDED``'s per-quantity checks read on the answers' own intervals (``figures``'
-    ``<q>_in_2_sd_interval``, ``beyond_5_sd_intervals``), and two-sided at 1 sd: each
-    quantity's share in its 1-sd interval, with its clustered interval, not wholly outside
-    ``calibration.WITHIN_TARGETS[1]`` (60-76 %): name -> whether it holds."""
-    lo, hi = WITHIN_TARGETS[1]
-    out = {f"{q}_in_1_sd_interval": f[f"{q}_in_1_sd_interval_ci"][1] >= lo
-           and f[f"{q}_in_1_sd_interval_ci"][0] <= hi for q in QUANTITIES}
-    out |= {f"{q}_in_2_sd_interval": f[f"{q}_in_2_sd_interval"] >= TWO_SIDED["within_2_sd"]
+    ``<q>_in_2_sd_interval``, ``beyond_5_sd_intervals``): name -> whether it holds. (Not the
+    1-sd shares against 60-76 %: clustered over a recording's 12-14 target vessels their
+    intervals span 35-45 points, and no answers, however wide or narrow, were found to miss
+    it; ``figures`` reports them.)"""
+    out = {f"{q}_in_2_sd_interval": f[f"{q}_in_2_sd_interval"] >= TWO_SIDED["within_2_sd"]
             for q in QUANTITIES}
     out["beyond_5_sd_intervals"] = f["beyond_5_sd_intervals"] <= TWO_SIDED["beyond_5_sd"]
     return out

@@ -8,13 +8,10 @@ gives the same on 2,000 targets)."""
 import numpy as np
 import pytest
 
-from tests.families.bearings2d.conftest import OWN_MODEL
 from tma.families.bearings2d.calibration import CONSISTENT_TARGET as CONSISTENT
 from tma.families.bearings2d.known_manoeuvres import true_manoeuvres_nees
 from tma.families.bearings2d.manoeuvre_components import burst_levels
 from tma.families.bearings2d.metrics import NEES_95
-
-pytestmark = OWN_MODEL
 
 
 @pytest.fixture(scope="module")
