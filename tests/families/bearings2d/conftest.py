@@ -5,12 +5,12 @@ import pytest
 import tma
 from tests.conftest import once_per_run
 
-OWN_MODEL_N, OWN_MODEL_SEED = 800, 7
+OWN_MODEL_N, OWN_MODEL_SEED = 1000, 7
 
 
 @pytest.fixture(scope="session")
 def own_model_runs(tmp_path_factory):
-    """``lm`` (the declared prior) on 800 targets that manoeuvre 3 times an hour, 0.5 deg,
+    """``lm`` (the declared prior) on 1,000 targets that manoeuvre 3 times an hour, 0.5 deg,
     one shard: ship-like turns (``turn``) and bursts drawn from ``lm``'s own model
     (``burst``): shape -> (dataset, results); once per test run (``once_per_run``)."""
     def runs():

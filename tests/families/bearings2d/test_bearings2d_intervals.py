@@ -186,7 +186,7 @@ def test_the_interval_z_on_a_circle_and_in_logarithms():
 
 @pytest.fixture(scope="module")
 def own_model(own_model_runs):
-    """``lm`` on 800 targets drawn from its own model (bursts, 3 manoeuvres an hour): per
+    """``lm`` on 1,000 targets drawn from its own model (bursts, 3 manoeuvres an hour): per
     track ``calibration.track_calibration``."""
     ds, result = own_model_runs["burst"]
     return track_calibration(result.tma.estimates, ds.truth)
@@ -244,7 +244,7 @@ def test_on_its_own_model_the_median_error_reads_as_honest_only_in_the_intervals
     """Issue 36, item 5's reading, where the model is right by construction: the median over
     the ok answers of the largest |z| of range, course and speed lies in the real-motion
     checks' band (``real_motion.TWO_SIDED``, the issue's 1.0-1.6 scaled to 1.02, what 2,000
-    such targets give; these 800: 0.996) in units of the intervals, and far below it in
+    such targets give; these 1,000: 1.03) in units of the intervals, and far below it in
     units of the sd, which a mixture's tails widen beyond its core (so the real pairs'
     0.35-0.71 in units of the sd are no proof of a prior too rich)."""
     ok = own_model[own_model.status == "ok"]

@@ -217,6 +217,26 @@ def test_the_mixture_averages_over_sets_of_several_manoeuvres():
         mixed.state[0], mean)
 
 
+@pytest.mark.parametrize("rate_per_h", [3.0, 10.0, 30.0])
+def test_where_the_bearings_cannot_show_the_manoeuvres_the_count_is_the_priors(rate_per_h):
+    """Manoeuvres far too small for the bearings to show (velocity changes of 1 mm/s): the
+    posterior of the manoeuvres is their prior, so the mixture's posterior mean number of
+    them is the prior's, the sum over the window's cells of each cell's probability of one,
+    and its ``p_manoeuvre`` the prior's probability of any (``manoeuvre_prior.cell_priors``:
+    20 cells of 20 s, 0.3 to 3 expected). The search reaches a handful of the sets of two or
+    more; counting only those, it said 77, 56 and 33 % of the count, and 0.25, 0.55 and 0.82
+    for 0.28, 0.66 and 0.96 (issue 36)."""
+    t, ox, oy, z, sigma, theta = _geometry()
+    prior = manoeuvres.ManoeuvrePrior(rate_per_h, 1e-3, (30.0, 120.0), step_s=20.0)
+    first, last = np.array([0]), np.array([t.size - 1])
+    mixed = manoeuvres.mixture(t, ox, oy, z[None], None, first, last, theta[None], 1e-4,
+                               prior, np.array([sigma]))
+    p_none = manoeuvres.cell_priors(prior, t, first, last)[3][0]
+    assert mixed.n_manoeuvres[0] == pytest.approx(np.sum(1.0 - p_none), rel=0.01)
+    assert mixed.p_manoeuvre[0] == pytest.approx(1.0 - np.prod(p_none), abs=0.002)
+    assert mixed.p_omitted[0] < 0.01
+
+
 def _mixture_draws(weights, means, covs, n, seed=0):
     """``n`` draws of the Gaussian mixture (numpy's generator, not the kernel's points)."""
     rng = np.random.default_rng(seed)
