@@ -48,6 +48,22 @@ def test_the_true_manoeuvres_component_is_consistent_where_it_was_made(runs):
     assert few.sum() >= 300 and np.all((0.90 <= shares) & (shares <= 0.98)), (few.sum(), shares)
 
 
+@pytest.mark.xfail(strict=True, reason="0.85 manoeuvres weighed where 0.95 were made: the "
+                   "sets of manoeuvres the bearings partly show that no base of the search "
+                   "reaches are not counted (docs/manoeuvres.md, 'The search weighs too few')")
+def test_the_search_weighs_as_many_manoeuvres_as_the_targets_made(runs):
+    """On data drawn from the model itself, the posterior mean number of manoeuvres averages
+    to the number made (the expectation of a posterior mean over the prior is the prior's):
+    over the answered burst targets, within 0.06 of it (two standard errors)."""
+    ds, result = runs["burst"]
+    weighed = result.tma.estimates.n_manoeuvres.to_numpy(dtype=float)
+    answered = np.isfinite(weighed)
+    made = ds.truth.n_manoeuvres.to_numpy()[answered]
+    assert answered.sum() >= 900
+    assert abs(weighed[answered].mean() - made.mean()) <= 0.06, (weighed[answered].mean(),
+                                                                 made.mean())
+
+
 def test_burst_levels_carry_each_bursts_velocity_variance():
     """Summed over the steps, each burst's levels give its dv^2, wherever its ends fall."""
     t = np.arange(0.0, 601.0, 7.0)
