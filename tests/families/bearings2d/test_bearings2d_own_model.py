@@ -54,7 +54,7 @@ def test_the_true_manoeuvres_component_is_consistent_where_it_was_made(runs):
 def test_the_search_weighs_as_many_manoeuvres_as_the_targets_made(runs):
     """On data drawn from the model itself, the posterior mean number of manoeuvres averages
     to the number made (the expectation of a posterior mean over the prior is the prior's):
-    over the answered burst targets, within 0.06 of it (two standard errors)."""
+    over the answered burst targets, within 0.06 of it (three standard errors)."""
     ds, result = runs["burst"]
     weighed = result.tma.estimates.n_manoeuvres.to_numpy(dtype=float)
     answered = np.isfinite(weighed)
