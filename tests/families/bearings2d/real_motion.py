@@ -162,7 +162,7 @@ def holds(figures: dict) -> bool:
 # read in units of the answers' own intervals (calibration.interval_z), its band the issue's
 # (1.0-1.6 about the 1.26 of three independent Gaussian |z|) scaled to what honest answers of
 # this kind give: 1.02 on lm's own model (2,000 targets; test_bearings2d_intervals holds its
-# 800 inside the band). In units of the sd, which a mixture's tails widen beyond its core,
+# 1,000 inside the band). In units of the sd, which a mixture's tails widen beyond its core,
 # honest answers give 0.57, below any band about 1.26.
 GAUSSIAN_MEDIAN_MAX_Z, OWN_MODEL_MEDIAN_MAX_IZ = 1.26, 1.02
 TWO_SIDED = {
@@ -262,7 +262,8 @@ def figures(results: pd.DataFrame) -> dict:
 
     def of_ok(prefix, median_key, within_key):
         """The ok rows' |z| (columns ``<prefix>_<q>``; an ok answer without a finite one is
-        no honest one) and their largest: the median and the shares within 1 and 2."""
+        no honest one) and their largest: the median and the shares within 1 and 2; returns
+        both."""
         z = np.abs(results.loc[ok, [f"{prefix}_{q}" for q in QUANTITIES]].to_numpy(float))
         z = np.where(np.isnan(z), np.inf, z)
         worst = z.max(axis=1, initial=0.0)
@@ -271,11 +272,11 @@ def figures(results: pd.DataFrame) -> dict:
         for k in (1, 2):
             for j, q in enumerate(QUANTITIES):
                 share(within_key.format(q=q, k=k), z[:, j] <= k, ok_vessel)
-        return worst
+        return z, worst
 
     share("ok", ok, vessel)
     share("ok_or_position_only", ok | (status == "position_only"), vessel)
-    worst = of_ok("z", "median_max_z", "{q}_within_{k}_sd")
+    _, worst = of_ok("z", "median_max_z", "{q}_within_{k}_sd")
     share("within_3_sd", worst <= 3, ok_vessel)
     po = status == "position_only"  # its answer is a position: range and bearing now
     for q in ("range", "bearing"):
@@ -285,12 +286,10 @@ def figures(results: pd.DataFrame) -> dict:
     out["beyond_5_sd"] = int((worst > 5).sum())
     out["beyond_5_sd_share_ci"] = wilson_clustered(worst > 5, ok_vessel)
     # the same in units of the answers' own intervals (calibration.interval_z)
-    worst = of_ok("iz", "median_max_iz", "{q}_in_{k}_sd_interval")
+    iz, worst = of_ok("iz", "median_max_iz", "{q}_in_{k}_sd_interval")
     out["beyond_5_sd_intervals"] = int((worst > 5).sum())
     # by what the target did: the pooled figures mix the steady targets' answers, which the
     # manoeuvres they might have made widen, with the turning targets', which may be narrow
-    iz = np.abs(results.loc[ok, [f"iz_{q}" for q in QUANTITIES]].to_numpy(float))
-    iz = np.where(np.isnan(iz), np.inf, iz)
     kinds = results.kind.to_numpy()[ok]
     if not set(kinds) <= set(KINDS):
         raise ValueError(f"kinds of pair {sorted(set(kinds) - set(KINDS))} not in {KINDS}")

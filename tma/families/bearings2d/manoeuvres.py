@@ -131,6 +131,12 @@ def _from_earlier_base(cells, bases, bi, b, nb, code):
 
 
 @njit(error_model="numpy")
+def _log1m_exp(x):
+    """log(1 - e^x) for x <= 0 (-inf at 0)."""
+    return math.log(-math.expm1(x)) if x < 0.0 else -np.inf
+
+
+@njit(error_model="numpy")
 def _unreached(below, base_mass, extended, level, reached):
     """The log factor by which the sets of ``level`` that add an unseen manoeuvre
     (``UNSEEN_NATS``) are scaled for those no base reaches (0: none missing); ``below``: the
@@ -157,7 +163,7 @@ def _unreached(below, base_mass, extended, level, reached):
                                          shock_posterior, state_with_shock, tail_scale,
                                          quantity_intervals,
                                          _extension, blank_path, smoothed_positions,
-                                         _unreached))
+                                         _unreached, _log1m_exp))
 def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q, taus, starts,
                    ends, durations, burst, p_none, epochs, shocks, scale2, p0_pos, max_iter, tol_m,
                    state, P_last, e, cost, passes, p_manoeuvre, p_omitted, n_manoeuvres, u,
@@ -286,7 +292,7 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
                             continue  # that set's mass is counted once, from that base
                         lw = logw[b] + log_pn[cj] + lbf
                         reached = _logaddexp(reached, lw + log_u)
-                        log_seen = math.log(-math.expm1(log_u)) if log_u < 0.0 else -np.inf
+                        log_seen = _log1m_exp(log_u)  # (the rest of its weight)
                         if not lw > total + LOG_SCREEN:
                             # too light to weigh one by one: pooled into one Gaussian by
                             # their screened weights and states (their moments)
@@ -328,10 +334,9 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
                                 omitted = _logaddexp(omitted, lw + log_seen)
                                 continue
                             lvl_omitted = _logaddexp(lvl_omitted, worst + log_unseen_c[c])
-                            if log_unseen_c[c] < 0.0:
-                                part = worst + math.log(-math.expm1(log_unseen_c[c]))
-                                seen = _logaddexp(seen, part)
-                                omitted = _logaddexp(omitted, part)
+                            part = worst + _log1m_exp(log_unseen_c[c])
+                            seen = _logaddexp(seen, part)
+                            omitted = _logaddexp(omitted, part)
                         else:
                             used += 1
                         count[c] = nb + 1

@@ -45,10 +45,10 @@ from tma.utc import format_utc
 log = logging.getLogger(__name__)
 
 
-INTERVALS = {c for ends in INTERVAL_COLUMNS.values() for c in ends}
+INTERVALS = tuple(c for ends in INTERVAL_COLUMNS.values() for c in ends)
 REPORT_COLUMNS = ["range_now_m", "range_sd_m", "bearing_now_deg", "bearing_sd_deg",
                   "course_deg", "course_sd_deg", "speed_m_s", "speed_sd_m_s",
-                  *(c for ends in INTERVAL_COLUMNS.values() for c in ends), "sigma_used_deg",
+                  *INTERVALS, "sigma_used_deg",
                   "fit_p_value", "motion_p_value", "accel_psd_m2_s3", "leg_start_s", "status"]
 
 

@@ -208,8 +208,10 @@ def shown_columns(report: pd.DataFrame) -> dict:
     if "covered" not in report:
         return {}
 
-    def cell(value, fmt):
-        return "-" if pd.isna(value) else format(value, fmt)
+    def zs(columns):  # one z per quantity, range / course / speed
+        return ["-" if pd.isna(row[0]) else
+                " / ".join("-" if pd.isna(v) else format(v, "+.1f") for v in row)
+                for row in report[columns].to_numpy()]
 
     return {
         "AIS ship (RMS deg)": [
@@ -218,11 +220,7 @@ def shown_columns(report: pd.DataFrame) -> dict:
         "true range / course / speed": [
             "-" if pd.isna(a) else f"{a:.0f} m / {b:.1f} deg / {c:.2f} m/s" for a, b, c in
             report[["true_range_m", "true_course_deg", "true_speed_m_s"]].to_numpy()],
-        "z range / course / speed": [
-            "-" if pd.isna(a) else f"{cell(a, '+.1f')} / {cell(b, '+.1f')} / {cell(c, '+.1f')}"
-            for a, b, c in report[["range_z", "course_z", "speed_z"]].to_numpy()],
-        "z in [a, b] range / course / speed": [
-            "-" if pd.isna(a) else f"{cell(a, '+.1f')} / {cell(b, '+.1f')} / {cell(c, '+.1f')}"
-            for a, b, c in report[[f"{q}_iz" for q in INTERVAL_QUANTITIES]].to_numpy()],
+        "z range / course / speed": zs(["range_z", "course_z", "speed_z"]),
+        "z in [a, b] range / course / speed": zs([f"{q}_iz" for q in INTERVAL_QUANTITIES]),
         "covered": ["-" if pd.isna(v) else ("yes" if v else "no") for v in report["covered"]],
     }
