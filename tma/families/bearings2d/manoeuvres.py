@@ -447,8 +447,7 @@ def mixture_tracks(t, ox, oy, measured, weight, weighted, first, last, theta, q,
             # the levels beyond the last: geometric at the ratio of the last two (all of
             # the last level's mass again when the masses do not fall)
             ratio = min(level_mass - previous_mass, 0.0)
-            beyond = level_mass + (ratio - math.log(-math.expm1(ratio)) if ratio < 0.0
-                                   else 0.0)
+            beyond = level_mass + (ratio - _log1m_exp(ratio) if ratio < 0.0 else 0.0)
             omitted = _logaddexp(omitted, beyond)
         pool_slot = -1
         if pooled > -np.inf:  # the pooled light extensions: one component (slot C - 1:
